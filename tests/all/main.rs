@@ -1,0 +1,3 @@
+//! Cross-crate and property tests of streamcert: one test binary, one module per topic.
+
+mod dynamics;

@@ -1,8 +1,12 @@
 //! # streamcert
 //!
 //! Facade crate: re-exports the streamcert micro-crates under short names. Depend on this
-//! crate for everything, or on one micro-crate alone (for example `streamcert-dynamics`).
+//! crate for everything, or on one micro-crate alone.
 //!
 //! * [`dynamics`]: the `Dynamics` trait, the G5 benchmark, disturbances, dither, integrators.
+//! * [`regression`]: streaming sliding-window integral regression (ridge and instrumented).
+//! * [`certificate`]: the streaming certifier (`β̂`, `ρ`, certificate, deployment gate).
 
+pub use streamcert_certificate as certificate;
 pub use streamcert_dynamics as dynamics;
+pub use streamcert_regression as regression;

@@ -1,3 +1,6 @@
 //! Cross-crate and property tests of streamcert: one test binary, one module per topic.
 
+mod certificate;
 mod dynamics;
+mod regression;
+mod support;

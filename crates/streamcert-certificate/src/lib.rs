@@ -1,0 +1,459 @@
+//! # streamcert-certificate
+//!
+//! The streaming contraction certificate of the paper (Section II-B) for one subsystem with
+//! `p` outputs, `m` inputs and a candidate output-feedback gain `K` (`m × p`):
+//!
+//! ```text
+//! J_cl = J_obs + B_obs K                                         (Section II-B)
+//! β̂   = −λ_max(½ (J_cl + J_clᵀ))                                 (eq. betahat)
+//! ρ    = c (1 + ‖K‖₂) RMS(R) / √(λ_min(Z Zᵀ / M) + λ)             (eq. rho)
+//! β_cert = β̂ − ρ                                                 (Gaussian certificate)
+//! ```
+//!
+//! and the deployment gate: the controller may be deployed once `β_cert >= β_margin` for `n_s`
+//! consecutive samples ([`Gate`]).
+//!
+//! [`Certifier`] takes one sample at a time and returns the full [`Evidence`]: `β̂`, `ρ`, the
+//! certificate, the gate, and the reason whenever it does not certify. It never certifies from
+//! a window with a bad value (bad samples are rejected before they enter the window), from a
+//! window still warming up, or from a regression without excitation.
+//!
+//! The radius `ρ` is the paper's heuristic with a tuned constant `c`, not a confidence bound.
+//! The ambiguity radius `ε(t)` of Section III multiplies it by `(1 + 2ε)`
+//! ([`certificate_value`]); `ε = 0` gives the Gaussian certificate.
+//!
+//! ```
+//! use streamcert_certificate::{Certifier, CertifierConfig};
+//! use streamcert_regression::RegressionConfig;
+//! let cfg = CertifierConfig::new(RegressionConfig::new(1, 1, 100, 5, 1e-4), vec![-1.0], 0.2, 0.05, 10);
+//! let mut cert = Certifier::new(cfg)?;
+//! let ev = cert.push(0.0, &[0.0], &[0.0])?;
+//! assert!(ev.cert_gauss.is_none() && !ev.gauss_gate.open);
+//! # Ok::<(), streamcert_certificate::CertifyError>(())
+//! ```
+
+mod gate;
+
+pub use gate::{Gate, GateState};
+
+use serde::{Deserialize, Serialize};
+use streamcert_regression::{
+    EstimateStatus, RegressionConfig, RegressionError, SlidingRegression, linalg,
+};
+
+/// `β_cert(ε) = β̂ − ρ (1 + 2ε)` (paper eq. wass_cert); `ε = 0` is the Gaussian certificate
+/// `β̂ − ρ`.
+#[must_use]
+pub fn certificate_value(beta_hat: f64, rho: f64, eps: f64) -> f64 {
+    beta_hat - rho * (1.0 + 2.0 * eps)
+}
+
+/// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
+/// wrong number of values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BadSamplePolicy {
+    /// Return the error; the sample is not absorbed (default).
+    #[default]
+    Reject,
+    /// Count it, close the gates, and return evidence with [`NotCertified::SkippedSample`];
+    /// the sample is not absorbed (integrals then span the gap, using the actual times).
+    Skip,
+}
+
+/// Configuration of a [`Certifier`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CertifierConfig {
+    /// The regression window.
+    pub regression: RegressionConfig,
+    /// Candidate gain `K`, `m × p` row-major (`u = K y`).
+    pub gain: Vec<f64>,
+    /// Conservatism constant `c > 0` of eq. rho (the paper does not give its value).
+    pub conservatism: f64,
+    /// `β_margin` (finite).
+    pub margin: f64,
+    /// `n_s >= 1`: consecutive samples at or above the margin before the gate opens.
+    pub consecutive: usize,
+    /// Bad-sample policy (default [`BadSamplePolicy::Reject`]).
+    #[serde(default)]
+    pub bad_samples: BadSamplePolicy,
+}
+
+impl CertifierConfig {
+    /// Required quantities; `bad_samples` defaults to [`BadSamplePolicy::Reject`].
+    #[must_use]
+    pub fn new(
+        regression: RegressionConfig,
+        gain: Vec<f64>,
+        conservatism: f64,
+        margin: f64,
+        consecutive: usize,
+    ) -> Self {
+        Self {
+            regression,
+            gain,
+            conservatism,
+            margin,
+            consecutive,
+            bad_samples: BadSamplePolicy::Reject,
+        }
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] or the regression's configuration error.
+    pub fn validate(&self) -> Result<(), CertifyError> {
+        self.regression.validate()?;
+        let (p, m) = (self.regression.outputs, self.regression.inputs);
+        let bad = |field: &'static str, reason: String| {
+            Err(CertifyError::InvalidConfig { field, reason })
+        };
+        if self.gain.len() != m * p {
+            return bad(
+                "gain",
+                format!("K must be m × p = {m} × {p} ({} values), got {}", m * p, self.gain.len()),
+            );
+        }
+        if let Some(v) = self.gain.iter().find(|v| !v.is_finite()) {
+            return bad("gain", format!("entries must be finite, got {v}"));
+        }
+        if !(self.conservatism > 0.0 && self.conservatism.is_finite()) {
+            return bad(
+                "conservatism",
+                format!("c must be finite and > 0, got {}", self.conservatism),
+            );
+        }
+        if !self.margin.is_finite() {
+            return bad("margin", format!("must be finite, got {}", self.margin));
+        }
+        if self.consecutive == 0 {
+            return bad("consecutive", "n_s must be at least 1".into());
+        }
+        Ok(())
+    }
+}
+
+/// Errors of this crate.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[non_exhaustive]
+pub enum CertifyError {
+    /// A configuration field is out of range.
+    #[error("invalid certifier configuration: `{field}` {reason}")]
+    InvalidConfig {
+        /// The field.
+        field: &'static str,
+        /// What is wrong and what is accepted.
+        reason: String,
+    },
+    /// The regression rejected a sample or its configuration.
+    #[error(transparent)]
+    Regression(#[from] RegressionError),
+    /// A checkpoint could not be written or read.
+    #[error("checkpoint: {0}")]
+    Checkpoint(String),
+}
+
+/// Why a sample is not certified.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "reason", rename_all = "snake_case")]
+pub enum NotCertified {
+    /// The window holds fewer columns than required.
+    WarmingUp {
+        /// Columns in the window.
+        columns: usize,
+        /// Columns needed.
+        needed: usize,
+    },
+    /// The regression is singular or near-singular (no excitation).
+    InsufficientExcitation,
+    /// The instrumented regression is singular.
+    WeakInstruments,
+    /// The certificate is below the margin.
+    BelowMargin {
+        /// The certificate.
+        certificate: f64,
+        /// The margin.
+        margin: f64,
+    },
+    /// At or above the margin, but not yet for `n_s` consecutive samples.
+    Accumulating {
+        /// Consecutive samples so far.
+        streak: usize,
+        /// Needed.
+        needed: usize,
+    },
+    /// The sample was bad and skipped ([`BadSamplePolicy::Skip`]).
+    SkippedSample,
+}
+
+impl std::fmt::Display for NotCertified {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::WarmingUp { columns, needed } => {
+                write!(f, "warming up ({columns}/{needed} columns)")
+            }
+            Self::InsufficientExcitation => f.write_str("insufficient excitation"),
+            Self::WeakInstruments => f.write_str("weak instruments"),
+            Self::BelowMargin { certificate, margin } => {
+                write!(f, "certificate {certificate:.4} below margin {margin}")
+            }
+            Self::Accumulating { streak, needed } => {
+                write!(f, "above margin for {streak}/{needed} samples")
+            }
+            Self::SkippedSample => f.write_str("bad sample skipped"),
+        }
+    }
+}
+
+/// Everything the certifier knows after one sample.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Evidence {
+    /// Sample time.
+    pub t: f64,
+    /// `β̂` (eq. betahat), when the regression is ready.
+    pub beta_hat: Option<f64>,
+    /// `ρ` (eq. rho), when the regression is ready.
+    pub rho: Option<f64>,
+    /// Gaussian certificate `β̂ − ρ`.
+    pub cert_gauss: Option<f64>,
+    /// The Gaussian certificate's gate.
+    pub gauss_gate: GateState,
+    /// Why the Gaussian gate is closed (`None` when open).
+    pub reason: Option<NotCertified>,
+    /// `RMS(R)`.
+    pub rms_residual: Option<f64>,
+    /// `λ_min(Z Zᵀ / M)`.
+    pub gram_lambda_min: Option<f64>,
+    /// Columns in the window.
+    pub columns: usize,
+}
+
+/// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
+/// [`Certifier::restore`] continue a run with bit-identical output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Certifier {
+    cfg: CertifierConfig,
+    regression: SlidingRegression,
+    gain_norm: f64,
+    gauss: Gate,
+    samples: u64,
+    skipped: u64,
+    jcl: Vec<f64>,
+    work: Vec<f64>,
+}
+
+/// The regression's outcome, reduced to what the certificate needs.
+#[derive(Debug, Clone, Copy)]
+struct Ready {
+    beta_hat: f64,
+    rho: f64,
+    rms: f64,
+    lambda_min: f64,
+}
+
+impl Certifier {
+    /// Validate and build.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] or [`CertifyError::Regression`].
+    ///
+    /// ```
+    /// use streamcert_certificate::{Certifier, CertifierConfig, CertifyError};
+    /// use streamcert_regression::RegressionConfig;
+    /// // K must be m × p = 1 × 1.
+    /// let cfg = CertifierConfig::new(RegressionConfig::new(1, 1, 100, 5, 1e-4), vec![1.0, 2.0], 0.2, 0.05, 10);
+    /// assert!(matches!(Certifier::new(cfg), Err(CertifyError::InvalidConfig { field: "gain", .. })));
+    /// ```
+    pub fn new(cfg: CertifierConfig) -> Result<Self, CertifyError> {
+        cfg.validate()?;
+        let (p, m) = (cfg.regression.outputs, cfg.regression.inputs);
+        Ok(Self {
+            regression: SlidingRegression::new(cfg.regression)?,
+            gain_norm: linalg::spectral_norm(&cfg.gain, m, p),
+            gauss: Gate::new(cfg.margin, cfg.consecutive),
+            samples: 0,
+            skipped: 0,
+            jcl: vec![0.0; p * p],
+            work: vec![0.0; p * p],
+            cfg,
+        })
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &CertifierConfig {
+        &self.cfg
+    }
+
+    /// `‖K‖₂`.
+    #[must_use]
+    pub fn gain_norm(&self) -> f64 {
+        self.gain_norm
+    }
+
+    /// Samples absorbed so far.
+    #[must_use]
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+
+    /// Bad samples skipped so far (policy [`BadSamplePolicy::Skip`]).
+    #[must_use]
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+
+    /// The underlying regression.
+    #[must_use]
+    pub fn regression(&self) -> &SlidingRegression {
+        &self.regression
+    }
+
+    /// Absorb one sample and return the evidence. No allocation.
+    ///
+    /// # Errors
+    /// Under [`BadSamplePolicy::Reject`], the regression's sample error (the state is
+    /// untouched, except after [`RegressionError::Overflow`], which clears the window).
+    pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
+        if let Err(e) = self.regression.push(t, y, u) {
+            return match self.cfg.bad_samples {
+                BadSamplePolicy::Reject => Err(e.into()),
+                BadSamplePolicy::Skip => {
+                    self.skipped += 1;
+                    let gauss_gate = self.gauss.update(t, None);
+                    Ok(Evidence {
+                        t,
+                        beta_hat: None,
+                        rho: None,
+                        cert_gauss: None,
+                        gauss_gate,
+                        reason: Some(NotCertified::SkippedSample),
+                        rms_residual: None,
+                        gram_lambda_min: None,
+                        columns: self.regression.columns(),
+                    })
+                }
+            };
+        }
+        self.samples += 1;
+        let (ready, columns, blocked) = self.evaluate();
+        let cert = ready.map(|r| certificate_value(r.beta_hat, r.rho, 0.0));
+        let gauss_gate = self.gauss.update(t, cert);
+        let reason = closed_reason(blocked, cert, &gauss_gate, &self.gauss);
+        Ok(Evidence {
+            t,
+            beta_hat: ready.map(|r| r.beta_hat),
+            rho: ready.map(|r| r.rho),
+            cert_gauss: cert,
+            gauss_gate,
+            reason,
+            rms_residual: ready.map(|r| r.rms),
+            gram_lambda_min: ready.map(|r| r.lambda_min),
+            columns,
+        })
+    }
+
+    /// Solve the regression and form `β̂` and `ρ`; `Err` carries why not.
+    fn evaluate(&mut self) -> (Option<Ready>, usize, Option<NotCertified>) {
+        let (p, m) = (self.cfg.regression.outputs, self.cfg.regression.inputs);
+        let d = p + m;
+        let est = self.regression.estimate();
+        let columns = est.columns;
+        let blocked = match est.status {
+            EstimateStatus::Ready => None,
+            EstimateStatus::WarmingUp { columns, needed } => {
+                Some(NotCertified::WarmingUp { columns, needed })
+            }
+            EstimateStatus::InsufficientExcitation { .. } => {
+                Some(NotCertified::InsufficientExcitation)
+            }
+            EstimateStatus::WeakInstruments { .. } => Some(NotCertified::WeakInstruments),
+        };
+        if blocked.is_some() {
+            return (None, columns, blocked);
+        }
+        // J_cl = J_obs + B_obs K, then its symmetric part.
+        let k = &self.cfg.gain;
+        for i in 0..p {
+            for j in 0..p {
+                let mut v = est.theta[i * d + j];
+                for l in 0..m {
+                    v += est.theta[i * d + p + l] * k[l * p + j];
+                }
+                self.jcl[i * p + j] = v;
+            }
+        }
+        for i in 0..p {
+            for j in i..p {
+                let s = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
+                self.work[i * p + j] = s;
+            }
+        }
+        let mut scratch = [0.0; 0];
+        let lambda_max = if p <= 2 {
+            linalg::sym_eig_extremes(&self.work, p, &mut scratch).1
+        } else {
+            // Needs a p × p scratch: reuse jcl, which is no longer needed.
+            linalg::sym_eig_extremes(&self.work, p, &mut self.jcl).1
+        };
+        let beta_hat = -lambda_max;
+        let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * est.rms_residual
+            / (est.gram_lambda_min + self.cfg.regression.ridge).sqrt();
+        let ready = Ready { beta_hat, rho, rms: est.rms_residual, lambda_min: est.gram_lambda_min };
+        if !(beta_hat.is_finite() && rho.is_finite()) {
+            return (None, columns, Some(NotCertified::InsufficientExcitation));
+        }
+        (Some(ready), columns, None)
+    }
+
+    /// Serialise the full streaming state as JSON (floats round-trip exactly).
+    ///
+    /// # Errors
+    /// [`CertifyError::Checkpoint`] if serialisation fails.
+    pub fn checkpoint(&self) -> Result<String, CertifyError> {
+        serde_json::to_string(self).map_err(|e| CertifyError::Checkpoint(e.to_string()))
+    }
+
+    /// Restore a state written by [`checkpoint`](Self::checkpoint), checking its consistency.
+    ///
+    /// # Errors
+    /// [`CertifyError::Checkpoint`] for malformed JSON or an inconsistent state.
+    pub fn restore(json: &str) -> Result<Self, CertifyError> {
+        let c: Self =
+            serde_json::from_str(json).map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
+        c.cfg.validate()?;
+        c.regression.check_state().map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
+        let p = c.cfg.regression.outputs;
+        if c.regression.config() != &c.cfg.regression
+            || c.jcl.len() != p * p
+            || c.work.len() != p * p
+        {
+            return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
+        }
+        Ok(c)
+    }
+}
+
+/// Why a gate is closed after this sample (`None` when it is open).
+fn closed_reason(
+    blocked: Option<NotCertified>,
+    cert: Option<f64>,
+    state: &GateState,
+    gate: &Gate,
+) -> Option<NotCertified> {
+    if state.open {
+        return None;
+    }
+    if blocked.is_some() {
+        return blocked;
+    }
+    match cert {
+        Some(c) if c >= gate.margin() => {
+            Some(NotCertified::Accumulating { streak: state.streak, needed: gate.needed() })
+        }
+        Some(c) => Some(NotCertified::BelowMargin { certificate: c, margin: gate.margin() }),
+        None => Some(NotCertified::InsufficientExcitation),
+    }
+}

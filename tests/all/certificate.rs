@@ -1,0 +1,250 @@
+//! streamcert-certificate: `β̂` against a dense eigensolver, validity of the certificate on
+//! known linear systems, the gate, bad input, and checkpoint/restore.
+
+use streamcert::certificate::{
+    BadSamplePolicy, Certifier, CertifierConfig, CertifyError, Evidence, NotCertified,
+};
+use streamcert::regression::{Estimator, InputIntegral, RegressionConfig, RegressionError};
+
+use crate::support::{LinearStream, true_rate};
+
+fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(p, m, 150, 5, 1e-4)
+    };
+    CertifierConfig::new(reg, gain, c, 0.05, 10)
+}
+
+fn run(cert: &mut Certifier, stream: &LinearStream, seed: u64) -> Vec<Evidence> {
+    let traj = stream.run(seed);
+    (0..traj.len())
+        .map(|k| cert.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid sample"))
+        .collect()
+}
+
+fn two_state() -> LinearStream {
+    LinearStream {
+        a: vec![-1.0, 0.5, -0.3, -2.0],
+        b: vec![1.0, 0.2, 0.0, 1.0],
+        n: 2,
+        m: 2,
+        sigma: 0.02,
+        k_explore: vec![0.0; 4],
+        dither: 0.5,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 2000,
+    }
+}
+
+#[test]
+fn beta_hat_is_minus_the_largest_eigenvalue_of_sym_j_cl() {
+    let k = vec![-0.5, 0.1, 0.0, -0.8];
+    let mut cert = Certifier::new(config(2, 2, k.clone(), 0.5)).expect("valid");
+    let stream = two_state();
+    let traj = stream.run(1);
+    for i in 0..traj.len() {
+        let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
+        let Some(beta_hat) = ev.beta_hat else { continue };
+        // Rebuild J_cl from the regression's Θ and solve with nalgebra.
+        let mut reg = cert.regression().clone();
+        let est = reg.estimate();
+        let theta: Vec<f64> = est.theta.to_vec();
+        let j_obs = vec![theta[0], theta[1], theta[4], theta[5]];
+        let b_obs = vec![theta[2], theta[3], theta[6], theta[7]];
+        let oracle = true_rate(&j_obs, &b_obs, &k, 2, 2);
+        assert!((beta_hat - oracle).abs() < 1e-10 * (1.0 + oracle.abs()), "{beta_hat} vs {oracle}");
+        let rho = ev.rho.expect("ready");
+        assert!(rho >= 0.0);
+        assert_eq!(ev.cert_gauss, Some(beta_hat - rho));
+        let expected_rho =
+            0.5 * (1.0 + cert.gain_norm()) * est.rms_residual / (est.gram_lambda_min + 1e-4).sqrt();
+        assert!((rho - expected_rho).abs() <= 1e-12 * expected_rho);
+    }
+}
+
+#[test]
+fn certificate_stays_below_the_true_rate_on_known_systems() {
+    // Scalar ẏ = a y + u + noise under strong dither; candidate K with known closed-loop rate.
+    let mut below = 0usize;
+    let mut total = 0usize;
+    for (a, k) in [(0.5, -1.5), (-1.0, -1.0), (0.2, -0.7)] {
+        let stream = LinearStream {
+            a: vec![a],
+            b: vec![1.0],
+            n: 1,
+            m: 1,
+            sigma: 0.05,
+            k_explore: vec![k],
+            dither: 1.0,
+            dither_hold: 0.1,
+            dt: 0.01,
+            steps: 1500,
+        };
+        let truth = true_rate(&[a], &[1.0], &[k], 1, 1);
+        for seed in 0..10 {
+            let mut cert = Certifier::new(config(1, 1, vec![k], 1.0)).expect("valid");
+            for ev in run(&mut cert, &stream, seed) {
+                if let Some(c) = ev.cert_gauss {
+                    total += 1;
+                    below += usize::from(c <= truth);
+                }
+            }
+        }
+    }
+    let fraction = below as f64 / total as f64;
+    assert!(total > 30_000);
+    assert!(fraction > 0.95, "certificate below the true rate on {fraction} of steps");
+}
+
+#[test]
+fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
+    let stream = LinearStream {
+        a: vec![-1.0],
+        b: vec![1.0],
+        n: 1,
+        m: 1,
+        sigma: 0.05,
+        k_explore: vec![-1.0],
+        dither: 1.0,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 1000,
+    };
+    let mut cert = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
+    let evs = run(&mut cert, &stream, 3);
+    // Warm-up: no certificate until the window holds M columns (h + M samples).
+    assert!(matches!(evs[0].reason, Some(NotCertified::WarmingUp { .. })));
+    assert!(evs[..154].iter().all(|e| e.cert_gauss.is_none() && !e.gauss_gate.open));
+    assert!(evs[155].cert_gauss.is_some());
+    let opened = evs.iter().position(|e| e.gauss_gate.open).expect("gate opens");
+    // n_s = 10 consecutive samples at or above the margin before it.
+    assert!(evs[opened + 1 - 10..=opened].iter().all(|e| e.cert_gauss.expect("ready") >= 0.05));
+    assert!(matches!(evs[opened - 1].reason, Some(NotCertified::Accumulating { .. })));
+    assert_eq!(evs.last().expect("non-empty").gauss_gate.first_opened_at, Some(evs[opened].t));
+}
+
+#[test]
+fn no_excitation_is_not_certified() {
+    // Pure feedback, no dither: Z has rank one.
+    let stream = LinearStream {
+        a: vec![-1.0],
+        b: vec![1.0],
+        n: 1,
+        m: 1,
+        sigma: 0.05,
+        k_explore: vec![-1.0],
+        dither: 0.0,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 600,
+    };
+    // With trapezoidal integrals of both y and u = K y, ∫u = K ∫y exactly. (With the
+    // zero-order-hold rule the two integrals use different quadratures and are not collinear.)
+    let mut cfg = config(1, 1, vec![-1.0], 0.2);
+    cfg.regression.input_integral = InputIntegral::Trapezoidal;
+    let mut cert = Certifier::new(cfg).expect("valid");
+    let evs = run(&mut cert, &stream, 3);
+    assert!(evs.iter().all(|e| !e.gauss_gate.open));
+    assert!(matches!(
+        evs.last().expect("non-empty").reason,
+        Some(NotCertified::InsufficientExcitation)
+    ));
+}
+
+#[test]
+fn bad_samples_are_rejected_or_skipped_and_never_certified() {
+    let stream = LinearStream {
+        a: vec![-1.0],
+        b: vec![1.0],
+        n: 1,
+        m: 1,
+        sigma: 0.05,
+        k_explore: vec![-1.0],
+        dither: 1.0,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 600,
+    };
+    let traj = stream.run(5);
+    let mut reject = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
+    let mut skip = Certifier::new(CertifierConfig {
+        bad_samples: BadSamplePolicy::Skip,
+        ..config(1, 1, vec![-1.0], 0.2)
+    })
+    .expect("valid");
+    for k in 0..traj.len() {
+        let (t, y, u) = (traj.t[k], traj.output(k), traj.input(k));
+        if k % 97 == 50 {
+            let err = reject.push(t, &[f64::NAN], u).unwrap_err();
+            assert!(matches!(err, CertifyError::Regression(RegressionError::NonFinite { .. })));
+            let ev = skip.push(t, &[f64::NAN], u).expect("skip policy");
+            assert_eq!(ev.reason, Some(NotCertified::SkippedSample));
+            assert!(!ev.gauss_gate.open && ev.cert_gauss.is_none());
+            // A repeated time is bad too.
+            assert!(reject.push(traj.t[k - 1], y, u).is_err());
+        } else {
+            let a = reject.push(t, y, u).expect("valid");
+            let b = skip.push(t, y, u).expect("valid");
+            // Same estimate; only the gates differ (a skip closes the skip policy's gate).
+            assert_eq!((a.beta_hat, a.rho, a.cert_gauss), (b.beta_hat, b.rho, b.cert_gauss));
+        }
+    }
+    assert_eq!(skip.skipped(), (0..traj.len()).filter(|k| k % 97 == 50).count() as u64);
+    assert!(matches!(
+        reject.push(100.0, &[1.0, 2.0], &[0.0]),
+        Err(CertifyError::Regression(RegressionError::DimensionMismatch { .. }))
+    ));
+}
+
+#[test]
+fn checkpoint_and_restore_continue_bit_identically() {
+    let stream = two_state();
+    let traj = stream.run(11);
+    let cfg = CertifierConfig {
+        regression: RegressionConfig {
+            estimator: Estimator::Instrumented,
+            ..config(2, 2, vec![0.0; 4], 0.5).regression
+        },
+        ..config(2, 2, vec![-0.5, 0.1, 0.0, -0.8], 0.5)
+    };
+    let mut whole = Certifier::new(cfg.clone()).expect("valid");
+    let all: Vec<Evidence> = (0..traj.len())
+        .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
+        .collect();
+    let mut first = Certifier::new(cfg).expect("valid");
+    let split = 777;
+    for k in 0..split {
+        first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+    }
+    let json = first.checkpoint().expect("serialises");
+    let mut second = Certifier::restore(&json).expect("restores");
+    for k in split..traj.len() {
+        let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+        let want = &all[k];
+        assert_eq!(ev.beta_hat.map(f64::to_bits), want.beta_hat.map(f64::to_bits));
+        assert_eq!(ev.rho.map(f64::to_bits), want.rho.map(f64::to_bits));
+        assert_eq!(ev, *want);
+    }
+    assert_eq!(second, whole);
+    // A corrupted checkpoint is refused, not trusted.
+    assert!(Certifier::restore(&json.replace("\"window\":150", "\"window\":151")).is_err());
+    assert!(Certifier::restore("{").is_err());
+}
+
+#[test]
+fn invalid_configurations_are_refused() {
+    let ok = config(1, 1, vec![-1.0], 0.2);
+    for (cfg, field) in [
+        (CertifierConfig { conservatism: 0.0, ..ok.clone() }, "conservatism"),
+        (CertifierConfig { conservatism: f64::NAN, ..ok.clone() }, "conservatism"),
+        (CertifierConfig { margin: f64::INFINITY, ..ok.clone() }, "margin"),
+        (CertifierConfig { consecutive: 0, ..ok.clone() }, "consecutive"),
+        (CertifierConfig { gain: vec![f64::NAN], ..ok.clone() }, "gain"),
+    ] {
+        assert!(
+            matches!(Certifier::new(cfg), Err(CertifyError::InvalidConfig { field: f, .. }) if f == field)
+        );
+    }
+}

@@ -6,7 +6,8 @@ use streamcert::certificate::{
 };
 use streamcert::regression::{Estimator, InputIntegral, RegressionConfig, RegressionError};
 
-use crate::support::{LinearStream, true_rate};
+use crate::support::{run as run_scenario, true_rate};
+use streamcert::dynamics::LinearScenario;
 
 fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
     let reg = RegressionConfig {
@@ -16,15 +17,15 @@ fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
     CertifierConfig::new(reg, gain, c, 0.05, 10)
 }
 
-fn run(cert: &mut Certifier, stream: &LinearStream, seed: u64) -> Vec<Evidence> {
-    let traj = stream.run(seed);
+fn run(cert: &mut Certifier, stream: &LinearScenario, seed: u64) -> Vec<Evidence> {
+    let traj = run_scenario(&stream, seed);
     (0..traj.len())
         .map(|k| cert.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid sample"))
         .collect()
 }
 
-fn two_state() -> LinearStream {
-    LinearStream {
+fn two_state() -> LinearScenario {
+    LinearScenario {
         a: vec![-1.0, 0.5, -0.3, -2.0],
         b: vec![1.0, 0.2, 0.0, 1.0],
         n: 2,
@@ -43,7 +44,7 @@ fn beta_hat_is_minus_the_largest_eigenvalue_of_sym_j_cl() {
     let k = vec![-0.5, 0.1, 0.0, -0.8];
     let mut cert = Certifier::new(config(2, 2, k.clone(), 0.5)).expect("valid");
     let stream = two_state();
-    let traj = stream.run(1);
+    let traj = run_scenario(&stream, 1);
     for i in 0..traj.len() {
         let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
         let Some(beta_hat) = ev.beta_hat else { continue };
@@ -70,7 +71,7 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
     let mut below = 0usize;
     let mut total = 0usize;
     for (a, k) in [(0.5, -1.5), (-1.0, -1.0), (0.2, -0.7)] {
-        let stream = LinearStream {
+        let stream = LinearScenario {
             a: vec![a],
             b: vec![1.0],
             n: 1,
@@ -100,7 +101,7 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
 
 #[test]
 fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: vec![-1.0],
         b: vec![1.0],
         n: 1,
@@ -128,7 +129,7 @@ fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
 #[test]
 fn no_excitation_is_not_certified() {
     // Pure feedback, no dither: Z has rank one.
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: vec![-1.0],
         b: vec![1.0],
         n: 1,
@@ -155,7 +156,7 @@ fn no_excitation_is_not_certified() {
 
 #[test]
 fn bad_samples_are_rejected_or_skipped_and_never_certified() {
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: vec![-1.0],
         b: vec![1.0],
         n: 1,
@@ -167,7 +168,7 @@ fn bad_samples_are_rejected_or_skipped_and_never_certified() {
         dt: 0.01,
         steps: 600,
     };
-    let traj = stream.run(5);
+    let traj = run_scenario(&stream, 5);
     let mut reject = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
     let mut skip = Certifier::new(CertifierConfig {
         bad_samples: BadSamplePolicy::Skip,
@@ -201,7 +202,7 @@ fn bad_samples_are_rejected_or_skipped_and_never_certified() {
 #[test]
 fn checkpoint_and_restore_continue_bit_identically() {
     let stream = two_state();
-    let traj = stream.run(11);
+    let traj = run_scenario(&stream, 11);
     let cfg = CertifierConfig {
         regression: RegressionConfig {
             estimator: Estimator::Instrumented,

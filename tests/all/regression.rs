@@ -10,7 +10,8 @@ use streamcert::regression::{
     EstimateStatus, Estimator, InputIntegral, RegressionConfig, RegressionError, SlidingRegression,
 };
 
-use crate::support::LinearStream;
+use crate::support::run as run_scenario;
+use streamcert::dynamics::LinearScenario;
 
 type Sample = (f64, Vec<f64>, Vec<f64>);
 
@@ -230,8 +231,8 @@ proptest! {
 }
 
 /// Push a simulated trajectory; return the final window's `(J_obs, B_obs)` for `p = m = 1`.
-fn scalar_estimate(stream: &LinearStream, estimator: Estimator, seed: u64) -> (f64, f64) {
-    let traj = stream.run(seed);
+fn scalar_estimate(stream: &LinearScenario, estimator: Estimator, seed: u64) -> (f64, f64) {
+    let traj = run_scenario(&stream, seed);
     let cfg = RegressionConfig {
         estimator,
         input_integral: InputIntegral::ZeroOrderHold,
@@ -249,7 +250,7 @@ fn scalar_estimate(stream: &LinearStream, estimator: Estimator, seed: u64) -> (f
 #[test]
 fn scalar_estimate_converges_with_strong_dither() {
     // ẏ = −1 y + 2 u + 0.02 dW, PRBS dither of amplitude 1 held 0.2 s, no feedback.
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: vec![-1.0],
         b: vec![2.0],
         n: 1,
@@ -272,7 +273,7 @@ fn scalar_estimate_converges_with_strong_dither() {
 fn instrumented_estimator_removes_the_noise_bias() {
     const K_CANDIDATE: f64 = -1.0;
     // ẏ = −1 y + u + 0.5 dW, exploration u = −1 y + small PRBS: the noise dominates the output.
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: vec![-1.0],
         b: vec![1.0],
         n: 1,
@@ -309,7 +310,7 @@ fn instrumented_estimator_removes_the_noise_bias() {
 fn recovers_a_three_output_two_input_system() {
     let a = vec![-1.0, 0.3, 0.0, -0.2, -1.5, 0.4, 0.1, 0.0, -0.8];
     let b = vec![1.0, 0.0, 0.0, 1.0, 0.5, -0.5];
-    let stream = LinearStream {
+    let stream = LinearScenario {
         a: a.clone(),
         b: b.clone(),
         n: 3,
@@ -321,7 +322,7 @@ fn recovers_a_three_output_two_input_system() {
         dt: 0.005,
         steps: 20_000,
     };
-    let traj = stream.run(8);
+    let traj = run_scenario(&stream, 8);
     let cfg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
         ..RegressionConfig::new(3, 2, 5000, 4, 1e-9)

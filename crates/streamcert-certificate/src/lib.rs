@@ -242,6 +242,7 @@ pub struct Certifier {
     skipped: u64,
     jcl: Vec<f64>,
     work: Vec<f64>,
+    eig_work: Vec<f64>,
 }
 
 /// The regression's outcome, reduced to what the certificate needs.
@@ -277,6 +278,7 @@ impl Certifier {
             skipped: 0,
             jcl: vec![0.0; p * p],
             work: vec![0.0; p * p],
+            eig_work: vec![0.0; linalg::eig_work_len(p)],
             cfg,
         })
     }
@@ -391,13 +393,7 @@ impl Certifier {
                 self.work[i * p + j] = s;
             }
         }
-        let mut scratch = [0.0; 0];
-        let lambda_max = if p <= 2 {
-            linalg::sym_eig_extremes(&self.work, p, &mut scratch).1
-        } else {
-            // Needs a p × p scratch: reuse jcl, which is no longer needed.
-            linalg::sym_eig_extremes(&self.work, p, &mut self.jcl).1
-        };
+        let lambda_max = linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1;
         let beta_hat = -lambda_max;
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * est.rms_residual
             / (est.gram_lambda_min + self.cfg.regression.ridge).sqrt();

@@ -34,6 +34,7 @@ mod dither;
 mod error;
 mod g5;
 mod linear;
+mod scenario;
 mod simulate;
 mod system;
 
@@ -42,6 +43,7 @@ pub use dither::{Dither, DitherConfig};
 pub use error::DynamicsError;
 pub use g5::{Coupling, G5, G5Config, LocalRates};
 pub use linear::LinearSystem;
+pub use scenario::LinearScenario;
 pub use simulate::{Integrator, NoiseScaling, SimConfig, Trajectory, simulate};
 pub use system::Dynamics;
 

@@ -304,6 +304,20 @@ impl Estimate<'_> {
     }
 }
 
+/// Element-wise copy; for the short slices of the hot path a plain loop beats a `memcpy` call.
+#[inline]
+fn copy(dst: &mut [f64], src: &[f64]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = *s;
+    }
+}
+
+/// `(i + 1) mod cap` without a division.
+#[inline]
+fn next(i: usize, cap: usize) -> usize {
+    if i + 1 == cap { 0 } else { i + 1 }
+}
+
 /// The streaming estimator. See the crate docs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlidingRegression {
@@ -378,7 +392,7 @@ impl SlidingRegression {
             cw: vec![0.0; p * d],
             since_refresh: 0,
             theta: vec![0.0; p * d],
-            work: vec![0.0; d * d],
+            work: vec![0.0; linalg::eig_work_len(d)],
             work2: vec![0.0; d * d],
             piv: vec![0; d],
             z: vec![0.0; d],
@@ -479,22 +493,27 @@ impl SlidingRegression {
         let (p, m, h) = (self.cfg.outputs, self.cfg.inputs, self.cfg.horizon);
         let d = p + m;
         let cap = h + 1;
-        self.hist_head = if self.hist_len == 0 { 0 } else { (self.hist_head + 1) % cap };
+        self.hist_head = if self.hist_len == 0 { 0 } else { next(self.hist_head, cap) };
         let k = self.hist_head;
         self.hist_t[k] = t;
-        self.hist_y[k * p..(k + 1) * p].copy_from_slice(y);
-        self.hist_u[k * m..(k + 1) * m].copy_from_slice(u);
+        copy(&mut self.hist_y[k * p..(k + 1) * p], y);
+        copy(&mut self.hist_u[k * m..(k + 1) * m], u);
         self.hist_len = (self.hist_len + 1).min(cap);
         if self.hist_len < cap {
             return Ok(());
         }
-        self.build_column();
+        // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+            self.build_column(1, 1);
+        } else {
+            self.build_column(self.cfg.outputs, self.cfg.inputs);
+        }
         if !self.z.iter().chain(self.dy.iter()).all(|v| v.is_finite()) {
             self.reset();
             return Err(RegressionError::Overflow);
         }
         if self.cfg.estimator == Estimator::Instrumented {
-            self.zhist_head = if self.zhist_len == 0 { 0 } else { (self.zhist_head + 1) % cap };
+            self.zhist_head = if self.zhist_len == 0 { 0 } else { next(self.zhist_head, cap) };
             let q = self.zhist_head;
             self.zhist[q * d..(q + 1) * d].copy_from_slice(&self.z);
             self.zhist_len = (self.zhist_len + 1).min(cap);
@@ -506,64 +525,79 @@ impl SlidingRegression {
     }
 
     /// Build `z = [∫y; ∫u]` and `dy = y_new − y_old` over the last `h` intervals.
-    fn build_column(&mut self) {
-        let (p, m, h) = (self.cfg.outputs, self.cfg.inputs, self.cfg.horizon);
+    #[inline(always)]
+    fn build_column(&mut self, p: usize, m: usize) {
+        let h = self.cfg.horizon;
         let cap = h + 1;
         let newest = self.hist_head;
-        let oldest = (newest + 1) % cap;
-        self.z.fill(0.0);
+        let oldest = next(newest, cap);
+        let (zy, zu) = self.z.split_at_mut(p);
+        zy.fill(0.0);
+        zu.fill(0.0);
         let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
         let mut a = oldest;
         for _ in 0..h {
-            let b = (a + 1) % cap;
+            let b = next(a, cap);
             let dt = self.hist_t[b] - self.hist_t[a];
             let half = 0.5 * dt;
-            for i in 0..p {
-                self.z[i] += half * (self.hist_y[a * p + i] + self.hist_y[b * p + i]);
+            let (ya, yb) = (&self.hist_y[a * p..(a + 1) * p], &self.hist_y[b * p..(b + 1) * p]);
+            for ((z, &va), &vb) in zy.iter_mut().zip(ya).zip(yb) {
+                *z += half * (va + vb);
             }
-            for j in 0..m {
-                let (ua, ub) = (self.hist_u[a * m + j], self.hist_u[b * m + j]);
-                self.z[p + j] += if zoh { dt * ua } else { half * (ua + ub) };
+            let (ua, ub) = (&self.hist_u[a * m..(a + 1) * m], &self.hist_u[b * m..(b + 1) * m]);
+            if zoh {
+                for (z, &va) in zu.iter_mut().zip(ua) {
+                    *z += dt * va;
+                }
+            } else {
+                for ((z, &va), &vb) in zu.iter_mut().zip(ua).zip(ub) {
+                    *z += half * (va + vb);
+                }
             }
             a = b;
         }
-        for i in 0..p {
-            self.dy[i] = self.hist_y[newest * p + i] - self.hist_y[oldest * p + i];
+        let (yn, yo) = (
+            &self.hist_y[newest * p..(newest + 1) * p],
+            &self.hist_y[oldest * p..(oldest + 1) * p],
+        );
+        for ((d, &vn), &vo) in self.dy.iter_mut().zip(yn).zip(yo) {
+            *d = vn - vo;
         }
     }
 
-    /// Add `sign ×` the outer products of column `(z, dy, w)` to the statistics.
+    /// Add `sign ×` the outer products of the column in slot `q` to the statistics.
     fn accumulate(&mut self, q: usize, sign: f64) {
         let (p, d) = (self.cfg.outputs, self.d());
         let z = &self.col_z[q * d..(q + 1) * d];
         let dy = &self.col_dy[q * p..(q + 1) * p];
-        for i in 0..d {
-            let zi = sign * z[i];
-            for j in i..d {
-                self.g[i * d + j] += zi * z[j];
+        for (i, &zi) in z.iter().enumerate() {
+            let zi = sign * zi;
+            let row = &mut self.g[i * d..(i + 1) * d];
+            for (g, &zj) in row[i..].iter_mut().zip(&z[i..]) {
+                *g += zi * zj;
             }
         }
-        for i in 0..p {
-            let di = sign * dy[i];
-            for j in 0..d {
-                self.c[i * d + j] += di * z[j];
+        for (i, &di) in dy.iter().enumerate() {
+            let di = sign * di;
+            for (c, &zj) in self.c[i * d..(i + 1) * d].iter_mut().zip(z) {
+                *c += di * zj;
             }
-            for j in i..p {
-                self.s[i * p + j] += di * dy[j];
+            for (s, &dj) in self.s[i * p + i..(i + 1) * p].iter_mut().zip(&dy[i..]) {
+                *s += di * dj;
             }
         }
         if self.cfg.estimator == Estimator::Instrumented {
             let w = &self.col_w[q * d..(q + 1) * d];
-            for i in 0..d {
-                let zi = sign * z[i];
-                for j in 0..d {
-                    self.gw[i * d + j] += zi * w[j];
+            for (i, &zi) in z.iter().enumerate() {
+                let zi = sign * zi;
+                for (g, &wj) in self.gw[i * d..(i + 1) * d].iter_mut().zip(w) {
+                    *g += zi * wj;
                 }
             }
-            for i in 0..p {
-                let di = sign * dy[i];
-                for j in 0..d {
-                    self.cw[i * d + j] += di * w[j];
+            for (i, &di) in dy.iter().enumerate() {
+                let di = sign * di;
+                for (c, &wj) in self.cw[i * d..(i + 1) * d].iter_mut().zip(w) {
+                    *c += di * wj;
                 }
             }
         }
@@ -582,29 +616,71 @@ impl SlidingRegression {
     fn insert_column(&mut self) -> Result<(), RegressionError> {
         let (p, d, mm) = (self.cfg.outputs, self.d(), self.cfg.window);
         let q = self.col_next;
-        if self.col_len == mm {
-            self.accumulate(q, -1.0);
-        }
-        self.col_z[q * d..(q + 1) * d].copy_from_slice(&self.z);
-        self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
-        if self.cfg.estimator == Estimator::Instrumented {
+        let instrumented = self.cfg.estimator == Estimator::Instrumented;
+        if instrumented {
             let cap = self.cfg.horizon + 1;
-            let oldest = (self.zhist_head + 1) % cap;
+            let oldest = next(self.zhist_head, cap);
+            // The evicted column's instrument must leave the sums before it is overwritten.
+            if self.col_len == mm {
+                self.accumulate(q, -1.0);
+            }
+            self.col_z[q * d..(q + 1) * d].copy_from_slice(&self.z);
+            self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
             self.col_w[q * d..(q + 1) * d]
                 .copy_from_slice(&self.zhist[oldest * d..(oldest + 1) * d]);
+            self.accumulate(q, 1.0);
+        } else if self.col_len == mm {
+            if p == 1 && d == 2 {
+                self.replace_column(q, 1, 2);
+            } else {
+                self.replace_column(q, p, d);
+            }
+        } else {
+            self.col_z[q * d..(q + 1) * d].copy_from_slice(&self.z);
+            self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
+            self.accumulate(q, 1.0);
         }
-        self.accumulate(q, 1.0);
         if !self.statistics_finite() {
             self.reset();
             return Err(RegressionError::Overflow);
         }
-        self.col_next = (q + 1) % mm;
+        self.col_next = next(q, mm);
         self.col_len = (self.col_len + 1).min(mm);
         self.since_refresh += 1;
         if self.since_refresh >= self.cfg.refresh_period {
             self.refresh();
         }
         Ok(())
+    }
+
+    /// One pass that adds the new column (`self.z`, `self.dy`) and removes the one in slot
+    /// `q`, then stores the new column in slot `q` (ordinary estimator). `p`, `d` are the
+    /// configured dimensions, passed in so call sites with literals get unrolled code.
+    #[inline(always)]
+    fn replace_column(&mut self, q: usize, p: usize, d: usize) {
+        let (z, dy) = (&self.z, &self.dy);
+        let zo = &mut self.col_z[q * d..(q + 1) * d];
+        let dyo = &mut self.col_dy[q * p..(q + 1) * p];
+        for i in 0..d {
+            let (zi, oi) = (z[i], zo[i]);
+            let row = &mut self.g[i * d..(i + 1) * d];
+            for j in i..d {
+                row[j] += zi * z[j] - oi * zo[j];
+            }
+        }
+        for i in 0..p {
+            let (di, oi) = (dy[i], dyo[i]);
+            let row = &mut self.c[i * d..(i + 1) * d];
+            for j in 0..d {
+                row[j] += di * z[j] - oi * zo[j];
+            }
+            let row = &mut self.s[i * p..(i + 1) * p];
+            for j in i..p {
+                row[j] += di * dy[j] - oi * dyo[j];
+            }
+        }
+        copy(zo, z);
+        copy(dyo, dy);
     }
 
     /// Recompute every statistic exactly from the column ring (`O(M d²)`), discarding the
@@ -615,12 +691,50 @@ impl SlidingRegression {
             v.fill(0.0);
         }
         let mm = self.cfg.window;
-        // Oldest to newest, so the sums are formed in a fixed order.
+        // Oldest to newest, so the sums are formed in a fixed order: the ring holds the
+        // window as [start, mm) followed by [0, start) when it has wrapped.
         let start = (self.col_next + mm - self.col_len) % mm;
-        for k in 0..self.col_len {
-            self.accumulate((start + k) % mm, 1.0);
+        let first = (mm - start).min(self.col_len);
+        if self.cfg.estimator == Estimator::Ordinary {
+            let (p, d) = (self.cfg.outputs, self.d());
+            if p == 1 && d == 2 {
+                self.sum_columns(start, first, 1, 2);
+                self.sum_columns(0, self.col_len - first, 1, 2);
+            } else {
+                self.sum_columns(start, first, p, d);
+                self.sum_columns(0, self.col_len - first, p, d);
+            }
+        } else {
+            for k in 0..self.col_len {
+                self.accumulate((start + k) % mm, 1.0);
+            }
         }
         self.since_refresh = 0;
+    }
+
+    /// Add the outer products of the contiguous slots `[from, from + count)` (ordinary
+    /// statistics only).
+    #[inline(always)]
+    fn sum_columns(&mut self, from: usize, count: usize, p: usize, d: usize) {
+        let zs = self.col_z[from * d..(from + count) * d].chunks_exact(d);
+        let dys = self.col_dy[from * p..(from + count) * p].chunks_exact(p);
+        for (z, dy) in zs.zip(dys) {
+            for i in 0..d {
+                let zi = z[i];
+                for j in i..d {
+                    self.g[i * d + j] += zi * z[j];
+                }
+            }
+            for i in 0..p {
+                let di = dy[i];
+                for j in 0..d {
+                    self.c[i * d + j] += di * z[j];
+                }
+                for j in i..p {
+                    self.s[i * p + j] += di * dy[j];
+                }
+            }
+        }
     }
 
     /// The sufficient statistics `(G = ZZᵀ, C = ΔY Zᵀ, S = ΔY ΔYᵀ)`, row-major; only the
@@ -632,7 +746,17 @@ impl SlidingRegression {
 
     /// Solve the window: `O(d³ + p d²)`, no allocation.
     pub fn estimate(&mut self) -> Estimate<'_> {
-        let (p, m) = (self.cfg.outputs, self.cfg.inputs);
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+            self.estimate_dims(1, 1)
+        } else {
+            self.estimate_dims(self.cfg.outputs, self.cfg.inputs)
+        }
+    }
+
+    /// [`estimate`](Self::estimate) with the dimensions passed in (literals at the call site
+    /// for the paper's `p = m = 1` unroll the small kernels).
+    #[inline(always)]
+    fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
         let d = p + m;
         let n = self.col_len;
         let mut out = Estimate {

@@ -11,6 +11,7 @@
 ///
 /// Returns `false` when `A` is not numerically positive definite (a pivot `<= 0` or not finite).
 #[must_use]
+#[inline]
 pub fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
     for j in 0..n {
         let mut diag = a[j * n + j];
@@ -34,6 +35,7 @@ pub fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
 }
 
 /// Solve `L Lᵀ x = b` in place in `b`, with `L` from [`cholesky_in_place`].
+#[inline]
 pub fn cholesky_solve_in_place(l: &[f64], n: usize, b: &mut [f64]) {
     for i in 0..n {
         let mut s = b[i];
@@ -113,12 +115,21 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     }
 }
 
-/// Smallest and largest eigenvalue of the symmetric `n × n` matrix `a` (row-major; only
-/// the upper triangle is read), using `work` (`>= n²`) as scratch.
-///
-/// `n = 1, 2` use closed forms; larger `n` use cyclic Jacobi rotations, which are accurate to
-/// a few ulps of `‖A‖` and converge quadratically (at most 50 sweeps).
+/// Scratch length [`sym_eig_extremes`] needs for an `n × n` matrix: `n² + 2n`.
 #[must_use]
+pub const fn eig_work_len(n: usize) -> usize {
+    n * n + 2 * n
+}
+
+/// Smallest and largest eigenvalue of the symmetric `n × n` matrix `a` (row-major; only the
+/// upper triangle is read), using `work` (at least [`eig_work_len`]`(n)` long) as scratch.
+///
+/// `n = 1, 2` use closed forms; larger `n` use Householder tridiagonalisation followed by the
+/// implicit QL iteration (EISPACK `tred1`/`tql1`, as in Numerical Recipes `tred2`/`tqli`
+/// without eigenvectors): `O(n³)` with a small constant, backward stable. Returns NaNs if
+/// the iteration fails to converge (it does not for finite input).
+#[must_use]
+#[inline]
 pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
     match n {
         0 => (f64::NAN, f64::NAN),
@@ -126,67 +137,150 @@ pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
         2 => {
             let (p, q, r) = (a[0], a[1], a[3]);
             let mean = 0.5 * (p + r);
-            let half = (0.5 * (p - r)).hypot(q);
+            let diff = 0.5 * (p - r);
+            // √(diff² + q²) without the cost of `hypot`, which it falls back to on overflow.
+            let mut half = (diff * diff + q * q).sqrt();
+            if !half.is_finite() {
+                half = diff.hypot(q);
+            }
             (mean - half, mean + half)
         }
         _ => {
-            let w = &mut work[..n * n];
+            let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
+            let (d, e) = rest.split_at_mut(n);
+            // Lower triangle of w from the upper triangle of a.
             for i in 0..n {
-                for j in 0..n {
-                    w[i * n + j] = if j >= i { a[i * n + j] } else { a[j * n + i] };
+                for j in 0..=i {
+                    w[i * n + j] = a[j * n + i];
                 }
             }
-            jacobi_diagonalise(w, n);
+            tridiagonalise(w, n, d, e);
+            if !tridiagonal_ql(d, e) {
+                return (f64::NAN, f64::NAN);
+            }
             let mut lo = f64::INFINITY;
             let mut hi = f64::NEG_INFINITY;
-            for i in 0..n {
-                lo = lo.min(w[i * n + i]);
-                hi = hi.max(w[i * n + i]);
+            for &v in d.iter() {
+                lo = lo.min(v);
+                hi = hi.max(v);
             }
             (lo, hi)
         }
     }
 }
 
-/// Cyclic Jacobi: drive the off-diagonal of the symmetric `w` to zero in place.
-fn jacobi_diagonalise(w: &mut [f64], n: usize) {
-    for _sweep in 0..50 {
-        let mut off = 0.0;
-        let mut diag = 0.0;
-        for i in 0..n {
-            diag += w[i * n + i] * w[i * n + i];
-            for j in i + 1..n {
-                off += w[i * n + j] * w[i * n + j];
+/// Householder reduction of the symmetric matrix held in the lower triangle of `a` to
+/// tridiagonal form: diagonal in `d`, sub-diagonal in `e[1..]` (`e[0] = 0`).
+fn tridiagonalise(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
+    for i in (1..n).rev() {
+        let l = i - 1;
+        let mut h = 0.0;
+        if l > 0 {
+            let scale: f64 = (0..=l).map(|k| a[i * n + k].abs()).sum();
+            if scale == 0.0 {
+                e[i] = a[i * n + l];
+            } else {
+                for k in 0..=l {
+                    a[i * n + k] /= scale;
+                    h += a[i * n + k] * a[i * n + k];
+                }
+                let f = a[i * n + l];
+                let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
+                e[i] = scale * g;
+                h -= f * g;
+                a[i * n + l] = f - g;
+                let mut f = 0.0;
+                for j in 0..=l {
+                    let mut g = 0.0;
+                    for k in 0..=j {
+                        g += a[j * n + k] * a[i * n + k];
+                    }
+                    for k in j + 1..=l {
+                        g += a[k * n + j] * a[i * n + k];
+                    }
+                    e[j] = g / h;
+                    f += e[j] * a[i * n + j];
+                }
+                let hh = f / (h + h);
+                for j in 0..=l {
+                    let f = a[i * n + j];
+                    let g = e[j] - hh * f;
+                    e[j] = g;
+                    for k in 0..=j {
+                        a[j * n + k] -= f * e[k] + g * a[i * n + k];
+                    }
+                }
             }
+        } else {
+            e[i] = a[i * n + l];
         }
-        if off <= 1e-30 * diag || off == 0.0 || !off.is_finite() {
-            return;
-        }
-        for p in 0..n {
-            for q in p + 1..n {
-                let apq = w[p * n + q];
-                if apq == 0.0 {
-                    continue;
+        d[i] = h;
+    }
+    e[0] = 0.0;
+    for i in 0..n {
+        d[i] = a[i * n + i];
+    }
+}
+
+/// Eigenvalues of the symmetric tridiagonal matrix (`d` diagonal, `e[1..]` sub-diagonal) by
+/// the implicit QL method with Wilkinson shifts; overwrites `d` with the eigenvalues.
+fn tridiagonal_ql(d: &mut [f64], e: &mut [f64]) -> bool {
+    let n = d.len();
+    for i in 1..n {
+        e[i - 1] = e[i];
+    }
+    e[n - 1] = 0.0;
+    for l in 0..n {
+        let mut iter = 0;
+        loop {
+            let mut m = l;
+            while m + 1 < n {
+                let dd = d[m].abs() + d[m + 1].abs();
+                if e[m].abs() <= f64::EPSILON * dd {
+                    break;
                 }
-                let (app, aqq) = (w[p * n + p], w[q * n + q]);
-                let theta = (aqq - app) / (2.0 * apq);
-                let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
-                let t = if theta == 0.0 { 1.0 } else { t };
-                let c = 1.0 / (t * t + 1.0).sqrt();
-                let s = t * c;
-                for k in 0..n {
-                    let (akp, akq) = (w[k * n + p], w[k * n + q]);
-                    w[k * n + p] = c * akp - s * akq;
-                    w[k * n + q] = s * akp + c * akq;
-                }
-                for k in 0..n {
-                    let (apk, aqk) = (w[p * n + k], w[q * n + k]);
-                    w[p * n + k] = c * apk - s * aqk;
-                    w[q * n + k] = s * apk + c * aqk;
-                }
+                m += 1;
             }
+            if m == l {
+                break;
+            }
+            iter += 1;
+            if iter > 60 {
+                return false;
+            }
+            let mut g = (d[l + 1] - d[l]) / (2.0 * e[l]);
+            let mut r = g.hypot(1.0);
+            g = d[m] - d[l] + e[l] / (g + if g >= 0.0 { r.abs() } else { -r.abs() });
+            let (mut s, mut c, mut p) = (1.0, 1.0, 0.0);
+            let mut deflated = false;
+            for i in (l..m).rev() {
+                let f = s * e[i];
+                let b = c * e[i];
+                r = f.hypot(g);
+                e[i + 1] = r;
+                if r == 0.0 {
+                    d[i + 1] -= p;
+                    e[m] = 0.0;
+                    deflated = true;
+                    break;
+                }
+                s = f / r;
+                c = g / r;
+                g = d[i + 1] - p;
+                r = (d[i] - g) * s + 2.0 * c * b;
+                p = s * r;
+                d[i + 1] = g + p;
+                g = c * r - b;
+            }
+            if deflated {
+                continue;
+            }
+            d[l] -= p;
+            e[l] = g;
+            e[m] = 0.0;
         }
     }
+    true
 }
 
 /// Spectral norm `‖K‖₂` of an `r × c` row-major matrix: `√λ_max(Kᵀ K)`. Allocates (it is
@@ -202,7 +296,7 @@ pub fn spectral_norm(k: &[f64], r: usize, c: usize) -> f64 {
             ktk[i * c + j] = (0..r).map(|l| k[l * c + i] * k[l * c + j]).sum();
         }
     }
-    let mut work = vec![0.0; c * c];
+    let mut work = vec![0.0; eig_work_len(c)];
     sym_eig_extremes(&ktk, c, &mut work).1.max(0.0).sqrt()
 }
 
@@ -226,9 +320,9 @@ mod tests {
 
     proptest! {
         #[test]
-        fn eigen_extremes_on_random_symmetric(a in (1usize..12).prop_flat_map(sym)) {
+        fn eigen_extremes_on_random_symmetric(a in (1usize..24).prop_flat_map(sym)) {
             let n = (a.len() as f64).sqrt() as usize;
-            let mut work = vec![0.0; n * n];
+            let mut work = vec![0.0; eig_work_len(n)];
             let (lo, hi) = sym_eig_extremes(&a, n, &mut work);
             let eig = DMatrix::from_row_slice(n, n, &a).symmetric_eigen().eigenvalues;
             let scale = 1.0 + eig.amax();

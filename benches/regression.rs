@@ -1,0 +1,115 @@
+//! Per-sample cost of the streaming regression and certifier, beside a naive baseline in the
+//! same group: the naive step absorbs the sample and then recomputes every statistic from the
+//! window (`O(M d²)`), which is what a non-incremental implementation does.
+//!
+//! Run: `cargo bench --bench regression`.
+
+use std::hint::black_box;
+
+use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use streamcert::certificate::{Certifier, CertifierConfig};
+use streamcert::regression::{RegressionConfig, SlidingRegression};
+
+/// A pre-generated stream of `len` samples with `p` outputs and `m` inputs.
+fn stream(p: usize, m: usize, len: usize) -> Vec<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut state = vec![0.0; p + m];
+    let mut out = Vec::with_capacity(len * (p + m));
+    for _ in 0..len {
+        for v in &mut state {
+            *v = 0.95 * *v + rng.random::<f64>() - 0.5;
+        }
+        out.extend_from_slice(&state);
+    }
+    out
+}
+
+/// Warm a regression up to a full window.
+fn warm(cfg: RegressionConfig, data: &[f64], t: &mut f64) -> SlidingRegression {
+    let d = cfg.outputs + cfg.inputs;
+    let mut reg = SlidingRegression::new(cfg).expect("valid");
+    for s in data.chunks(d).take(cfg.window + cfg.horizon + 1) {
+        *t += 0.01;
+        reg.push(*t, &s[..cfg.outputs], &s[cfg.outputs..]).expect("valid");
+    }
+    reg
+}
+
+fn regression_update(c: &mut Criterion) {
+    let mut group = c.benchmark_group("regression_update");
+    for (p, m, window) in [(1usize, 1usize, 150usize), (1, 1, 1500), (10, 10, 150)] {
+        let d = p + m;
+        let len = 4096;
+        let data = stream(p, m, len);
+        let cfg = RegressionConfig::new(p, m, window, 5, 1e-4);
+        let id = format!("p{p}_m{m}_M{window}");
+        let mut t = 0.0;
+        let mut reg = warm(cfg, &data, &mut t);
+        let mut k = 0usize;
+        group.bench_function(BenchmarkId::new("incremental", &id), |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                t += 0.01;
+                let s = &data[k * d..(k + 1) * d];
+                reg.push(black_box(t), &s[..p], &s[p..]).expect("valid");
+            });
+        });
+        let mut t = 0.0;
+        let mut reg = warm(cfg, &data, &mut t);
+        group.bench_function(BenchmarkId::new("naive_recompute", &id), |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                t += 0.01;
+                let s = &data[k * d..(k + 1) * d];
+                reg.push(black_box(t), &s[..p], &s[p..]).expect("valid");
+                reg.refresh();
+            });
+        });
+        let mut t = 0.0;
+        let mut reg = warm(cfg, &data, &mut t);
+        group.bench_function(BenchmarkId::new("incremental_plus_estimate", &id), |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                t += 0.01;
+                let s = &data[k * d..(k + 1) * d];
+                reg.push(black_box(t), &s[..p], &s[p..]).expect("valid");
+                black_box(reg.estimate().rms_residual);
+            });
+        });
+    }
+    group.finish();
+}
+
+fn certifier_step(c: &mut Criterion) {
+    let mut group = c.benchmark_group("certifier_step");
+    for (p, m) in [(1usize, 1usize), (10, 10)] {
+        let d = p + m;
+        let len = 4096;
+        let data = stream(p, m, len);
+        let gain: Vec<f64> =
+            (0..m * p).map(|i| if i % (p + 1) == 0 { -1.0 } else { 0.0 }).collect();
+        let cfg =
+            CertifierConfig::new(RegressionConfig::new(p, m, 150, 5, 1e-4), gain, 0.2, 0.05, 10);
+        let mut cert = Certifier::new(cfg).expect("valid");
+        let mut t = 0.0;
+        for s in data.chunks(d).take(200) {
+            t += 0.01;
+            cert.push(t, &s[..p], &s[p..]).expect("valid");
+        }
+        let mut k = 0usize;
+        group.bench_function(BenchmarkId::new("gaussian", format!("p{p}_m{m}_M150")), |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                t += 0.01;
+                let s = &data[k * d..(k + 1) * d];
+                black_box(cert.push(black_box(t), &s[..p], &s[p..]).expect("valid"));
+            });
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, regression_update, certifier_step);
+criterion_main!(benches);

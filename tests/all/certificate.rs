@@ -18,7 +18,7 @@ fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
 }
 
 fn run(cert: &mut Certifier, stream: &LinearScenario, seed: u64) -> Vec<Evidence> {
-    let traj = run_scenario(&stream, seed);
+    let traj = run_scenario(stream, seed);
     (0..traj.len())
         .map(|k| cert.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid sample"))
         .collect()

@@ -232,7 +232,7 @@ proptest! {
 
 /// Push a simulated trajectory; return the final window's `(J_obs, B_obs)` for `p = m = 1`.
 fn scalar_estimate(stream: &LinearScenario, estimator: Estimator, seed: u64) -> (f64, f64) {
-    let traj = run_scenario(&stream, seed);
+    let traj = run_scenario(stream, seed);
     let cfg = RegressionConfig {
         estimator,
         input_integral: InputIntegral::ZeroOrderHold,

@@ -5,8 +5,10 @@
 //!
 //! * [`dynamics`]: the `Dynamics` trait, the G5 benchmark, disturbances, dither, integrators.
 //! * [`regression`]: streaming sliding-window integral regression (ridge and instrumented).
+//! * [`ambiguity`]: exact sliding-window kurtosis, spike fraction and the radius `ε(t)`.
 //! * [`certificate`]: the streaming certifier (`β̂`, `ρ`, certificate, deployment gate).
 
+pub use streamcert_ambiguity as ambiguity;
 pub use streamcert_certificate as certificate;
 pub use streamcert_dynamics as dynamics;
 pub use streamcert_regression as regression;

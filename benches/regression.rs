@@ -9,6 +9,7 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use streamcert::ambiguity::AmbiguityConfig;
 use streamcert::certificate::{Certifier, CertifierConfig};
 use streamcert::regression::{RegressionConfig, SlidingRegression};
 
@@ -84,14 +85,19 @@ fn regression_update(c: &mut Criterion) {
 
 fn certifier_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("certifier_step");
-    for (p, m) in [(1usize, 1usize), (10, 10)] {
+    let cases = [(1usize, 1usize, false), (1, 1, true), (10, 10, false), (10, 10, true)];
+    for (p, m, wasserstein) in cases {
         let d = p + m;
         let len = 4096;
         let data = stream(p, m, len);
         let gain: Vec<f64> =
             (0..m * p).map(|i| if i % (p + 1) == 0 { -1.0 } else { 0.0 }).collect();
-        let cfg =
+        let mut cfg =
             CertifierConfig::new(RegressionConfig::new(p, m, 150, 5, 1e-4), gain, 0.2, 0.05, 10);
+        if wasserstein {
+            cfg.ambiguity = Some(AmbiguityConfig::paper(150));
+        }
+        let name = if wasserstein { "gaussian_and_wasserstein" } else { "gaussian" };
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
         for s in data.chunks(d).take(200) {
@@ -99,7 +105,7 @@ fn certifier_step(c: &mut Criterion) {
             cert.push(t, &s[..p], &s[p..]).expect("valid");
         }
         let mut k = 0usize;
-        group.bench_function(BenchmarkId::new("gaussian", format!("p{p}_m{m}_M150")), |b| {
+        group.bench_function(BenchmarkId::new(name, format!("p{p}_m{m}_M150")), |b| {
             b.iter(|| {
                 k = (k + 1) % len;
                 t += 0.01;

@@ -7,7 +7,7 @@
 //! Run: `cargo run --release --example estimator_study`.
 
 use streamcert::certificate::{Certifier, CertifierConfig};
-use streamcert::dynamics::LinearScenario;
+use streamcert::dynamics::{LinearScenario, Process};
 use streamcert::regression::{
     EstimateStatus, Estimator, InputIntegral, RegressionConfig, SlidingRegression,
 };
@@ -26,7 +26,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         m: 1,
         a: vec![-1.0],
         b: vec![1.0],
-        sigma: 0.5,
+        noise: Process::Gaussian { sigma: 0.5 },
         k_explore: vec![-1.0],
         dither: 0.05,
         dither_hold: 0.5,
@@ -73,7 +73,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 m: 1,
                 a: vec![a],
                 b: vec![1.0],
-                sigma: 0.05,
+                noise: Process::Gaussian { sigma: 0.05 },
                 k_explore: vec![k],
                 dither: 1.0,
                 dither_hold: 0.1,

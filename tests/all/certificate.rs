@@ -1,13 +1,16 @@
 //! streamcert-certificate: `β̂` against a dense eigensolver, validity of the certificate on
 //! known linear systems, the gate, bad input, and checkpoint/restore.
 
+use proptest::prelude::*;
+use streamcert::ambiguity::AmbiguityConfig;
 use streamcert::certificate::{
     BadSamplePolicy, Certifier, CertifierConfig, CertifyError, Evidence, NotCertified,
+    ResidualSource, certificate_surface, certificate_value,
 };
 use streamcert::regression::{Estimator, InputIntegral, RegressionConfig, RegressionError};
 
 use crate::support::{run as run_scenario, true_rate};
-use streamcert::dynamics::LinearScenario;
+use streamcert::dynamics::{LinearScenario, Process};
 
 fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
     let reg = RegressionConfig {
@@ -30,7 +33,7 @@ fn two_state() -> LinearScenario {
         b: vec![1.0, 0.2, 0.0, 1.0],
         n: 2,
         m: 2,
-        sigma: 0.02,
+        noise: Process::Gaussian { sigma: 0.02 },
         k_explore: vec![0.0; 4],
         dither: 0.5,
         dither_hold: 0.1,
@@ -76,7 +79,7 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
             b: vec![1.0],
             n: 1,
             m: 1,
-            sigma: 0.05,
+            noise: Process::Gaussian { sigma: 0.05 },
             k_explore: vec![k],
             dither: 1.0,
             dither_hold: 0.1,
@@ -106,7 +109,7 @@ fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
         b: vec![1.0],
         n: 1,
         m: 1,
-        sigma: 0.05,
+        noise: Process::Gaussian { sigma: 0.05 },
         k_explore: vec![-1.0],
         dither: 1.0,
         dither_hold: 0.1,
@@ -134,7 +137,7 @@ fn no_excitation_is_not_certified() {
         b: vec![1.0],
         n: 1,
         m: 1,
-        sigma: 0.05,
+        noise: Process::Gaussian { sigma: 0.05 },
         k_explore: vec![-1.0],
         dither: 0.0,
         dither_hold: 0.1,
@@ -161,7 +164,7 @@ fn bad_samples_are_rejected_or_skipped_and_never_certified() {
         b: vec![1.0],
         n: 1,
         m: 1,
-        sigma: 0.05,
+        noise: Process::Gaussian { sigma: 0.05 },
         k_explore: vec![-1.0],
         dither: 1.0,
         dither_hold: 0.1,
@@ -208,6 +211,7 @@ fn checkpoint_and_restore_continue_bit_identically() {
             estimator: Estimator::Instrumented,
             ..config(2, 2, vec![0.0; 4], 0.5).regression
         },
+        ambiguity: Some(AmbiguityConfig::paper(150)),
         ..config(2, 2, vec![-0.5, 0.1, 0.0, -0.8], 0.5)
     };
     let mut whole = Certifier::new(cfg.clone()).expect("valid");
@@ -248,4 +252,86 @@ fn invalid_configurations_are_refused() {
             matches!(Certifier::new(cfg), Err(CertifyError::InvalidConfig { field: f, .. }) if f == field)
         );
     }
+}
+
+proptest! {
+    #[test]
+    fn wasserstein_never_exceeds_gaussian(beta in -10.0f64..10.0, rho in 0.0f64..10.0, eps in 0.0f64..1.0) {
+        let gauss = certificate_value(beta, rho, 0.0);
+        prop_assert_eq!(gauss, beta - rho);
+        prop_assert!(certificate_value(beta, rho, eps) <= gauss);
+        let grid = [0.0, eps / 2.0, eps];
+        let mut out = [0.0; 3];
+        certificate_surface(beta, rho, &grid, &mut out);
+        prop_assert_eq!(out[0], gauss);
+        prop_assert!(out[2] <= out[1] && out[1] <= out[0]);
+    }
+}
+
+fn laplace_scalar() -> LinearScenario {
+    LinearScenario {
+        a: vec![-1.0],
+        b: vec![1.0],
+        n: 1,
+        m: 1,
+        noise: Process::Laplace { scale: 0.1 },
+        k_explore: vec![-1.0],
+        dither: 1.0,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 6000,
+    }
+}
+
+fn with_ambiguity(residuals: ResidualSource) -> CertifierConfig {
+    CertifierConfig {
+        ambiguity: Some(AmbiguityConfig::paper(150)),
+        residuals,
+        ..config(1, 1, vec![-1.0], 0.3)
+    }
+}
+
+#[test]
+fn both_certificates_come_from_one_certifier_and_keep_their_order() {
+    let mut cert = Certifier::new(with_ambiguity(ResidualSource::OneStep)).expect("valid");
+    let evs = run(&mut cert, &laplace_scalar(), 4);
+    let mut both = 0;
+    for ev in &evs {
+        if let (Some(g), Some(w), Some(eps)) = (ev.cert_gauss, ev.cert_wass, ev.eps) {
+            both += 1;
+            assert!(w <= g);
+            assert!((0.015..=0.32).contains(&eps));
+            assert_eq!(
+                w,
+                certificate_value(ev.beta_hat.expect("ready"), ev.rho.expect("ready"), eps)
+            );
+        }
+        // The Wasserstein gate can only be open when the Gaussian one is.
+        assert!(!ev.wass_gate.open || ev.gauss_gate.open);
+    }
+    assert!(both > 5000);
+    // Without an ambiguity model there is no Wasserstein certificate, and it says so.
+    let mut plain = Certifier::new(config(1, 1, vec![-1.0], 0.3)).expect("valid");
+    let ev = run(&mut plain, &laplace_scalar(), 4).pop().expect("non-empty");
+    assert_eq!((ev.cert_wass, ev.eps), (None, None));
+    assert_eq!(ev.wass_reason, Some(NotCertified::NoAmbiguityModel));
+}
+
+#[test]
+fn one_step_residuals_keep_the_laplace_tails_that_horizon_residuals_average_away() {
+    let mean_kurtosis = |source| {
+        let mut cert = Certifier::new(with_ambiguity(source)).expect("valid");
+        let ks: Vec<f64> = run(&mut cert, &laplace_scalar(), 9)
+            .iter()
+            .skip(600)
+            .filter_map(|e| e.kurtosis)
+            .collect();
+        ks.iter().sum::<f64>() / ks.len() as f64
+    };
+    let one_step = mean_kurtosis(ResidualSource::OneStep);
+    let horizon = mean_kurtosis(ResidualSource::Horizon);
+    // Laplace increments: excess kurtosis 3 per step, 3/h = 0.6 for a sum of h = 5 steps
+    // (overlapping columns are not independent, so only the ordering and rough size are tested).
+    assert!(one_step > 2.0, "one-step kurtosis {one_step}");
+    assert!(horizon < 1.2 && horizon < one_step - 1.0, "horizon kurtosis {horizon}");
 }

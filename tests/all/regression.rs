@@ -11,7 +11,7 @@ use streamcert::regression::{
 };
 
 use crate::support::run as run_scenario;
-use streamcert::dynamics::LinearScenario;
+use streamcert::dynamics::{LinearScenario, Process};
 
 type Sample = (f64, Vec<f64>, Vec<f64>);
 
@@ -255,7 +255,7 @@ fn scalar_estimate_converges_with_strong_dither() {
         b: vec![2.0],
         n: 1,
         m: 1,
-        sigma: 0.02,
+        noise: Process::Gaussian { sigma: 0.02 },
         k_explore: vec![0.0],
         dither: 1.0,
         dither_hold: 0.2,
@@ -278,7 +278,7 @@ fn instrumented_estimator_removes_the_noise_bias() {
         b: vec![1.0],
         n: 1,
         m: 1,
-        sigma: 0.5,
+        noise: Process::Gaussian { sigma: 0.5 },
         k_explore: vec![-1.0],
         dither: 0.05,
         dither_hold: 0.5,
@@ -315,7 +315,7 @@ fn recovers_a_three_output_two_input_system() {
         b: b.clone(),
         n: 3,
         m: 2,
-        sigma: 0.01,
+        noise: Process::Gaussian { sigma: 0.01 },
         k_explore: vec![0.0; 6],
         dither: 1.0,
         dither_hold: 0.1,

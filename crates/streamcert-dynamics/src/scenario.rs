@@ -7,7 +7,7 @@ use crate::{
     NoiseScaling, Process, SimConfig, Trajectory, simulate,
 };
 
-/// `dx = (A x + B u) dt + σ dW` (independent noise on every state, SDE scaling), fully
+/// `dx = (A x + B u) dt + dη` (independent noise on every state, SDE scaling), fully
 /// measured (`y = x`), under the exploration policy `u = K_explore y + d(t)` where `d` is an
 /// independent PRBS per input, held over each step. The ground truth of every estimator test:
 /// the closed-loop Jacobian under a candidate `K` is `A + B K` exactly.
@@ -22,8 +22,8 @@ pub struct LinearScenario {
     pub a: Vec<f64>,
     /// `B`, `n × m` row-major.
     pub b: Vec<f64>,
-    /// Noise intensity `σ` on every state.
-    pub sigma: f64,
+    /// Noise process on every state (scaled by `√dt`, [`NoiseScaling::Sde`]).
+    pub noise: Process,
     /// Exploration gain `K_explore`, `m × n` row-major.
     pub k_explore: Vec<f64>,
     /// PRBS amplitude.
@@ -61,7 +61,7 @@ impl LinearScenario {
             integrator: Integrator::EulerMaruyama,
             noise_scaling: NoiseScaling::Sde,
         };
-        let noise = DisturbanceConfig::stationary(Process::Gaussian { sigma: self.sigma });
+        let noise = DisturbanceConfig::stationary(self.noise);
         let mut dist = (0..n)
             .map(|j| {
                 Disturbance::new(noise.clone(), seed.wrapping_mul(1000).wrapping_add(j as u64))

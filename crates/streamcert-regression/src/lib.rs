@@ -89,6 +89,18 @@ pub enum Estimator {
     Instrumented,
 }
 
+/// The interval over which [`SlidingRegression::residual`] evaluates `ΔY − Θ̂ Z`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualSource {
+    /// The newest sample interval `[t_{k−1}, t_k]` (one-step residual; keeps the tails of the
+    /// per-step noise). Default.
+    #[default]
+    OneStep,
+    /// The newest `h`-step column (nearly Gaussian by averaging `h` increments).
+    Horizon,
+}
+
 /// Configuration of a [`SlidingRegression`]. Build with [`RegressionConfig::new`] for the
 /// documented defaults, then adjust public fields.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -352,6 +364,9 @@ pub struct SlidingRegression {
     piv: Vec<usize>,
     z: Vec<f64>,
     dy: Vec<f64>,
+    // The newest single sample interval: regressor and output increment.
+    z1: Vec<f64>,
+    dy1: Vec<f64>,
 }
 
 impl SlidingRegression {
@@ -397,6 +412,8 @@ impl SlidingRegression {
             piv: vec![0; d],
             z: vec![0.0; d],
             dy: vec![0.0; p],
+            z1: vec![0.0; d],
+            dy1: vec![0.0; p],
         })
     }
 
@@ -499,6 +516,9 @@ impl SlidingRegression {
         copy(&mut self.hist_y[k * p..(k + 1) * p], y);
         copy(&mut self.hist_u[k * m..(k + 1) * m], u);
         self.hist_len = (self.hist_len + 1).min(cap);
+        if self.hist_len >= 2 {
+            self.build_interval();
+        }
         if self.hist_len < cap {
             return Ok(());
         }
@@ -522,6 +542,53 @@ impl SlidingRegression {
             }
         }
         self.insert_column()
+    }
+
+    /// The newest interval `[t_{k−1}, t_k]`: `z1 = [∫y; ∫u]` by the configured rules and
+    /// `dy1 = y_k − y_{k−1}`.
+    fn build_interval(&mut self) {
+        let (p, m, cap) = (self.cfg.outputs, self.cfg.inputs, self.cfg.horizon + 1);
+        let b = self.hist_head;
+        let a = if b == 0 { cap - 1 } else { b - 1 };
+        let dt = self.hist_t[b] - self.hist_t[a];
+        for i in 0..p {
+            let (ya, yb) = (self.hist_y[a * p + i], self.hist_y[b * p + i]);
+            self.z1[i] = 0.5 * dt * (ya + yb);
+            self.dy1[i] = yb - ya;
+        }
+        for j in 0..m {
+            let (ua, ub) = (self.hist_u[a * m + j], self.hist_u[b * m + j]);
+            self.z1[p + j] = match self.cfg.input_integral {
+                InputIntegral::Trapezoidal => 0.5 * dt * (ua + ub),
+                InputIntegral::ZeroOrderHold => dt * ua,
+            };
+        }
+    }
+
+    /// The newest single sample interval `(Z, ΔY)` (one-step regressor and output increment),
+    /// once two samples are in. Its residual `ΔY − Θ̂ Z` keeps the tails of the per-step
+    /// noise that the `h`-step columns average away.
+    #[must_use]
+    pub fn newest_interval(&self) -> Option<(&[f64], &[f64])> {
+        (self.hist_len >= 2).then_some((&self.z1[..], &self.dy1[..]))
+    }
+
+    /// Residual `out ← ΔY − Θ̂ Z` (length `p`) over the chosen interval, with the `Θ̂` of the
+    /// latest [`estimate`](Self::estimate) call. Call it only after an estimate whose status
+    /// was [`EstimateStatus::Ready`]; returns `false` (leaving `out` alone) when the interval
+    /// does not exist yet.
+    pub fn residual(&self, source: ResidualSource, out: &mut [f64]) -> bool {
+        let d = self.d();
+        let pair = match source {
+            ResidualSource::OneStep => self.newest_interval(),
+            ResidualSource::Horizon => self.newest_column(),
+        };
+        let Some((z, dy)) = pair else { return false };
+        for (i, o) in out.iter_mut().enumerate().take(self.cfg.outputs) {
+            let th = &self.theta[i * d..(i + 1) * d];
+            *o = dy[i] - th.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
+        }
+        true
     }
 
     /// Build `z = [∫y; ∫u]` and `dy = y_new − y_old` over the last `h` intervals.
@@ -867,6 +934,8 @@ impl SlidingRegression {
             ("piv", self.piv.len(), fresh.piv.len()),
             ("z", self.z.len(), fresh.z.len()),
             ("dy", self.dy.len(), fresh.dy.len()),
+            ("z1", self.z1.len(), fresh.z1.len()),
+            ("dy1", self.dy1.len(), fresh.dy1.len()),
         ];
         if let Some((name, got, want)) = sizes.iter().find(|(_, g, w)| g != w) {
             return Err(RegressionError::CorruptState(format!(

@@ -2,6 +2,7 @@
 
 mod ambiguity;
 mod certificate;
+mod compose;
 mod dynamics;
 mod regression;
 mod support;

@@ -81,13 +81,13 @@ fn dense(c: &mut Criterion) {
 fn sparse(c: &mut Criterion) {
     let mut group = c.benchmark_group("compose_sparse");
     group.sample_size(10);
-    let small = grid(50, 0, 1);
-    group.bench_function(BenchmarkId::new("certify_sparse", "grid_N2500"), |b| {
+    let small = grid(30, 0, 1);
+    group.bench_function(BenchmarkId::new("certify_sparse", "grid_N900"), |b| {
         b.iter(|| {
             black_box(certify_sparse(&small, &SparseOptions::default()).expect("valid").rate)
         });
     });
-    group.bench_function(BenchmarkId::new("naive_dense_network_rate", "grid_N2500"), |b| {
+    group.bench_function(BenchmarkId::new("naive_dense_network_rate", "grid_N900"), |b| {
         b.iter(|| black_box(network_rate(&small).expect("solves").rate));
     });
     for (name, side, long) in

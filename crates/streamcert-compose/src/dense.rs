@@ -80,8 +80,6 @@ fn sym_extreme(m: &Mat<f64>, largest: bool) -> Result<f64, ComposeError> {
 pub fn network_rate(net: &Network) -> Result<NetworkCertificate, ComposeError> {
     let n = net.len();
     let g = net.dense_gain_matrix();
-    let gamma = mat(n, |i, j| g[i * n + j]);
-    let (alpha, _, _) = abscissa(&gamma)?;
 
     // Symmetric bound.
     let sym =
@@ -104,9 +102,14 @@ pub fn network_rate(net: &Network) -> Result<NetworkCertificate, ComposeError> {
     // Perron weights, regularising a reducible Γ.
     let scale = g.iter().fold(0.0f64, |a, &x| a.max(x.abs())).max(f64::MIN_POSITIVE);
     let mut delta = 0.0;
+    let mut alpha = f64::NAN;
     let weights = loop {
         let m = mat(n, |i, j| g[i * n + j] + if i == j { 0.0 } else { delta });
-        let (_, kr, right) = abscissa(&m)?;
+        let (abscissa_m, kr, right) = abscissa(&m)?;
+        if delta == 0.0 {
+            // The first pass is on Γ itself: its abscissa is the network rate.
+            alpha = abscissa_m;
+        }
         let mt = mat(n, |i, j| m[(j, i)]);
         let (_, kl, left) = abscissa(&mt)?;
         match (positive_vector(&right, kr, n), positive_vector(&left, kl, n)) {

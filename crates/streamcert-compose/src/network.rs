@@ -137,11 +137,18 @@ impl Network {
         self.col[r.clone()].iter().copied().zip(self.val[r].iter().copied())
     }
 
+    /// `(Γ_off x)_i = Σ_j γ_ij x_j` for one row.
+    #[inline]
+    #[must_use]
+    pub fn row_dot(&self, i: usize, x: &[f64]) -> f64 {
+        let r = self.row_ptr[i]..self.row_ptr[i + 1];
+        self.col[r.clone()].iter().zip(&self.val[r]).map(|(&j, &g)| g * x[j]).sum()
+    }
+
     /// `y ← Γ_off x` (the coupling part only).
     pub fn coupling_times(&self, x: &[f64], y: &mut [f64]) {
         for (i, yi) in y.iter_mut().enumerate() {
-            let r = self.row_ptr[i]..self.row_ptr[i + 1];
-            *yi = self.col[r.clone()].iter().zip(&self.val[r]).map(|(&j, &g)| g * x[j]).sum();
+            *yi = self.row_dot(i, x);
         }
     }
 

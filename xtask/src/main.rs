@@ -2,46 +2,109 @@
 //!
 //! Commands:
 //!
-//! * `reproduce [--out DIR] [--seed S]`: simulate the G5 benchmark (paper Section II-D) under
-//!   Experiment 1's disturbance schedule (both coupling structures) and Experiment 2's
-//!   disconnected data collection, and write the trajectories as CSV with a `meta.json`.
-//!   The certificate experiments (Tables II and III) are added as their crates land.
+//! * `reproduce`: both experiments of the paper (Tables II and III, six figures), the
+//!   validity table and a sensitivity study, written with `REPORT.md` and `meta.json` to
+//!   `target/reproduce` (or `--out DIR`).
+//! * `exp1`, `exp2`: one experiment.
 //!
-//! Without a command it prints this list.
+//! Every choice the paper leaves open is a flag (see `USAGE`). Without a command it prints
+//! the command list.
 
-mod simulate_g5;
+mod common;
+mod exp1;
+mod exp2;
+mod plot;
+mod report;
+
+use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
-use std::path::PathBuf;
+
+use crate::common::Params;
 
 const USAGE: &str = "\
 usage: cargo xtask <command> [options]
 
 commands:
-  reproduce [--out DIR] [--seed S]   simulate G5 (Experiments 1 and 2 data) and write CSV
-                                     trajectories and meta.json (default DIR: target/reproduce)
+  reproduce      both experiments, sensitivity study, REPORT.md, meta.json
+  exp1           Experiment 1 only (Table II, validity, Figs. 3-5)
+  exp2           Experiment 2 only (Table III, coupled simulations, Figs. 6-8)
+
+options (defaults in brackets; see REPORT.md for why):
+  --out DIR                     output folder [target/reproduce]
+  --seeds N                     seeds [20]
+  --c X                         conservatism c of eq. rho [0.1]
+  --window M                    regression window in columns [150]
+  --horizon H                   integration horizon in samples [5]
+  --consecutive N               gate length n_s [10]
+  --alpha-kurtosis X            alpha_kappa of eq. eps_est [0.03]
+  --alpha-spike X               alpha_s of eq. eps_est [2.0]
+  --dither X                    PRBS dither amplitude [0.5]
+  --dither-hold S               PRBS hold time in seconds [0.1]
+  --noise-scaling S             sde | held_input | state_increment [sde]
+  --coupling S                  Experiment 1 G5 coupling: cascade | bidirectional [cascade]
+  --residuals S                 residuals for eps: one_step | horizon [one_step]
+  --estimator S                 ordinary | instrumented [ordinary]
+  --input-integral S            trapezoidal | zero_order_hold [trapezoidal]
+  --exp2-noise-on-a B           Experiment 2 noise also into x1: true | false [true]
+  --no-sensitivity              skip the sensitivity study
 ";
 
-/// Options shared by the commands.
-#[derive(Debug)]
 struct Options {
     out: PathBuf,
-    seed: u64,
+    params: Params,
+    sensitivity: bool,
+}
+
+fn enum_arg<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> Result<T> {
+    serde_json::from_value(serde_json::Value::String(v.to_string()))
+        .with_context(|| format!("{flag}: unknown value `{v}`\n{USAGE}"))
 }
 
 fn parse(args: &[String]) -> Result<Options> {
-    let mut opts = Options { out: PathBuf::from("target/reproduce"), seed: 1 };
+    let mut o = Options {
+        out: PathBuf::from("target/reproduce"),
+        params: Params::default(),
+        sensitivity: true,
+    };
     let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--out" => opts.out = PathBuf::from(it.next().context("--out needs a directory")?),
-            "--seed" => {
-                opts.seed = it.next().context("--seed needs a value")?.parse().context("--seed")?;
+    while let Some(flag) = it.next() {
+        if flag == "--no-sensitivity" {
+            o.sensitivity = false;
+            continue;
+        }
+        let v = it.next().with_context(|| format!("{flag} needs a value\n{USAGE}"))?;
+        let num =
+            |v: &str| v.parse::<f64>().with_context(|| format!("{flag}: not a number: `{v}`"));
+        let int =
+            |v: &str| v.parse::<usize>().with_context(|| format!("{flag}: not a count: `{v}`"));
+        let p = &mut o.params;
+        match flag.as_str() {
+            "--out" => o.out = PathBuf::from(v),
+            "--seeds" => p.seeds = int(v)?,
+            "--c" => p.c = num(v)?,
+            "--window" => p.window = int(v)?,
+            "--horizon" => p.horizon = int(v)?,
+            "--consecutive" => p.consecutive = int(v)?,
+            "--alpha-kurtosis" => p.alpha_kurtosis = num(v)?,
+            "--alpha-spike" => p.alpha_spike = num(v)?,
+            "--dither" => p.dither = num(v)?,
+            "--dither-hold" => p.dither_hold = num(v)?,
+            "--noise-scaling" => p.noise_scaling = enum_arg(flag, v)?,
+            "--coupling" => p.coupling = enum_arg(flag, v)?,
+            "--residuals" => p.residuals = enum_arg(flag, v)?,
+            "--estimator" => p.estimator = enum_arg(flag, v)?,
+            "--input-integral" => p.input_integral = enum_arg(flag, v)?,
+            "--exp2-noise-on-a" => {
+                p.exp2_noise_on_a = v.parse().with_context(|| format!("{flag}: true or false"))?
             }
             other => bail!("unknown option `{other}`\n{USAGE}"),
         }
     }
-    Ok(opts)
+    if o.params.seeds == 0 {
+        bail!("--seeds must be at least 1");
+    }
+    Ok(o)
 }
 
 fn main() -> Result<()> {
@@ -50,8 +113,11 @@ fn main() -> Result<()> {
         print!("{USAGE}");
         return Ok(());
     };
+    plot::init_fonts()?;
     match cmd.as_str() {
-        "reproduce" => simulate_g5::run(&parse(&args[1..])?),
+        "reproduce" => report::reproduce(&parse(&args[1..])?, true, true),
+        "exp1" => report::reproduce(&parse(&args[1..])?, true, false),
+        "exp2" => report::reproduce(&parse(&args[1..])?, false, true),
         "help" | "--help" | "-h" => {
             print!("{USAGE}");
             Ok(())

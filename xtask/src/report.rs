@@ -1,0 +1,190 @@
+//! `reproduce`: run the experiments, the sensitivity study, and write REPORT.md and meta.json.
+
+use std::fmt::Write as _;
+
+use anyhow::Result;
+use streamcert_certificate::ResidualSource;
+use streamcert_dynamics::{DisturbanceConfig, NoiseScaling};
+use streamcert_regression::{Estimator, InputIntegral};
+
+use crate::common::{Params, markdown, write};
+use crate::{Options, exp1, exp2};
+
+fn choices(p: &Params) -> String {
+    let rows = vec![
+        vec!["regression window M".into(), format!("{} columns ({} s)", p.window, p.window as f64 * p.dt), "not given; the same span as the paper's 3 s tail window".into()],
+        vec!["horizon h".into(), format!("{} samples ({} s)", p.horizon, p.horizon as f64 * p.dt), "not given; short against the closed-loop time constants (0.2 to 0.4 s)".into()],
+        vec!["conservatism c".into(), format!("{}", p.c), "not given. Rule: the largest of {0.1, 0.3, 1, 3} for which Experiment 2's local certificates are positive on average, so that there is something to compose; with c = 0.3 or 1 every certificate of both experiments is negative (sensitivity table). The validity table says how often c = 0.1 certifies above the true rate".into()],
+        vec!["gate length n_s".into(), format!("{} samples ({} s)", p.consecutive, p.consecutive as f64 * p.dt), "not given".into()],
+        vec!["α_κ, α_s".into(), format!("{}, {}", p.alpha_kurtosis, p.alpha_spike), "not given; α_κ·3 ≈ 0.1 matches the ε plateau the paper describes for Laplace noise, α_s = 2 makes a 5 % spike share add 0.1".into()],
+        vec!["σ0 of the spike test".into(), format!("1.4826 · MAD of the first {} residuals", p.tail_window), "the paper's σ0 = 0.08 is the disturbance scale, not the residual scale".into()],
+        vec!["residuals for ε".into(), format!("{:?}", p.residuals), "h-step residuals average the tails away (κ_e/h)".into()],
+        vec!["dither".into(), format!("PRBS ±{} held {} s on both inputs", p.dither, p.dither_hold), "not given; without it ∫u and ∫y are collinear".into()],
+        vec!["data collection".into(), "closed loop under the candidate K plus dither".into(), "in open loop G5's node 2 (ẋ2 = x2³ − x2 + 0.3 x1) escapes in finite time once x1 exceeds about 1.28, which the Regime-2 noise causes; Fig. 5's response branches do run without control until deployment".into()],
+        vec!["noise scaling".into(), format!("{:?}", p.noise_scaling), "increment √dt·w: statistics independent of dt".into()],
+        vec!["estimator, ∫u rule".into(), format!("{:?}, {:?}", p.estimator, p.input_integral), "the paper's ridge and trapezoid".into()],
+        vec!["Experiment 1 coupling".into(), format!("{:?}", p.coupling), "as printed (eq. SA1)".into()],
+        vec!["Experiment 2 noise".into(), if p.exp2_noise_on_a { "σ into x4 and x1".into() } else { "σ into x4 only".into() }, "the paper says σ = 0.10 without the channel; a noise-free A has no residual but discretisation error".into()],
+        vec!["seeds".into(), format!("{} (run r uses streams (r+1)·1000003 + k)", p.seeds), "mean ± sample std over all seeds; figures show seed 0".into()],
+    ];
+    markdown(&["choice", "value", "why"], &rows)
+}
+
+fn sensitivity(base: &Params) -> Result<String> {
+    let mut p0 = base.clone();
+    p0.seeds = base.seeds.min(5);
+    let mut variants: Vec<(String, Params)> = vec![("defaults".into(), p0.clone())];
+    for c in [0.03, 0.3, 1.0] {
+        variants.push((format!("c = {c}"), Params { c, ..p0.clone() }));
+    }
+    for horizon in [2, 10] {
+        variants.push((format!("h = {horizon}"), Params { horizon, ..p0.clone() }));
+    }
+    for window in [100, 250] {
+        variants.push((format!("M = {window}"), Params { window, ..p0.clone() }));
+    }
+    for dither in [0.2, 1.0] {
+        variants.push((format!("dither ±{dither}"), Params { dither, ..p0.clone() }));
+    }
+    for ns in [NoiseScaling::HeldInput, NoiseScaling::StateIncrement] {
+        variants.push((format!("noise {ns:?}"), Params { noise_scaling: ns, ..p0.clone() }));
+    }
+    variants.push((
+        "residuals Horizon".into(),
+        Params { residuals: ResidualSource::Horizon, ..p0.clone() },
+    ));
+    variants.push((
+        "∫u zero-order hold".into(),
+        Params { input_integral: InputIntegral::ZeroOrderHold, ..p0.clone() },
+    ));
+    variants.push((
+        "instrumented estimator".into(),
+        Params { estimator: Estimator::Instrumented, ..p0.clone() },
+    ));
+    let bar = crate::common::progress(variants.len(), "sensitivity");
+    let mut rows = Vec::new();
+    for (name, p) in &variants {
+        let (g, w) = exp1::shares(p)?;
+        let [a, b] = exp2::local_rates(p)?;
+        let f = |x: f64| format!("{:.0} %", 100.0 * x);
+        rows.push(vec![
+            name.clone(),
+            f(g[0]),
+            f(g[1]),
+            f(g[2]),
+            f(w[0]),
+            f(w[1]),
+            f(w[2]),
+            format!("{a:.2}"),
+            format!("{b:.2}"),
+        ]);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(markdown(
+        &[
+            "variant",
+            "II: B Gauss R1",
+            "R2",
+            "R3",
+            "II: B Wass R1",
+            "R2",
+            "R3",
+            "III: β_A_cert",
+            "β_B_cert",
+        ],
+        &rows,
+    ))
+}
+
+fn discrepancies() -> String {
+    let r2 = exp1_variance(1);
+    let r3 = exp1_variance(2);
+    format!(
+        "## What does not reproduce, and why\n\n\
+1. **Wasserstein certified more often than Gaussian (Table II).** With ρ ≥ 0 and ε ≥ 0, \
+β̂ − ρ(1 + 2ε) ≤ β̂ − ρ at every step, so every step certified by the Wasserstein certificate \
+is also certified by the Gaussian one. Our Table II shows Wasserstein ≤ Gaussian in every \
+regime; the paper's +6, +5 and +40 point improvements cannot come from eqs. rho and \
+wass_cert as written. The same holds for the decision point of Fig. 5 (Gaussian −1.61 while \
+Wasserstein +0.22 is impossible with one β̂ and ρ): when the two disagree, it is the Gaussian \
+one that certifies. Consequently the Fig. 5 cost ratio, if anything, favours the Gaussian \
+policy (it deploys no later).\n\n\
+2. **G5 as printed is a cascade.** Eq. SA1 feeds γ x4 into x1 and nothing feeds x1 back into \
+Σ_B: the network contracts for every γ once both blocks do (Lemma 1 does not apply; the \
+asymmetric two-block rate with γ_BA = 0 is min(β_A, β_B)). The coupled-simulation table \
+shows the cascade recovering at all three couplings; only the bidirectional structure \
+(γ x1 also into x4, as the text and the Lemma assume) loses contraction at γ_unsafe.\n\n\
+3. **Regime 3 is milder than Regime 2.** Laplace scale 0.3 plus spikes of 4.5 to 7.5 σ0 at \
+5.5 % has variance {r3:.3}, against {r2:.3} for Laplace scale 0.5: the 'spike' regime \
+injects less energy, so ρ (which scales with RMS(R)) is smaller in Regime 3 and the \
+certificates do not crash there for energy reasons; only ε (tail shape) sees the spikes.\n\n\
+4. **The paper's local rates (0.80, 1.20) are far below the true ones.** Under u = K y with \
+K = diag(−2.5, −3.0) the observed closed loops have true rates β*_A = tanh x1 + x1 sech² x1 + 2.5 \
+≥ 2.5 near the origin and β*_B = 4. Certificates near 0.8 and 1.2 need a large ρ; how large \
+depends on c, which the paper does not give (see the sensitivity table).\n\n\
+5. **'Grows without bound' at γ_unsafe does not reproduce, even bidirectionally.** At 1.08 γ_true the linearisation at the origin is unstable, but −x1 tanh x1 contributes up to −1 more to the x1 diagonal at large |x1|, which makes the coupled (x1, x4) block contracting again away from the origin: the state leaves the origin and settles near a non-zero equilibrium (the final ‖x‖ of the coupled table) instead of diverging. Contraction is lost, boundedness is not. Where a local certificate of a seed is not positive there is no γ_warn and that seed has no coupled simulation (the count is in the table).
+
+6. **Unstated choices.** c, α_κ, α_s, M, h, n_s, the dither, the noise scaling with dt and \
+the subsystem of Table II are not in the paper; our values are in the table above, each a \
+flag, and the sensitivity table shows which matter.\n"
+    )
+}
+
+fn exp1_variance(regime: usize) -> f64 {
+    DisturbanceConfig::experiment1().segments[regime].process.variance()
+}
+
+/// Run the selected experiments and write the report.
+pub(crate) fn reproduce(o: &Options, do1: bool, do2: bool) -> Result<()> {
+    let p = &o.params;
+    std::fs::create_dir_all(&o.out)?;
+    let mut report = String::new();
+    let _ = writeln!(report, "# streamcert: reproduction of the paper's experiments\n");
+    let _ = writeln!(
+        report,
+        "Produced by `cargo xtask {}` (with `--seeds {}`); every number below is computed by that command, except the columns marked *paper*, which quote the paper. Running it twice gives identical files.\n",
+        if do1 && do2 {
+            "reproduce"
+        } else if do1 {
+            "exp1"
+        } else {
+            "exp2"
+        },
+        p.seeds
+    );
+    let _ = writeln!(report, "## Choices where the paper is silent\n\n{}", choices(p));
+    if do1 {
+        report.push_str(&exp1::run(p, &o.out)?);
+    }
+    if do2 {
+        report.push_str(&exp2::run(p, &o.out)?);
+    }
+    if do1 && do2 {
+        report.push_str(&discrepancies());
+        if o.sensitivity {
+            let _ = writeln!(
+                report,
+                "\n## Sensitivity to the unstated choices ({} seeds each; one change at a time)\n\nTable II columns: share of all steps with β_cert > 0.05 for subsystem B per regime. Table III columns: median local certificates.\n\n{}",
+                p.seeds.min(5),
+                sensitivity(p)?
+            );
+        }
+    }
+    write(&o.out.join("REPORT.md"), &report)?;
+    let meta = serde_json::json!({
+        "command": if do1 && do2 { "reproduce" } else if do1 { "exp1" } else { "exp2" },
+        "params": p,
+        "sensitivity": o.sensitivity && do1 && do2,
+        "exp1": { "gamma": 0.15, "k": [-3.5, -4.0], "dt": p.dt, "steps": 1500, "margin": 0.05,
+                  "eps_floor": 0.015, "eps_cap": 0.32, "ridge": p.ridge,
+                  "disturbance_x4": DisturbanceConfig::experiment1(), "decision_impulse": 2.5 },
+        "exp2": { "k": [-2.5, -3.0], "sigma": 0.10, "margin": 0.10, "data_steps": 800, "sim_steps": 700,
+                  "impulse": 2.5, "impulse_time": 3.0, "sweep": [0.0, 4.2], "safe_factor": 0.55,
+                  "unsafe_factor": 1.08 },
+        "seed_rule": "run r, stream k: (r + 1) * 1000003 + k",
+    });
+    write(&o.out.join("meta.json"), &serde_json::to_string_pretty(&meta)?)?;
+    println!("wrote {}", o.out.join("REPORT.md").display());
+    Ok(())
+}

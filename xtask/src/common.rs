@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{CertifierConfig, ResidualSource};
-use streamcert_dynamics::{Coupling, NoiseScaling};
+use streamcert_dynamics::{Coupling, Experiment, G5Dataset, NoiseScaling};
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
 /// Every choice the paper leaves open, with its default; each is a command-line flag.
@@ -78,6 +78,19 @@ impl Default for Params {
 }
 
 impl Params {
+    /// The G5 data set of an experiment with these choices.
+    pub(crate) fn dataset(&self, experiment: Experiment) -> G5Dataset {
+        G5Dataset {
+            experiment,
+            coupling: self.coupling,
+            dt: self.dt,
+            dither: self.dither,
+            dither_hold: self.dither_hold,
+            noise_scaling: self.noise_scaling,
+            noise_on_a: self.exp2_noise_on_a,
+        }
+    }
+
     /// The certifier of one scalar subsystem for candidate gain `k`.
     pub(crate) fn certifier(&self, k: f64, margin: f64) -> CertifierConfig {
         let reg = RegressionConfig {

@@ -7,8 +7,8 @@ use std::path::Path;
 use anyhow::Result;
 use streamcert_certificate::{Certifier, Evidence, certificate_surface};
 use streamcert_dynamics::{
-    Disturbance, DisturbanceConfig, Dither, DitherConfig, G5, G5Config, Impulse, Integrator,
-    SimConfig, Trajectory, simulate,
+    Disturbance, DisturbanceConfig, Experiment, G5, Impulse, Integrator, SimConfig, Trajectory,
+    simulate,
 };
 
 use crate::common::{Params, cell, csv, markdown, mean_std, pct, pm, progress, seed, write};
@@ -18,7 +18,6 @@ const K1: f64 = -3.5;
 const K4: f64 = -4.0;
 const GAMMA: f64 = 0.15;
 const MARGIN: f64 = 0.05;
-const STEPS: usize = 1500;
 const IMPULSE: f64 = 2.5;
 
 /// Regime index of time `t` (`None` at or after 30 s).
@@ -27,31 +26,12 @@ fn regime(t: f64) -> Option<usize> {
 }
 
 fn g5(p: &Params) -> Result<G5> {
-    Ok(G5::new(G5Config { gamma: GAMMA, k1: K1, k4: K4, ..G5Config::paper(p.coupling) })?)
+    Ok(p.dataset(Experiment::One).system()?)
 }
 
-/// The data run: the candidate gains plus PRBS dither on both inputs (closed-loop
-/// identification; in open loop node 2's cubic term lets `x2` escape in finite time once
-/// `x1` exceeds about 1.28), Experiment 1's schedule on `η`.
-fn data_run(p: &Params, sys: &G5, run: usize) -> Result<Trajectory> {
-    let cfg = SimConfig {
-        dt: p.dt,
-        steps: STEPS,
-        t0: 0.0,
-        x0: vec![0.0; 5],
-        integrator: Integrator::EulerMaruyama,
-        noise_scaling: p.noise_scaling,
-    };
-    let mut dist = [
-        Disturbance::new(DisturbanceConfig::none(), seed(run, 1))?,
-        Disturbance::new(DisturbanceConfig::experiment1(), seed(run, 2))?,
-    ];
-    let prbs = DitherConfig::Prbs { amplitude: p.dither, hold: p.dither_hold };
-    let (mut da, mut db) = (Dither::new(prbs, seed(run, 3))?, Dither::new(prbs, seed(run, 4))?);
-    Ok(simulate(sys, &cfg, &mut dist, |t, y, u| {
-        u[0] = K1 * y[0] + da.value(t);
-        u[1] = K4 * y[1] + db.value(t);
-    })?)
+/// The data run (see `G5Dataset`): candidate gains plus PRBS dither, Experiment 1's schedule.
+fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
+    Ok(p.dataset(Experiment::One).run([seed(run, 1), seed(run, 2), seed(run, 3), seed(run, 4)])?)
 }
 
 /// Certify one measured channel (`0` = A: `x1`, `u1`; `1` = B: `x4`, `u4`).
@@ -204,7 +184,7 @@ type SeedRun = (SeedResult, Trajectory, [Vec<Evidence>; 2], Vec<[f64; 2]>);
 
 fn run_seed(p: &Params, run: usize) -> Result<SeedRun> {
     let sys = g5(p)?;
-    let traj = data_run(p, &sys, run)?;
+    let traj = data_run(p, run)?;
     let ev = [certify(p, &traj, 0, K1, MARGIN)?, certify(p, &traj, 1, K4, MARGIN)?];
     let truth: Vec<[f64; 2]> = (0..traj.len())
         .map(|k| {

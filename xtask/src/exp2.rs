@@ -9,8 +9,8 @@ use anyhow::Result;
 use streamcert_certificate::Evidence;
 use streamcert_compose::{Network, lemma1_rate, network_rate};
 use streamcert_dynamics::{
-    Coupling, Disturbance, DisturbanceConfig, Dither, DitherConfig, G5, G5Config, Impulse,
-    Integrator, Process, SimConfig, Trajectory, simulate,
+    Coupling, Disturbance, DisturbanceConfig, Experiment, G5, G5Config, Impulse, Integrator,
+    Process, SimConfig, Trajectory, simulate,
 };
 
 use crate::common::{Params, cell, csv, markdown, median, pm, progress, seed, write};
@@ -38,26 +38,12 @@ fn noise(on: bool) -> DisturbanceConfig {
 }
 
 fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
-    let sys =
-        G5::new(G5Config { gamma: 0.0, k1: K1, k4: K4, ..G5Config::paper(Coupling::Cascade) })?;
-    let cfg = SimConfig {
-        dt: p.dt,
-        steps: DATA_STEPS,
-        t0: 0.0,
-        x0: vec![0.0; 5],
-        integrator: Integrator::EulerMaruyama,
-        noise_scaling: p.noise_scaling,
-    };
-    let mut dist = [
-        Disturbance::new(noise(p.exp2_noise_on_a), seed(run, 11))?,
-        Disturbance::new(noise(true), seed(run, 12))?,
-    ];
-    let prbs = DitherConfig::Prbs { amplitude: p.dither, hold: p.dither_hold };
-    let (mut da, mut db) = (Dither::new(prbs, seed(run, 13))?, Dither::new(prbs, seed(run, 14))?);
-    Ok(simulate(&sys, &cfg, &mut dist, |t, y, u| {
-        u[0] = K1 * y[0] + da.value(t);
-        u[1] = K4 * y[1] + db.value(t);
-    })?)
+    Ok(p.dataset(Experiment::Two).run([
+        seed(run, 11),
+        seed(run, 12),
+        seed(run, 13),
+        seed(run, 14),
+    ])?)
 }
 
 /// Closed-loop coupled response: `u = K y`, impulse into x4 at 3 s.

@@ -1,0 +1,228 @@
+//! `streamcert certify`: one output row per sample, flushed, and a summary.
+
+use std::io::{BufRead, Write};
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::{Certifier, Evidence};
+
+use crate::CliError;
+use crate::config::Config;
+use crate::input::{Sample, SampleReader};
+
+/// Output format.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Format {
+    /// Comma-separated values with a header.
+    Csv,
+    /// One JSON object per line.
+    Jsonl,
+}
+
+/// What to do with a malformed row.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BadRows {
+    /// Stop with the row's error (exit code 3). Default.
+    Stop,
+    /// Report it on stderr, count it in the summary, and go on; the row never reaches the
+    /// certifier, so the next integral spans the gap using the actual times.
+    Skip,
+}
+
+/// Options of a run.
+#[derive(Debug, Clone)]
+pub struct Options {
+    /// Output format.
+    pub format: Format,
+    /// Bad-row policy.
+    pub bad_rows: BadRows,
+    /// Write the streaming state here at the end (and every `checkpoint_every` rows).
+    pub checkpoint: Option<PathBuf>,
+    /// Checkpoint period in accepted rows.
+    pub checkpoint_every: Option<u64>,
+    /// Continue from this checkpoint (the header is then not written again, so the outputs
+    /// of a split run concatenate to the output of the whole run).
+    pub resume: Option<PathBuf>,
+}
+
+/// Counts over a run (continued across checkpoint and resume).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Rows certified or not (accepted rows).
+    pub rows: u64,
+    /// Malformed rows skipped.
+    pub skipped: u64,
+    /// Rows with the Gaussian gate open.
+    pub gauss_open: u64,
+    /// Rows with the Wasserstein gate open.
+    pub wass_open: u64,
+    /// First time the Gaussian gate opened (deployment decision).
+    pub first_deploy_gauss: Option<f64>,
+    /// First time the Wasserstein gate opened.
+    pub first_deploy_wass: Option<f64>,
+    /// Time of the last accepted row.
+    pub last_time: Option<f64>,
+}
+
+impl Summary {
+    /// Share of accepted rows with the Gaussian gate open.
+    #[must_use]
+    pub fn share_gauss(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.gauss_open as f64 / self.rows as f64 }
+    }
+    /// Share of accepted rows with the Wasserstein gate open.
+    #[must_use]
+    pub fn share_wass(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.wass_open as f64 / self.rows as f64 }
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+struct Checkpoint {
+    certifier: Certifier,
+    summary: Summary,
+}
+
+/// The CSV header of the output.
+pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass";
+
+fn num(v: Option<f64>) -> String {
+    v.map_or(String::new(), |x| format!("{x}"))
+}
+
+fn row_csv(e: &Evidence) -> String {
+    let reason = |r: Option<streamcert_certificate::NotCertified>| {
+        r.map_or(String::new(), |r| r.to_string().replace(',', ";"))
+    };
+    format!(
+        "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+        e.t,
+        num(e.beta_hat),
+        num(e.rho),
+        num(e.eps),
+        num(e.kurtosis),
+        num(e.spike_fraction),
+        num(e.cert_gauss),
+        num(e.cert_wass),
+        u8::from(e.gauss_gate.open),
+        u8::from(e.wass_gate.open),
+        reason(e.reason),
+        reason(e.wass_reason)
+    )
+}
+
+fn row_json(e: &Evidence) -> String {
+    let reason = |r: Option<streamcert_certificate::NotCertified>| r.map(|r| r.to_string());
+    let v = serde_json::json!({
+        "t": e.t, "beta_hat": e.beta_hat, "rho": e.rho, "eps": e.eps, "kurtosis": e.kurtosis,
+        "spike_fraction": e.spike_fraction, "cert_gauss": e.cert_gauss, "cert_wass": e.cert_wass,
+        "gauss_open": e.gauss_gate.open, "wass_open": e.wass_gate.open,
+        "reason_gauss": reason(e.reason), "reason_wass": reason(e.wass_reason),
+    });
+    format!("{v}\n")
+}
+
+fn save(path: &PathBuf, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
+    let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
+    let text = serde_json::to_string(&cp).map_err(|e| CliError::Checkpoint {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    })?;
+    // Write then rename, so an interrupted write never leaves a truncated checkpoint.
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, text)
+        .map_err(|e| CliError::io(format!("writing {}", tmp.display()), e))?;
+    std::fs::rename(&tmp, path)
+        .map_err(|e| CliError::io(format!("renaming to {}", path.display()), e))
+}
+
+fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
+    let json = serde_json::to_string(&cp.certifier).map_err(|e| bad(e.to_string()))?;
+    let cert = Certifier::restore(&json).map_err(|e| bad(e.to_string()))?;
+    if cert.config() != &cfg.certifier {
+        return Err(bad("the checkpoint was written with a different configuration".into()));
+    }
+    Ok((cert, cp.summary))
+}
+
+/// Certify a stream: one output row per accepted input row, flushed immediately.
+///
+/// # Errors
+/// The first malformed row under [`BadRows::Stop`], input/output errors, checkpoint errors.
+pub fn run<R: BufRead, W: Write>(
+    cfg: &Config,
+    input: R,
+    input_name: &str,
+    out: &mut W,
+    opts: &Options,
+) -> Result<Summary, CliError> {
+    let (mut cert, mut summary) = match &opts.resume {
+        Some(path) => load(path, cfg)?,
+        None => (
+            Certifier::new(cfg.certifier.clone()).map_err(|e| CliError::Config {
+                path: "configuration".into(),
+                message: e.to_string(),
+            })?,
+            Summary::default(),
+        ),
+    };
+    let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
+    reader.set_last_time(summary.last_time);
+    let io = |e| CliError::io("writing output", e);
+    if opts.resume.is_none() && opts.format == Format::Csv {
+        writeln!(out, "{HEADER}").map_err(io)?;
+    }
+    let mut s = Sample::default();
+    while let Some(next) = reader.next_into(&mut s) {
+        match next {
+            Ok(()) => {}
+            Err(CliError::Row(e)) if opts.bad_rows == BadRows::Skip => {
+                eprintln!("skipped: {e}");
+                summary.skipped += 1;
+                continue;
+            }
+            Err(e) => return Err(e),
+        }
+        let ev = match cert.push(s.t, &s.y, &s.u) {
+            Ok(ev) => ev,
+            Err(e) => {
+                let err = crate::RowError {
+                    file: input_name.into(),
+                    line: s.line,
+                    column: None,
+                    message: e.to_string(),
+                };
+                if opts.bad_rows == BadRows::Skip {
+                    eprintln!("skipped: {err}");
+                    summary.skipped += 1;
+                    continue;
+                }
+                return Err(CliError::Row(err));
+            }
+        };
+        summary.rows += 1;
+        summary.gauss_open += u64::from(ev.gauss_gate.open);
+        summary.wass_open += u64::from(ev.wass_gate.open);
+        summary.first_deploy_gauss = summary.first_deploy_gauss.or(ev.gauss_gate.first_opened_at);
+        summary.first_deploy_wass = summary.first_deploy_wass.or(ev.wass_gate.first_opened_at);
+        summary.last_time = Some(s.t);
+        let line = match opts.format {
+            Format::Csv => row_csv(&ev),
+            Format::Jsonl => row_json(&ev),
+        };
+        out.write_all(line.as_bytes()).map_err(io)?;
+        out.flush().map_err(io)?;
+        if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
+            if every > 0 && summary.rows % every == 0 {
+                save(path, &cert, &summary)?;
+            }
+        }
+    }
+    if let Some(path) = &opts.checkpoint {
+        save(path, &cert, &summary)?;
+    }
+    Ok(summary)
+}

@@ -1,0 +1,234 @@
+//! The `certify` configuration file (TOML), validated before any data is read.
+
+use serde::Deserialize;
+use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
+use streamcert_certificate::{Certifier, CertifierConfig, ResidualSource};
+use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
+
+use crate::CliError;
+
+/// The commented default configuration printed by `streamcert certify --print-config`.
+pub const DEFAULT_CONFIG: &str = r#"# streamcert certify configuration (TOML). Unknown keys are refused.
+
+[columns]
+# Name of the time column (seconds, strictly increasing).
+time = "t"
+# Measured outputs y (p columns) and applied inputs u (m columns), by header name.
+outputs = ["y_b"]
+inputs = ["u_b"]
+
+[controller]
+# Candidate gain K (m rows of p values): the controller u = K y to be certified.
+gain = [[-4.0]]
+
+[certificate]
+# Conservatism c of rho = c (1 + ||K||) RMS(R) / sqrt(lambda_min(Z Z^T / M) + lambda).
+# The paper gives no value; this is a required, deliberate choice.
+conservatism = 0.1
+# Deploy once the certificate is >= margin for `consecutive` samples.
+margin = 0.05
+consecutive = 10
+
+[regression]
+window = 150            # M: columns in the sliding window
+horizon = 5             # h: samples per integration interval
+ridge = 1e-4            # lambda
+# min_columns = 150     # warm-up (default: window)
+input_integral = "trapezoidal"   # or "zero_order_hold" (exact for held inputs)
+estimator = "ordinary"           # or "instrumented" (removes the process-noise bias)
+
+[ambiguity]
+enabled = true          # also compute the Wasserstein certificate
+tail_window = 150
+eps_floor = 0.015
+eps_cap = 0.32
+alpha_kurtosis = 0.03
+alpha_spike = 2.0
+# sigma0 for the 3 sigma0 spike test: a number, or omit to calibrate it as
+# 1.4826 * MAD of the first `tail_window` residuals.
+# sigma0 = 0.08
+residuals = "one_step"  # or "horizon"
+"#;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct File {
+    columns: Columns,
+    controller: Controller,
+    certificate: Certificate,
+    #[serde(default)]
+    regression: Regression,
+    #[serde(default)]
+    ambiguity: Ambiguity,
+}
+
+/// Input column names.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Columns {
+    /// Time column.
+    pub time: String,
+    /// Output columns.
+    pub outputs: Vec<String>,
+    /// Input columns.
+    pub inputs: Vec<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Controller {
+    gain: Vec<Vec<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Certificate {
+    conservatism: f64,
+    margin: f64,
+    consecutive: usize,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Regression {
+    window: usize,
+    horizon: usize,
+    ridge: f64,
+    min_columns: Option<usize>,
+    input_integral: InputIntegral,
+    estimator: Estimator,
+}
+
+impl Default for Regression {
+    fn default() -> Self {
+        Self {
+            window: 150,
+            horizon: 5,
+            ridge: 1e-4,
+            min_columns: None,
+            input_integral: InputIntegral::Trapezoidal,
+            estimator: Estimator::Ordinary,
+        }
+    }
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Ambiguity {
+    enabled: bool,
+    tail_window: usize,
+    eps_floor: f64,
+    eps_cap: f64,
+    alpha_kurtosis: f64,
+    alpha_spike: f64,
+    sigma0: Option<f64>,
+    residuals: ResidualSource,
+}
+
+impl Default for Ambiguity {
+    fn default() -> Self {
+        let a = AmbiguityConfig::paper(150);
+        Self {
+            enabled: true,
+            tail_window: a.tail_window,
+            eps_floor: a.eps_floor,
+            eps_cap: a.eps_cap,
+            alpha_kurtosis: a.alpha_kurtosis,
+            alpha_spike: a.alpha_spike,
+            sigma0: None,
+            residuals: ResidualSource::OneStep,
+        }
+    }
+}
+
+/// A validated configuration.
+#[derive(Debug, Clone)]
+pub struct Config {
+    /// Column names.
+    pub columns: Columns,
+    /// The certifier configuration.
+    pub certifier: CertifierConfig,
+}
+
+/// Parse and validate a configuration text; `path` names it in errors.
+///
+/// # Errors
+/// [`CliError::Config`] for a TOML error, an unknown key, a wrong `K` shape or an invalid
+/// parameter.
+pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
+    let bad = |message: String| CliError::Config { path: path.to_string(), message };
+    let f: File = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let (p, m) = (f.columns.outputs.len(), f.columns.inputs.len());
+    if p == 0 || m == 0 {
+        return Err(bad(
+            "columns.outputs and columns.inputs must each name at least one column".into()
+        ));
+    }
+    let mut names: Vec<&String> = f.columns.outputs.iter().chain(&f.columns.inputs).collect();
+    names.push(&f.columns.time);
+    names.sort();
+    if names.windows(2).any(|w| w[0] == w[1]) {
+        return Err(bad("a column is named twice in [columns]".into()));
+    }
+    if f.controller.gain.len() != m || f.controller.gain.iter().any(|r| r.len() != p) {
+        return Err(bad(format!(
+            "controller.gain must be m × p = {m} × {p} (one row per input, one value per output), got {} rows of lengths {:?}",
+            f.controller.gain.len(),
+            f.controller.gain.iter().map(Vec::len).collect::<Vec<_>>()
+        )));
+    }
+    let r = &f.regression;
+    let reg = RegressionConfig {
+        min_columns: r.min_columns.unwrap_or(r.window),
+        input_integral: r.input_integral,
+        estimator: r.estimator,
+        ..RegressionConfig::new(p, m, r.window, r.horizon, r.ridge)
+    };
+    let mut certifier = CertifierConfig::new(
+        reg,
+        f.controller.gain.concat(),
+        f.certificate.conservatism,
+        f.certificate.margin,
+        f.certificate.consecutive,
+    );
+    let a = &f.ambiguity;
+    if a.enabled {
+        certifier.ambiguity = Some(AmbiguityConfig {
+            tail_window: a.tail_window,
+            eps_floor: a.eps_floor,
+            eps_cap: a.eps_cap,
+            alpha_kurtosis: a.alpha_kurtosis,
+            alpha_spike: a.alpha_spike,
+            spike_scale: match a.sigma0 {
+                Some(sigma0) => SpikeScale::Fixed { sigma0 },
+                None => SpikeScale::Calibrated { samples: a.tail_window },
+            },
+        });
+    }
+    certifier.residuals = a.residuals;
+    // Validate everything by building a certifier once.
+    Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
+    Ok(Config { columns: f.columns, certifier })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_config_parses() {
+        let c = parse(DEFAULT_CONFIG, "default").unwrap();
+        assert_eq!(c.certifier.gain, vec![-4.0]);
+        assert!(c.certifier.ambiguity.is_some());
+    }
+
+    #[test]
+    fn bad_configs_are_refused() {
+        let unknown = DEFAULT_CONFIG.replace("margin = 0.05", "margin = 0.05\nmargn = 1");
+        assert!(parse(&unknown, "x").unwrap_err().to_string().contains("margn"));
+        let shape = DEFAULT_CONFIG.replace("gain = [[-4.0]]", "gain = [[-4.0, 1.0]]");
+        assert!(parse(&shape, "x").unwrap_err().to_string().contains("m × p"));
+        let invalid = DEFAULT_CONFIG.replace("conservatism = 0.1", "conservatism = -1.0");
+        assert!(parse(&invalid, "x").unwrap_err().to_string().contains("conservatism"));
+    }
+}

@@ -1,0 +1,97 @@
+//! # streamcert-cli
+//!
+//! The library behind the `streamcert` binary: configuration files, streaming CSV input with
+//! precise error locations, the `certify`, `compose` and `simulate` commands. The binary's
+//! `main` only parses arguments and maps errors to exit codes.
+//!
+//! Exit codes: 0 success, 2 invalid command line or configuration (nothing was read),
+//! 3 malformed input data (stopping policy), 4 I/O failure, 5 checkpoint failure.
+
+pub mod certify;
+pub mod compose;
+pub mod config;
+pub mod input;
+pub mod simulate;
+
+use std::fmt;
+
+/// Errors of the command line, each with what a user needs to fix it.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum CliError {
+    /// The configuration is invalid; nothing was read.
+    #[error("{path}: invalid configuration: {message}")]
+    Config {
+        /// Configuration file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// A row of the input is malformed.
+    #[error("{0}")]
+    Row(RowError),
+    /// The input has no header or no data.
+    #[error("{file}: {message}")]
+    Input {
+        /// Input name.
+        file: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// Reading or writing failed.
+    #[error("{context}: {source}")]
+    Io {
+        /// What was being done.
+        context: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// A checkpoint could not be written, read or used.
+    #[error("checkpoint {path}: {message}")]
+    Checkpoint {
+        /// Checkpoint file.
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+impl CliError {
+    /// The process exit code for this error.
+    #[must_use]
+    pub fn exit_code(&self) -> i32 {
+        match self {
+            Self::Config { .. } => 2,
+            Self::Row(_) | Self::Input { .. } => 3,
+            Self::Io { .. } => 4,
+            Self::Checkpoint { .. } => 5,
+        }
+    }
+
+    /// An I/O error with what was being done.
+    pub fn io(context: impl Into<String>, source: std::io::Error) -> Self {
+        Self::Io { context: context.into(), source }
+    }
+}
+
+/// A malformed row: where, and what was expected.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RowError {
+    /// Input name (`-` for stdin).
+    pub file: String,
+    /// 1-based line number.
+    pub line: u64,
+    /// Column name, when one column is at fault.
+    pub column: Option<String>,
+    /// What was found and what was expected.
+    pub message: String,
+}
+
+impl fmt::Display for RowError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match &self.column {
+            Some(c) => write!(f, "{}:{}: column `{c}`: {}", self.file, self.line, self.message),
+            None => write!(f, "{}:{}: {}", self.file, self.line, self.message),
+        }
+    }
+}

@@ -1,0 +1,236 @@
+//! The `streamcert` binary: argument parsing and exit codes; the work is in the library.
+
+use std::io::{BufRead, BufReader, BufWriter, Write};
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+use streamcert_cli::{CliError, certify, compose, config, simulate};
+use streamcert_dynamics::{Coupling, Experiment};
+
+/// Decide from streaming sensor data whether a feedback controller may be deployed, and
+/// whether a coupled network of certified subsystems stays contracting.
+///
+/// Exit codes: 0 success, 2 invalid command line or configuration, 3 malformed input data,
+/// 4 I/O failure, 5 checkpoint failure.
+#[derive(Parser)]
+#[command(name = "streamcert", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Certify a candidate gain K from (t, y, u) samples: one output row per sample.
+    ///
+    /// Reads CSV with a header (columns named in the configuration), line by line, and writes
+    /// t, beta_hat, rho, eps, kurtosis, spike_fraction, cert_gauss, cert_wass, both gate
+    /// states and the reasons when not certified, flushing every row, so
+    /// `tail -f plant.csv | streamcert certify --config c.toml` works live. A summary goes to
+    /// stderr (or to --summary FILE as JSON).
+    Certify {
+        /// Configuration (TOML); see --print-config.
+        #[arg(long, required_unless_present = "print_config")]
+        config: Option<PathBuf>,
+        /// Print a commented default configuration and exit.
+        #[arg(long)]
+        print_config: bool,
+        /// Input CSV file, or - for stdin.
+        #[arg(long, default_value = "-")]
+        input: String,
+        /// Output file, or - for stdout.
+        #[arg(long, default_value = "-")]
+        output: String,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = certify::Format::Csv)]
+        format: certify::Format,
+        /// Malformed rows: stop (exit 3) or skip and count them.
+        #[arg(long, value_enum, default_value_t = certify::BadRows::Stop)]
+        on_bad_row: certify::BadRows,
+        /// Write the streaming state to FILE at the end (and every --checkpoint-every rows).
+        #[arg(long)]
+        checkpoint: Option<PathBuf>,
+        /// Checkpoint period in rows.
+        #[arg(long)]
+        checkpoint_every: Option<u64>,
+        /// Resume from a checkpoint; the input continues the earlier one, and the output has
+        /// no header, so the two outputs concatenate to the output of one run.
+        #[arg(long)]
+        resume: Option<PathBuf>,
+        /// Write the summary as JSON to FILE instead of text on stderr.
+        #[arg(long)]
+        summary: Option<PathBuf>,
+    },
+    /// Compose local contraction rates and coupling bounds into a network certificate.
+    Compose {
+        /// Local rates beta_i, one per subsystem (whitespace, comma or newline separated).
+        #[arg(long)]
+        rates: PathBuf,
+        /// Coupling bounds gamma_ij (how subsystem j drives subsystem i).
+        #[arg(long)]
+        gains: PathBuf,
+        /// Layout of the gains file.
+        #[arg(long, value_enum, default_value_t = compose::GainsFormat::Dense)]
+        gains_format: compose::GainsFormat,
+        /// Computation.
+        #[arg(long, value_enum, default_value_t = compose::Method::Auto)]
+        method: compose::Method,
+        /// JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Simulate a benchmark and write it in the CSV layout certify reads.
+    Simulate {
+        #[command(subcommand)]
+        system: SimSystem,
+    },
+}
+
+#[derive(Subcommand)]
+enum SimSystem {
+    /// The paper's five-node network G5 under its candidate gains plus PRBS dither.
+    G5 {
+        /// Which experiment's data set (1: three disturbance regimes, 30 s; 2: disconnected, 16 s).
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
+        experiment: u8,
+        /// Seed.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// Coupling structure.
+        #[arg(long, value_enum, default_value_t = CouplingArg::Cascade)]
+        coupling: CouplingArg,
+    },
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum CouplingArg {
+    Cascade,
+    Bidirectional,
+}
+
+fn open_input(name: &str) -> Result<Box<dyn BufRead>, CliError> {
+    if name == "-" {
+        Ok(Box::new(BufReader::new(std::io::stdin())))
+    } else {
+        let f =
+            std::fs::File::open(name).map_err(|e| CliError::io(format!("opening {name}"), e))?;
+        Ok(Box::new(BufReader::new(f)))
+    }
+}
+
+fn open_output(name: &str) -> Result<Box<dyn Write>, CliError> {
+    if name == "-" {
+        Ok(Box::new(std::io::stdout()))
+    } else {
+        let f =
+            std::fs::File::create(name).map_err(|e| CliError::io(format!("creating {name}"), e))?;
+        Ok(Box::new(BufWriter::new(f)))
+    }
+}
+
+fn read(path: &PathBuf) -> Result<String, CliError> {
+    std::fs::read_to_string(path)
+        .map_err(|e| CliError::io(format!("reading {}", path.display()), e))
+}
+
+fn run(cli: Cli) -> Result<(), CliError> {
+    match cli.command {
+        Command::Certify {
+            config,
+            print_config,
+            input,
+            output,
+            format,
+            on_bad_row,
+            checkpoint,
+            checkpoint_every,
+            resume,
+            summary,
+        } => {
+            if print_config {
+                print!("{}", config::DEFAULT_CONFIG);
+                return Ok(());
+            }
+            let path = config.ok_or_else(|| CliError::Config {
+                path: "-".into(),
+                message: "--config is required".into(),
+            })?;
+            let text = std::fs::read_to_string(&path).map_err(|e| CliError::Config {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })?;
+            let cfg = config::parse(&text, &path.display().to_string())?;
+            let opts = certify::Options {
+                format,
+                bad_rows: on_bad_row,
+                checkpoint,
+                checkpoint_every,
+                resume,
+            };
+            let mut out = open_output(&output)?;
+            let s = certify::run(&cfg, open_input(&input)?, &input, &mut out, &opts)?;
+            out.flush().map_err(|e| CliError::io("writing output", e))?;
+            match summary {
+                Some(file) => {
+                    let v = serde_json::json!({
+                        "rows": s.rows, "skipped": s.skipped,
+                        "share_gauss_gate_open": s.share_gauss(), "share_wass_gate_open": s.share_wass(),
+                        "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
+                        "last_time": s.last_time,
+                    });
+                    std::fs::write(&file, format!("{v}\n"))
+                        .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
+                }
+                None => eprintln!(
+                    "summary: {} rows, {} skipped; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
+                    s.rows,
+                    s.skipped,
+                    100.0 * s.share_gauss(),
+                    s.first_deploy_gauss.map_or("never".into(), |t| format!("t = {t}")),
+                    100.0 * s.share_wass(),
+                    s.first_deploy_wass.map_or("never".into(), |t| format!("t = {t}")),
+                ),
+            }
+            Ok(())
+        }
+        Command::Compose { rates, gains, gains_format, method, json } => {
+            let text = compose::run(
+                &read(&rates)?,
+                &rates.display().to_string(),
+                &read(&gains)?,
+                &gains.display().to_string(),
+                gains_format,
+                method,
+                json,
+            )?;
+            print!("{text}");
+            Ok(())
+        }
+        Command::Simulate { system: SimSystem::G5 { experiment, seed, coupling } } => {
+            let experiment = if experiment == 1 { Experiment::One } else { Experiment::Two };
+            let coupling = match coupling {
+                CouplingArg::Cascade => Coupling::Cascade,
+                CouplingArg::Bidirectional => Coupling::Bidirectional,
+            };
+            let stdout = std::io::stdout();
+            let mut out = BufWriter::new(stdout.lock());
+            simulate::run(experiment, coupling, seed, &mut out)
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        // A closed pipe downstream (`streamcert simulate g5 | head`) is not an error.
+        Err(CliError::Io { source, .. }) if source.kind() == std::io::ErrorKind::BrokenPipe => {
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("streamcert: error: {e}");
+            ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1))
+        }
+    }
+}

@@ -1,0 +1,253 @@
+//! End-to-end tests of the `streamcert` binary: simulate | certify, split and resume, every
+//! kind of bad input with its message and exit code, and compose against Lemma 1.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
+
+fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_streamcert"))
+}
+
+fn run(args: &[&str], stdin: &[u8]) -> Output {
+    let mut child = bin()
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    // Feed stdin from another thread: the child streams its output while it reads, so
+    // writing everything first could fill the output pipe and deadlock.
+    let mut pipe = child.stdin.take().expect("stdin");
+    let data = stdin.to_vec();
+    let feeder = std::thread::spawn(move || {
+        // The child may stop reading early (a configuration error): ignore a broken pipe.
+        let _ = pipe.write_all(&data);
+    });
+    let out = child.wait_with_output().expect("wait");
+    feeder.join().expect("feeder thread");
+    out
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cli-tests");
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    dir.join(name)
+}
+
+/// The printed default configuration, written to a file private to the calling test (tests
+/// run in parallel).
+fn config(tag: &str) -> PathBuf {
+    let out = run(&["certify", "--print-config"], b"");
+    assert!(out.status.success());
+    let path = tmp(&format!("config-{tag}.toml"));
+    std::fs::write(&path, &out.stdout).expect("write config");
+    path
+}
+
+fn simulate(seed: &str) -> Vec<u8> {
+    let out = run(&["simulate", "g5", "--experiment", "1", "--seed", seed], b"");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    out.stdout
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn simulate_pipes_into_certify() {
+    let cfg = config("pipe");
+    let data = simulate("4");
+    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &data);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
+    assert_eq!(lines.len(), 1 + 1501, "header plus one row per sample");
+    assert!(
+        lines[0].starts_with("t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass")
+    );
+    assert!(lines.iter().any(|l| l.contains(",1,1,")), "some row has both gates open");
+    assert!(text(&out.stderr).contains("summary: 1501 rows, 0 skipped"));
+    // JSON lines carry the same numbers.
+    let json =
+        run(&["certify", "--config", cfg.to_str().expect("utf8"), "--format", "jsonl"], &data);
+    let last: serde_json::Value =
+        serde_json::from_str(text(&json.stdout).lines().last().expect("rows")).expect("json");
+    let csv: Vec<f64> = lines
+        .last()
+        .expect("rows")
+        .split(',')
+        .take(2)
+        .map(|v| v.parse().expect("number"))
+        .collect();
+    assert_eq!(
+        csv,
+        vec![last["t"].as_f64().expect("t"), last["beta_hat"].as_f64().expect("beta_hat")]
+    );
+}
+
+#[test]
+fn split_and_resume_equals_one_run() {
+    let cfg = config("resume");
+    let c = cfg.to_str().expect("utf8");
+    let data = text(&simulate("5"));
+    let lines: Vec<&str> = data.lines().collect();
+    let (head, rest) = lines.split_at(700);
+    let first = format!("{}\n", head.join("\n"));
+    let second = format!("{}\n{}\n", lines[0], rest.join("\n"));
+    let whole = run(&["certify", "--config", c], data.as_bytes());
+    let cp = tmp("state.json");
+    let cps = cp.to_str().expect("utf8");
+    let a = run(
+        &["certify", "--config", c, "--checkpoint", cps, "--checkpoint-every", "100"],
+        first.as_bytes(),
+    );
+    let b = run(&["certify", "--config", c, "--resume", cps], second.as_bytes());
+    assert!(a.status.success() && b.status.success(), "{}{}", text(&a.stderr), text(&b.stderr));
+    assert_eq!(format!("{}{}", text(&a.stdout), text(&b.stdout)), text(&whole.stdout));
+    // Resuming with another configuration is refused.
+    let other = tmp("other.toml");
+    std::fs::write(
+        &other,
+        std::fs::read_to_string(&cfg).expect("cfg").replace("margin = 0.05", "margin = 0.06"),
+    )
+    .expect("write");
+    let bad = run(
+        &["certify", "--config", other.to_str().expect("utf8"), "--resume", cps],
+        second.as_bytes(),
+    );
+    assert_eq!(bad.status.code(), Some(5), "{}", text(&bad.stderr));
+}
+
+/// Run certify on `body` (after a valid header) and return (exit code, stderr).
+fn certify_rows(body: &str, extra: &[&str]) -> (Option<i32>, String) {
+    let cfg = config("rows");
+    let header = "t,y_a,u_a,y_b,u_b\n";
+    let mut args = vec!["certify", "--config", cfg.to_str().expect("utf8")];
+    args.extend_from_slice(extra);
+    let out = run(&args, format!("{header}{body}").as_bytes());
+    (out.status.code(), text(&out.stderr))
+}
+
+#[test]
+fn each_bad_input_has_its_message_and_exit_code() {
+    let good = "0,0,0,0,0\n0.02,0,0,0.1,0.5\n";
+    let cases = [
+        (format!("{good}0.04,0,0,abc,0.5\n"), "-:4: column `y_b`: expected a number, found `abc`"),
+        (format!("{good}0.04,0,0,NaN,0.5\n"), "-:4: column `y_b`: expected a finite number"),
+        (format!("{good}0.04,0,0,0.1,inf\n"), "-:4: column `u_b`: expected a finite number"),
+        (
+            format!("{good}0.01,0,0,0.1,0.5\n"),
+            "-:4: column `t`: time 0.01 is before the previous time 0.02",
+        ),
+        (format!("{good}0.02,0,0,0.1,0.5\n"), "-:4: column `t`: duplicated time 0.02"),
+        (format!("{good}0.04,0,0\n"), "-:4: expected 5 comma-separated fields"),
+    ];
+    for (body, message) in &cases {
+        let (code, stderr) = certify_rows(body, &[]);
+        assert_eq!(code, Some(3), "{stderr}");
+        assert!(stderr.contains(message), "expected `{message}` in `{stderr}`");
+    }
+    // Skip policy: every bad row counted, the run succeeds.
+    let all_bad: String =
+        cases.iter().map(|(b, _)| b.lines().nth(2).expect("bad row").to_string() + "\n").collect();
+    let summary = tmp("summary.json");
+    let (code, stderr) = certify_rows(
+        &format!("{good}{all_bad}0.06,0,0,0.1,0.5\n"),
+        &["--on-bad-row", "skip", "--summary", summary.to_str().expect("utf8")],
+    );
+    assert_eq!(code, Some(0), "{stderr}");
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&summary).expect("summary")).expect("json");
+    assert_eq!(s["skipped"], 6);
+    assert_eq!(s["rows"], 3);
+    // Empty input and a header without the configured columns.
+    let cfg = config("rows");
+    let empty = run(&["certify", "--config", cfg.to_str().expect("utf8")], b"");
+    assert_eq!(empty.status.code(), Some(3));
+    assert!(text(&empty.stderr).contains("empty input"));
+    let header = run(&["certify", "--config", cfg.to_str().expect("utf8")], b"t,y,u\n0,0,0\n");
+    assert_eq!(header.status.code(), Some(3));
+    assert!(text(&header.stderr).contains("no column `y_b`"));
+}
+
+#[test]
+fn invalid_configurations_are_refused_before_reading() {
+    let base = std::fs::read_to_string(config("invalid")).expect("cfg");
+    for (edit, message) in [
+        (base.replace("margin = 0.05", "margin = 0.05\nmargn = 1"), "unknown field"),
+        (base.replace("gain = [[-4.0]]", "gain = [[-4.0, 2.0]]"), "m × p"),
+        (base.replace("conservatism = 0.1", "conservatism = 0.0"), "conservatism"),
+        (base.replace("eps_floor = 0.015", "eps_floor = 0.5"), "eps_floor"),
+    ] {
+        let path = tmp("bad.toml");
+        std::fs::write(&path, edit).expect("write");
+        // The input would fail too, but the configuration error comes first (exit 2).
+        let out = run(&["certify", "--config", path.to_str().expect("utf8")], b"garbage");
+        assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+        assert!(
+            text(&out.stderr).contains(message),
+            "expected `{message}` in {}",
+            text(&out.stderr)
+        );
+    }
+}
+
+#[test]
+fn compose_two_subsystems_equals_lemma_1() {
+    let (rates, gains) = (tmp("compose-rates.txt"), tmp("compose-gains.txt"));
+    std::fs::write(&rates, "0.8\n1.2\n").expect("write");
+    std::fs::write(&gains, "0 0.5\n0.5 0\n").expect("write");
+    let out = run(
+        &[
+            "compose",
+            "--rates",
+            rates.to_str().expect("utf8"),
+            "--gains",
+            gains.to_str().expect("utf8"),
+            "--json",
+        ],
+        b"",
+    );
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).expect("json");
+    let lemma = streamcert_compose::lemma1_rate(0.8, 1.2, 0.5).expect("valid");
+    assert!((v["rate"].as_f64().expect("rate") - lemma).abs() < 1e-12);
+    let warn = streamcert_compose::warning_gain(0.8, 1.2).expect("valid");
+    assert!((v["critical_scale"].as_f64().expect("scale") * 0.5 - warn).abs() < 1e-9);
+    // Sparse triplets give a certified rate no larger than the exact one.
+    std::fs::write(&gains, "i,j,gamma\n0,1,0.5\n1,0,0.5\n").expect("write");
+    let out = run(
+        &[
+            "compose",
+            "--rates",
+            rates.to_str().expect("utf8"),
+            "--gains",
+            gains.to_str().expect("utf8"),
+            "--gains-format",
+            "triplets",
+            "--method",
+            "sparse",
+            "--json",
+        ],
+        b"",
+    );
+    let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).expect("json");
+    let r = v["rate"].as_f64().expect("rate");
+    assert!(r <= lemma + 1e-12 && r > lemma - 1e-3, "{r} vs {lemma}");
+    // A negative gain is an input error.
+    std::fs::write(&gains, "0 -0.5\n0.5 0\n").expect("write");
+    let out = run(
+        &[
+            "compose",
+            "--rates",
+            rates.to_str().expect("utf8"),
+            "--gains",
+            gains.to_str().expect("utf8"),
+        ],
+        b"",
+    );
+    assert_eq!(out.status.code(), Some(3));
+    assert!(text(&out.stderr).contains(">= 0"));
+}

@@ -88,6 +88,7 @@ impl Params {
             dither_hold: self.dither_hold,
             noise_scaling: self.noise_scaling,
             noise_on_a: self.exp2_noise_on_a,
+            steps: None,
         }
     }
 

@@ -100,6 +100,9 @@ enum SimSystem {
         /// Coupling structure.
         #[arg(long, value_enum, default_value_t = CouplingArg::Cascade)]
         coupling: CouplingArg,
+        /// Number of steps instead of the experiment's (for long test files).
+        #[arg(long)]
+        steps: Option<usize>,
     },
 }
 
@@ -207,7 +210,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             print!("{text}");
             Ok(())
         }
-        Command::Simulate { system: SimSystem::G5 { experiment, seed, coupling } } => {
+        Command::Simulate { system: SimSystem::G5 { experiment, seed, coupling, steps } } => {
             let experiment = if experiment == 1 { Experiment::One } else { Experiment::Two };
             let coupling = match coupling {
                 CouplingArg::Cascade => Coupling::Cascade,
@@ -215,7 +218,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             };
             let stdout = std::io::stdout();
             let mut out = BufWriter::new(stdout.lock());
-            simulate::run(experiment, coupling, seed, &mut out)
+            simulate::run(experiment, coupling, seed, steps, &mut out)
         }
     }
 }

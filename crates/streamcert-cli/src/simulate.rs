@@ -6,7 +6,8 @@ use streamcert_dynamics::{Coupling, Experiment, G5Dataset};
 
 use crate::CliError;
 
-/// Write `t,y_a,u_a,y_b,u_b` (and the states and the true local rates) for one seed.
+/// Write `t,y_a,u_a,y_b,u_b` (and the states and the true local rates) for one seed,
+/// optionally with another number of steps.
 ///
 /// # Errors
 /// [`CliError::Io`] on a write error.
@@ -14,9 +15,10 @@ pub fn run<W: Write>(
     experiment: Experiment,
     coupling: Coupling,
     seed: u64,
+    steps: Option<usize>,
     out: &mut W,
 ) -> Result<(), CliError> {
-    let ds = G5Dataset { coupling, ..G5Dataset::defaults(experiment) };
+    let ds = G5Dataset { coupling, steps, ..G5Dataset::defaults(experiment) };
     let base = seed.wrapping_mul(1_000_003);
     let traj = ds
         .run([base + 1, base + 2, base + 3, base + 4])

@@ -40,6 +40,10 @@ pub struct G5Dataset {
     pub noise_scaling: NoiseScaling,
     /// Experiment 2: also put the noise into `x1`.
     pub noise_on_a: bool,
+    /// Number of steps instead of the experiment's (Experiment 1: 1500, Experiment 2: 800);
+    /// after 30 s Experiment 1's schedule has no random part left.
+    #[serde(default)]
+    pub steps: Option<usize>,
 }
 
 impl G5Dataset {
@@ -55,6 +59,7 @@ impl G5Dataset {
             dither_hold: 0.1,
             noise_scaling: NoiseScaling::Sde,
             noise_on_a: true,
+            steps: None,
         }
     }
 
@@ -83,7 +88,8 @@ impl G5Dataset {
     /// Invalid `dt`, dither or noise parameters.
     pub fn run(&self, seeds: [u64; 4]) -> Result<Trajectory, DynamicsError> {
         let sys = self.system()?;
-        let (_, k1, k4, steps) = self.settings();
+        let (_, k1, k4, default_steps) = self.settings();
+        let steps = self.steps.unwrap_or(default_steps);
         let cfg = SimConfig {
             dt: self.dt,
             steps,

@@ -10,7 +10,7 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::AmbiguityConfig;
-use streamcert::certificate::{Certifier, CertifierConfig};
+use streamcert::certificate::{Calibration, Certifier, CertifierConfig};
 use streamcert::regression::{RegressionConfig, SlidingRegression};
 
 /// A pre-generated stream of `len` samples with `p` outputs and `m` inputs.
@@ -85,8 +85,9 @@ fn regression_update(c: &mut Criterion) {
 
 fn certifier_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("certifier_step");
-    let cases = [(1usize, 1usize, false), (1, 1, true), (10, 10, false), (10, 10, true)];
-    for (p, m, wasserstein) in cases {
+    let cases = [(1usize, 1usize, 0u8), (1, 1, 1), (1, 1, 2), (10, 10, 0), (10, 10, 1)];
+    for (p, m, variant) in cases {
+        let wasserstein = variant == 1;
         let d = p + m;
         let len = 4096;
         let data = stream(p, m, len);
@@ -97,7 +98,11 @@ fn certifier_step(c: &mut Criterion) {
         if wasserstein {
             cfg.ambiguity = Some(AmbiguityConfig::paper(150));
         }
-        let name = if wasserstein { "gaussian_and_wasserstein" } else { "gaussian" };
+        if variant == 2 {
+            cfg.calibration = Some(Calibration { delta: 0.01 });
+        }
+        let name = ["gaussian", "gaussian_and_wasserstein", "gaussian_and_calibrated"]
+            [usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
         for s in data.chunks(d).take(200) {

@@ -335,3 +335,78 @@ fn one_step_residuals_keep_the_laplace_tails_that_horizon_residuals_average_away
     assert!(one_step > 2.0, "one-step kurtosis {one_step}");
     assert!(horizon < 1.2 && horizon < one_step - 1.0, "horizon kurtosis {horizon}");
 }
+
+fn calibrated_config(k: f64) -> CertifierConfig {
+    CertifierConfig {
+        calibration: Some(streamcert::certificate::Calibration { delta: 0.01 }),
+        ..config(1, 1, vec![k], 1.0)
+    }
+}
+
+fn non_contracting_scalar() -> LinearScenario {
+    // ẏ = 0.5 y + u + w explored by u = −y + PRBS; candidate K = −0.2 has true rate −0.3.
+    LinearScenario {
+        a: vec![0.5],
+        b: vec![1.0],
+        n: 1,
+        m: 1,
+        noise: Process::Gaussian { sigma: 0.1 },
+        k_explore: vec![-1.0],
+        dither: 1.0,
+        dither_hold: 0.2,
+        dt: 0.01,
+        steps: 4000,
+    }
+}
+
+#[test]
+fn calibrated_radius_matches_its_formula() {
+    let k = -0.2;
+    let mut cert = Certifier::new(calibrated_config(k)).expect("valid");
+    let traj = run_scenario(&non_contracting_scalar(), 2);
+    let mut looks = 0u64;
+    for i in 0..traj.len() {
+        let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
+        let Some(rho_cal) = ev.rho_calibrated else { continue };
+        looks += 1;
+        // Oracle: Tᵀ (G + λI)⁻¹ T by nalgebra from the regression's statistics.
+        let (g, _, _) = cert.regression().statistics();
+        let gram = nalgebra::Matrix2::new(g[0] + 1e-4, g[1], g[1], g[3] + 1e-4);
+        let t = nalgebra::Vector2::new(1.0, k);
+        let form = (t.transpose() * gram.try_inverse().expect("invertible") * t)[(0, 0)];
+        let risk = streamcert::certificate::look_risk(0.01, looks);
+        let rms = ev.rms_residual.expect("ready");
+        let expected = (5.0 * rms * rms * form * 2.0 * (1.0 / risk).ln()).sqrt();
+        assert!((rho_cal - expected).abs() < 1e-9 * expected, "{rho_cal} vs {expected}");
+        assert_eq!(ev.cert_calibrated, Some(ev.beta_hat.expect("ready") - rho_cal));
+    }
+    assert!(looks > 3000);
+}
+
+#[test]
+fn calibrated_gate_rarely_deploys_a_non_contracting_candidate() {
+    // δ = 0.01 over 100 runs: P(Bin(100, 0.01) > 4) < 0.4 %, so more than 4 openings would be
+    // evidence against the guarantee. The contracting candidate (rate 1.0) must open in most.
+    let (mut false_opens, mut true_opens) = (0, 0);
+    for seed in 0..100 {
+        let traj = run_scenario(&non_contracting_scalar(), 500 + seed);
+        for (k, counter) in [(-0.2, &mut false_opens), (-1.5, &mut true_opens)] {
+            let mut cert = Certifier::new(calibrated_config(k)).expect("valid");
+            let opened = (0..traj.len()).any(|i| {
+                cert.push(traj.t[i], traj.output(i), traj.input(i))
+                    .expect("valid")
+                    .calibrated_gate
+                    .open
+            });
+            *counter += usize::from(opened);
+        }
+    }
+    assert!(
+        false_opens <= 4,
+        "calibrated gate opened for {false_opens} of 100 non-contracting runs"
+    );
+    assert!(
+        true_opens >= 90,
+        "calibrated gate opened for only {true_opens} of 100 contracting runs"
+    );
+}

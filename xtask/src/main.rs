@@ -15,6 +15,7 @@ mod exp1;
 mod exp2;
 mod plot;
 mod report;
+mod validity;
 
 use std::path::PathBuf;
 
@@ -29,6 +30,10 @@ commands:
   reproduce      both experiments, sensitivity study, REPORT.md, meta.json
   exp1           Experiment 1 only (Table II, validity, Figs. 3-5)
   exp2           Experiment 2 only (Table III, coupled simulations, Figs. 6-8)
+  validity [--runs N] [--out DIR]
+                 gate-opening rates of the calibrated and the paper's certificates on
+                 linear systems with known rates (VALIDITY.md, default 200 runs,
+                 default DIR target/validity)
 
 options (defaults in brackets; see REPORT.md for why):
   --out DIR                     output folder [target/reproduce]
@@ -118,6 +123,20 @@ fn main() -> Result<()> {
         "reproduce" => report::reproduce(&parse(&args[1..])?, true, true),
         "exp1" => report::reproduce(&parse(&args[1..])?, true, false),
         "exp2" => report::reproduce(&parse(&args[1..])?, false, true),
+        "validity" => {
+            let mut runs = 200;
+            let mut out = PathBuf::from("target/validity");
+            let mut it = args[1..].iter();
+            while let Some(flag) = it.next() {
+                let v = it.next().with_context(|| format!("{flag} needs a value"))?;
+                match flag.as_str() {
+                    "--runs" => runs = v.parse().context("--runs")?,
+                    "--out" => out = PathBuf::from(v),
+                    other => bail!("unknown option `{other}`\n{USAGE}"),
+                }
+            }
+            validity::run(runs, &out)
+        }
         "help" | "--help" | "-h" => {
             print!("{USAGE}");
             Ok(())

@@ -78,6 +78,65 @@ pub fn certificate_surface(beta_hat: f64, rho: f64, eps: &[f64], out: &mut [f64]
     }
 }
 
+/// The calibrated certificate (an addition to the paper; see [`calibrated_radius`]).
+///
+/// The paper's `ρ = c (1 + ‖K‖) RMS(R) / √(λ_min + λ)` has a tuned constant `c` and is checked
+/// at every sample, so it gives no stated probability of deploying a controller that does not
+/// contract. The calibrated mode replaces `c` by a radius derived from the regression's own
+/// uncertainty and spends the risk `δ` over all the looks of the run, so that
+/// `P(the calibrated gate ever opens for a candidate whose true rate is below β_margin) <= δ`
+/// under the assumptions stated in [`calibrated_radius`].
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// Risk `δ ∈ (0, 1)` over the whole run (default of the CLI: 0.01).
+    pub delta: f64,
+}
+
+/// Risk spent at the `k`-th look (`k >= 1`): `δ_k = 6 δ / (π² k²)`, so `Σ_k δ_k = δ` over an
+/// unbounded run (a union bound over every look, valid for any stopping rule).
+#[must_use]
+pub fn look_risk(delta: f64, k: u64) -> f64 {
+    let k = k.max(1) as f64;
+    6.0 * delta / (std::f64::consts::PI * std::f64::consts::PI * k * k)
+}
+
+/// The calibrated radius for one look:
+///
+/// ```text
+/// ρ_cal = √( h · σ̂² · λ_max(Tᵀ (ZZᵀ + λI)⁻¹ T) · q(δ_k) ),   T = [I_p; K],   σ̂ = RMS(R)
+/// q = 2 ln(1/δ_k)                              (p = 1: Gaussian Chernoff bound)
+/// q = p² + 2 √(p² ln(1/δ_k)) + 2 ln(1/δ_k)     (p > 1: Laurent–Massart χ² bound)
+/// ```
+///
+/// Derivation: `Θ̂ − Θ = R Zᵀ (ZZᵀ + λI)⁻¹` (ridge bias neglected), so
+/// `ΔJ_cl = (Θ̂ − Θ) T`. Each column residual is the sum of the `h` per-step noise increments of
+/// its interval; overlapping columns share up to `h − 1` of them, so the autocorrelation has
+/// `Σ_l |ρ_l| = h` and, by Cauchy–Schwarz lag by lag, the variance of any linear functional is
+/// at most `h` times the i.i.d. one, `σ² aᵀ(ZZᵀ+λI)⁻¹a`. For `p = 1`, `β̂ − β* = −ΔJ_cl` is a
+/// scalar with variance at most `h σ² TᵀG⁻¹T`; for `p > 1`, Weyl's inequality gives
+/// `|λ_max(sym J̃) − λ_max(sym J)| <= ‖ΔJ_cl‖₂ <= ‖ΔJ_cl‖_F`, a quadratic form bounded by the
+/// `χ²_{p²}` tail. With probability at least `1 − δ_k`, `β̂ − ρ_cal <= β*`.
+///
+/// Assumptions (when they fail the guarantee is void, and the Wasserstein radius is the
+/// paper's hedge against heavier tails): the system is linear (or its Jacobian constant) over
+/// the window; the per-step process noise is white, independent of the inputs, with
+/// (sub-)Gaussian tails for the window sum (heavy-tailed noise with finite variance is covered
+/// only through the central limit theorem); the excitation is exogenous and dominates the
+/// noise in the regressor (otherwise the ordinary estimate is biased, see
+/// `Estimator::Instrumented`); `σ̂` is a plug-in estimate; the ridge bias is negligible.
+#[must_use]
+pub fn calibrated_radius(horizon: usize, rms: f64, form_max: f64, p: usize, risk: f64) -> f64 {
+    let x = (1.0 / risk).ln();
+    let q = if p == 1 {
+        2.0 * x
+    } else {
+        let k = (p * p) as f64;
+        k + 2.0 * (k * x).sqrt() + 2.0 * x
+    };
+    (horizon as f64 * rms * rms * form_max.max(0.0) * q).sqrt()
+}
+
 /// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
 /// wrong number of values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -114,6 +173,9 @@ pub struct CertifierConfig {
     /// Residuals that feed `ε` (default [`ResidualSource::OneStep`]).
     #[serde(default)]
     pub residuals: ResidualSource,
+    /// Calibrated certificate beside the paper's (`None`: not computed).
+    #[serde(default)]
+    pub calibration: Option<Calibration>,
 }
 
 impl CertifierConfig {
@@ -137,6 +199,7 @@ impl CertifierConfig {
             bad_samples: BadSamplePolicy::Reject,
             ambiguity: None,
             residuals: ResidualSource::OneStep,
+            calibration: None,
         }
     }
 
@@ -173,6 +236,17 @@ impl CertifierConfig {
         }
         if let Some(a) = &self.ambiguity {
             a.validate()?;
+        }
+        if let Some(c) = &self.calibration {
+            if !(c.delta > 0.0 && c.delta < 1.0) {
+                return bad("calibration.delta", format!("must lie in (0, 1), got {}", c.delta));
+            }
+            if self.regression.estimator != streamcert_regression::Estimator::Ordinary {
+                return bad(
+                    "calibration",
+                    "the calibrated radius is derived for the ordinary (ridge) estimator".into(),
+                );
+            }
         }
         Ok(())
     }
@@ -283,6 +357,12 @@ pub struct Evidence {
     pub wass_gate: GateState,
     /// Why the Wasserstein gate is closed (`None` when open).
     pub wass_reason: Option<NotCertified>,
+    /// Calibrated radius `ρ_cal` ([`calibrated_radius`]), when configured.
+    pub rho_calibrated: Option<f64>,
+    /// Calibrated certificate `β̂ − ρ_cal`.
+    pub cert_calibrated: Option<f64>,
+    /// The calibrated certificate's gate (false-deployment probability at most `δ`).
+    pub calibrated_gate: GateState,
     /// `RMS(R)`.
     pub rms_residual: Option<f64>,
     /// `λ_min(Z Zᵀ / M)`.
@@ -302,6 +382,11 @@ pub struct Certifier {
     samples: u64,
     skipped: u64,
     wass: Gate,
+    calibrated: Gate,
+    looks: u64,
+    tmat: Vec<f64>,
+    form: Vec<f64>,
+    form_scratch: Vec<f64>,
     ambiguity: Vec<AmbiguityRadius>,
     resid: Vec<f64>,
     jcl: Vec<f64>,
@@ -316,6 +401,7 @@ struct Ready {
     rho: f64,
     rms: f64,
     lambda_min: f64,
+    rho_cal: Option<f64>,
 }
 
 impl Certifier {
@@ -339,6 +425,17 @@ impl Certifier {
             gain_norm: linalg::spectral_norm(&cfg.gain, m, p),
             gauss: Gate::new(cfg.margin, cfg.consecutive),
             wass: Gate::new(cfg.margin, cfg.consecutive),
+            calibrated: Gate::new(cfg.margin, cfg.consecutive),
+            looks: 0,
+            // T = [I_p; K] (d × p, row-major).
+            tmat: (0..(p + m) * p)
+                .map(|idx| {
+                    let (r, c) = (idx / p, idx % p);
+                    if r < p { f64::from(u8::from(r == c)) } else { cfg.gain[(r - p) * p + c] }
+                })
+                .collect(),
+            form: vec![0.0; p * p],
+            form_scratch: vec![0.0; (p + m) * p + linalg::eig_work_len(p)],
             ambiguity: match &cfg.ambiguity {
                 Some(a) => (0..p).map(|_| AmbiguityRadius::new(*a)).collect::<Result<_, _>>()?,
                 None => Vec::new(),
@@ -408,6 +505,9 @@ impl Certifier {
                         cert_wass: None,
                         wass_gate: self.wass.update(t, None),
                         wass_reason: Some(NotCertified::SkippedSample),
+                        rho_calibrated: None,
+                        cert_calibrated: None,
+                        calibrated_gate: self.calibrated.update(t, None),
                         rms_residual: None,
                         gram_lambda_min: None,
                         columns: self.regression.columns(),
@@ -425,6 +525,9 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
+        let rho_calibrated = ready.and_then(|r| r.rho_cal);
+        let cert_calibrated = ready.and_then(|r| r.rho_cal.map(|rc| r.beta_hat - rc));
+        let calibrated_gate = self.calibrated.update(t, cert_calibrated);
         let reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let wass_reason = if amb.is_none() {
             Some(NotCertified::NoAmbiguityModel)
@@ -444,6 +547,9 @@ impl Certifier {
             cert_wass,
             wass_gate,
             wass_reason,
+            rho_calibrated,
+            cert_calibrated,
+            calibrated_gate,
             rms_residual: ready.map(|r| r.rms),
             gram_lambda_min: ready.map(|r| r.lambda_min),
             columns,
@@ -523,7 +629,19 @@ impl Certifier {
         if !(beta_hat.is_finite() && rho.is_finite()) {
             return (None, columns, Some(NotCertified::InsufficientExcitation));
         }
-        (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None)
+        let rho_cal = self.cfg.calibration.and_then(|c| {
+            let d = p + m;
+            let (tmat, form) = (&self.tmat, &mut self.form);
+            let (scratch, eig) = self.form_scratch.split_at_mut(d * p);
+            if !self.regression.gram_inverse_form(tmat, p, scratch, form) {
+                return None;
+            }
+            self.looks += 1;
+            let form_max = linalg::sym_eig_extremes(form, p, eig).1;
+            let risk = look_risk(c.delta, self.looks);
+            Some(calibrated_radius(self.cfg.regression.horizon, rms, form_max, p, risk))
+        });
+        (Some(Ready { beta_hat, rho, rms, lambda_min, rho_cal }), columns, None)
     }
 
     /// Serialise the full streaming state as JSON (floats round-trip exactly).
@@ -555,6 +673,8 @@ impl Certifier {
             || c.jcl.len() != p * p
             || c.work.len() != p * p
             || c.resid.len() != p
+            || c.tmat.len() != (p + c.cfg.regression.inputs) * p
+            || c.form.len() != p * p
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }

@@ -367,6 +367,9 @@ pub struct SlidingRegression {
     // The newest single sample interval: regressor and output increment.
     z1: Vec<f64>,
     dy1: Vec<f64>,
+    // `work` holds the Cholesky factor of the latest Ready ordinary estimate.
+    #[serde(default)]
+    factor_valid: bool,
 }
 
 impl SlidingRegression {
@@ -414,6 +417,7 @@ impl SlidingRegression {
             dy: vec![0.0; p],
             z1: vec![0.0; d],
             dy1: vec![0.0; p],
+            factor_valid: false,
         })
     }
 
@@ -452,6 +456,7 @@ impl SlidingRegression {
 
     /// Forget every sample and column (the configuration is kept).
     pub fn reset(&mut self) {
+        self.factor_valid = false;
         self.hist_len = 0;
         self.zhist_len = 0;
         self.col_len = 0;
@@ -571,6 +576,42 @@ impl SlidingRegression {
     #[must_use]
     pub fn newest_interval(&self) -> Option<(&[f64], &[f64])> {
         (self.hist_len >= 2).then_some((&self.z1[..], &self.dy1[..]))
+    }
+
+    /// `aᵀ (Z Zᵀ + λ I)⁻¹ a` for each column `a` of the `d × k` row-major matrix `t`, written
+    /// into `out` (`k × k`, row-major: `out = tᵀ (ZZᵀ + λI)⁻¹ t`), from the Cholesky factor of
+    /// the latest [`estimate`](Self::estimate). `scratch` needs `d · k` values. `O(d² k)`.
+    ///
+    /// Returns `false` (leaving `out` alone) unless the latest estimate was
+    /// [`EstimateStatus::Ready`] with [`Estimator::Ordinary`].
+    pub fn gram_inverse_form(
+        &self,
+        t: &[f64],
+        k: usize,
+        scratch: &mut [f64],
+        out: &mut [f64],
+    ) -> bool {
+        let d = self.d();
+        if self.cfg.estimator != Estimator::Ordinary || !self.factor_valid {
+            return false;
+        }
+        // y_j = L⁻¹ t_j, then out[i][j] = y_i · y_j.
+        for j in 0..k {
+            let y = &mut scratch[j * d..(j + 1) * d];
+            for r in 0..d {
+                let mut s = t[r * k + j];
+                for c in 0..r {
+                    s -= self.work[r * d + c] * y[c];
+                }
+                y[r] = s / self.work[r * d + r];
+            }
+        }
+        for i in 0..k {
+            for j in 0..k {
+                out[i * k + j] = (0..d).map(|r| scratch[i * d + r] * scratch[j * d + r]).sum();
+            }
+        }
+        true
     }
 
     /// Residual `out ← ΔY − Θ̂ Z` (length `p`) over the chosen interval, with the `Θ̂` of the
@@ -825,6 +866,7 @@ impl SlidingRegression {
     #[inline(always)]
     fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
         let d = p + m;
+        self.factor_valid = false;
         let n = self.col_len;
         let mut out = Estimate {
             status: EstimateStatus::Ready,
@@ -866,6 +908,7 @@ impl SlidingRegression {
                     row.copy_from_slice(&self.c[i * d..(i + 1) * d]);
                     linalg::cholesky_solve_in_place(&self.work, d, row);
                 }
+                self.factor_valid = true;
             }
             Estimator::Instrumented => {
                 // Row i of Θ solves (Z Wᵀ + λI)ᵀ x = (ΔY Wᵀ)[i, :].

@@ -9,7 +9,7 @@ use streamcert::certificate::{
 };
 use streamcert::regression::{Estimator, InputIntegral, RegressionConfig, RegressionError};
 
-use crate::support::{run as run_scenario, true_rate};
+use crate::support::{run as run_scenario, scalar, true_rate};
 use streamcert::dynamics::{LinearScenario, Process};
 
 fn config(p: usize, m: usize, gain: Vec<f64>, c: f64) -> CertifierConfig {
@@ -74,18 +74,8 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
     let mut below = 0usize;
     let mut total = 0usize;
     for (a, k) in [(0.5, -1.5), (-1.0, -1.0), (0.2, -0.7)] {
-        let stream = LinearScenario {
-            a: vec![a],
-            b: vec![1.0],
-            n: 1,
-            m: 1,
-            noise: Process::Gaussian { sigma: 0.05 },
-            k_explore: vec![k],
-            dither: 1.0,
-            dither_hold: 0.1,
-            dt: 0.01,
-            steps: 1500,
-        };
+        let stream =
+            LinearScenario { steps: 1500, ..scalar(a, k, Process::Gaussian { sigma: 0.05 }, 1.0) };
         let truth = true_rate(&[a], &[1.0], &[k], 1, 1);
         for seed in 0..10 {
             let mut cert = Certifier::new(config(1, 1, vec![k], 1.0)).expect("valid");
@@ -104,18 +94,7 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
 
 #[test]
 fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
-    let stream = LinearScenario {
-        a: vec![-1.0],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Gaussian { sigma: 0.05 },
-        k_explore: vec![-1.0],
-        dither: 1.0,
-        dither_hold: 0.1,
-        dt: 0.01,
-        steps: 1000,
-    };
+    let stream = scalar(-1.0, -1.0, Process::Gaussian { sigma: 0.05 }, 1.0);
     let mut cert = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
     let evs = run(&mut cert, &stream, 3);
     // Warm-up: no certificate until the window holds M columns (h + M samples).
@@ -132,18 +111,8 @@ fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
 #[test]
 fn no_excitation_is_not_certified() {
     // Pure feedback, no dither: Z has rank one.
-    let stream = LinearScenario {
-        a: vec![-1.0],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Gaussian { sigma: 0.05 },
-        k_explore: vec![-1.0],
-        dither: 0.0,
-        dither_hold: 0.1,
-        dt: 0.01,
-        steps: 600,
-    };
+    let stream =
+        LinearScenario { steps: 600, ..scalar(-1.0, -1.0, Process::Gaussian { sigma: 0.05 }, 0.0) };
     // With trapezoidal integrals of both y and u = K y, ∫u = K ∫y exactly. (With the
     // zero-order-hold rule the two integrals use different quadratures and are not collinear.)
     let mut cfg = config(1, 1, vec![-1.0], 0.2);
@@ -159,18 +128,8 @@ fn no_excitation_is_not_certified() {
 
 #[test]
 fn bad_samples_are_rejected_or_skipped_and_never_certified() {
-    let stream = LinearScenario {
-        a: vec![-1.0],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Gaussian { sigma: 0.05 },
-        k_explore: vec![-1.0],
-        dither: 1.0,
-        dither_hold: 0.1,
-        dt: 0.01,
-        steps: 600,
-    };
+    let stream =
+        LinearScenario { steps: 600, ..scalar(-1.0, -1.0, Process::Gaussian { sigma: 0.05 }, 1.0) };
     let traj = run_scenario(&stream, 5);
     let mut reject = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
     let mut skip = Certifier::new(CertifierConfig {
@@ -269,18 +228,7 @@ proptest! {
 }
 
 fn laplace_scalar() -> LinearScenario {
-    LinearScenario {
-        a: vec![-1.0],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Laplace { scale: 0.1 },
-        k_explore: vec![-1.0],
-        dither: 1.0,
-        dither_hold: 0.1,
-        dt: 0.01,
-        steps: 6000,
-    }
+    LinearScenario { steps: 6000, ..scalar(-1.0, -1.0, Process::Laplace { scale: 0.1 }, 1.0) }
 }
 
 fn with_ambiguity(residuals: ResidualSource) -> CertifierConfig {
@@ -346,16 +294,9 @@ fn calibrated_config(k: f64) -> CertifierConfig {
 fn non_contracting_scalar() -> LinearScenario {
     // ẏ = 0.5 y + u + w explored by u = −y + PRBS; candidate K = −0.2 has true rate −0.3.
     LinearScenario {
-        a: vec![0.5],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Gaussian { sigma: 0.1 },
-        k_explore: vec![-1.0],
-        dither: 1.0,
         dither_hold: 0.2,
-        dt: 0.01,
         steps: 4000,
+        ..scalar(0.5, -1.0, Process::Gaussian { sigma: 0.1 }, 1.0)
     }
 }
 

@@ -10,7 +10,7 @@ use streamcert::regression::{
     EstimateStatus, Estimator, InputIntegral, RegressionConfig, RegressionError, SlidingRegression,
 };
 
-use crate::support::run as run_scenario;
+use crate::support::{run as run_scenario, scalar};
 use streamcert::dynamics::{LinearScenario, Process};
 
 type Sample = (f64, Vec<f64>, Vec<f64>);
@@ -274,16 +274,9 @@ fn instrumented_estimator_removes_the_noise_bias() {
     const K_CANDIDATE: f64 = -1.0;
     // ẏ = −1 y + u + 0.5 dW, exploration u = −1 y + small PRBS: the noise dominates the output.
     let stream = LinearScenario {
-        a: vec![-1.0],
-        b: vec![1.0],
-        n: 1,
-        m: 1,
-        noise: Process::Gaussian { sigma: 0.5 },
-        k_explore: vec![-1.0],
-        dither: 0.05,
         dither_hold: 0.5,
-        dt: 0.01,
         steps: 30_000,
+        ..scalar(-1.0, -1.0, Process::Gaussian { sigma: 0.5 }, 0.05)
     };
     let seeds = 40u64;
     let (mut ols, mut iv) = (Vec::new(), Vec::new());

@@ -1,6 +1,6 @@
 //! Shared helpers for the known-answer tests.
 
-use streamcert::dynamics::{LinearScenario, Trajectory};
+use streamcert::dynamics::{LinearScenario, Process, Trajectory};
 
 /// Run a scenario that is valid by construction.
 pub(crate) fn run(scenario: &LinearScenario, seed: u64) -> Trajectory {
@@ -15,4 +15,21 @@ pub(crate) fn true_rate(a: &[f64], b: &[f64], k: &[f64], n: usize, m: usize) -> 
     let j = a + b * k;
     let s = (&j + j.transpose()) * 0.5;
     -s.symmetric_eigen().eigenvalues.max()
+}
+
+/// `ẏ = a y + u + noise` explored by `u = k_explore y + PRBS(±dither, held 0.1 s)`, dt = 0.01,
+/// 1000 steps; adjust other fields with struct update syntax.
+pub(crate) fn scalar(a: f64, k_explore: f64, noise: Process, dither: f64) -> LinearScenario {
+    LinearScenario {
+        n: 1,
+        m: 1,
+        a: vec![a],
+        b: vec![1.0],
+        noise,
+        k_explore: vec![k_explore],
+        dither,
+        dither_hold: 0.1,
+        dt: 0.01,
+        steps: 1000,
+    }
 }

@@ -49,26 +49,7 @@ impl Network {
                 e.push((i, j, g));
             }
         }
-        e.sort_by_key(|a| (a.0, a.1));
-        let mut row_ptr = vec![0usize; n + 1];
-        let mut col = Vec::with_capacity(e.len());
-        let mut val: Vec<f64> = Vec::with_capacity(e.len());
-        let mut last: Option<(usize, usize)> = None;
-        for (i, j, g) in e {
-            if last == Some((i, j)) {
-                if let Some(v) = val.last_mut() {
-                    *v += g;
-                }
-                continue;
-            }
-            last = Some((i, j));
-            row_ptr[i + 1] += 1;
-            col.push(j);
-            val.push(g);
-        }
-        for i in 0..n {
-            row_ptr[i + 1] += row_ptr[i];
-        }
+        let (row_ptr, col, val) = compress(e, n);
         for &v in &val {
             finite("gamma (summed)", v)?;
         }
@@ -165,4 +146,34 @@ impl Network {
         }
         m
     }
+}
+
+/// Compress `(outer, inner, value)` entries into `(ptr, inner indices, values)` (CSR when
+/// `outer` is the row, CSC when it is the column): a stable sort by `(outer, inner)`, then
+/// duplicates summed in input order, so the sums are deterministic.
+pub(crate) fn compress(
+    mut entries: Vec<(usize, usize, f64)>,
+    n: usize,
+) -> (Vec<usize>, Vec<usize>, Vec<f64>) {
+    entries.sort_by_key(|a| (a.0, a.1));
+    let mut ptr = vec![0usize; n + 1];
+    let mut idx = Vec::with_capacity(entries.len());
+    let mut val: Vec<f64> = Vec::with_capacity(entries.len());
+    let mut last: Option<(usize, usize)> = None;
+    for (o, i, v) in entries {
+        if last == Some((o, i)) {
+            if let Some(x) = val.last_mut() {
+                *x += v;
+            }
+            continue;
+        }
+        last = Some((o, i));
+        ptr[o + 1] += 1;
+        idx.push(i);
+        val.push(v);
+    }
+    for k in 0..n {
+        ptr[k + 1] += ptr[k];
+    }
+    (ptr, idx, val)
 }

@@ -142,27 +142,7 @@ fn symmetric_lower(net: &Network) -> Result<SymmetricMatrix, ComposeError> {
             entries.push((i.min(j), i.max(j), -0.5 * g));
         }
     }
-    // Stable sort by (column, row) and merge duplicates in input order (deterministic sums).
-    entries.sort_by_key(|a| (a.0, a.1));
-    let mut col_ptr = vec![0usize; n + 1];
-    let mut row_idx = Vec::with_capacity(entries.len());
-    let mut values: Vec<f64> = Vec::with_capacity(entries.len());
-    let mut last = None;
-    for (c, r, v) in entries {
-        if last == Some((c, r)) {
-            if let Some(x) = values.last_mut() {
-                *x += v;
-            }
-            continue;
-        }
-        last = Some((c, r));
-        col_ptr[c + 1] += 1;
-        row_idx.push(r);
-        values.push(v);
-    }
-    for c in 0..n {
-        col_ptr[c + 1] += col_ptr[c];
-    }
+    let (col_ptr, row_idx, values) = crate::network::compress(entries, n);
     // Rows within a column are sorted and >= the column, so the diagonal comes first.
     let diag = col_ptr[..n].to_vec();
     let symbolic = SymbolicSparseColMat::new_checked(n, n, col_ptr, None, row_idx);

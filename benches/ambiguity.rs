@@ -45,13 +45,8 @@ impl Naive {
 fn kurtosis_and_spikes(c: &mut Criterion) {
     let mut group = c.benchmark_group("kurtosis_spike_update");
     let window = 150;
-    let spikes = Process::LaplaceSpikes {
-        scale: 0.3,
-        spike_prob: 0.055,
-        spike_min: 4.5,
-        spike_max: 7.5,
-        sigma0: 0.08,
-    };
+    // Experiment 1's Regime 3: Laplace 0.3 plus 4.5 to 7.5 σ0 spikes at 5.5 % per step.
+    let spikes = DisturbanceConfig::experiment1().segments[2].process;
     for (name, process) in
         [("gaussian", Process::Gaussian { sigma: 0.08 }), ("laplace_spikes", spikes)]
     {

@@ -154,13 +154,8 @@ fn excess_kurtosis(x: &[f64]) -> f64 {
 #[test]
 fn disturbance_moments_match_theory() {
     let n = 400_000;
-    let spikes = Process::LaplaceSpikes {
-        scale: 0.3,
-        spike_prob: 0.055,
-        spike_min: 4.5,
-        spike_max: 7.5,
-        sigma0: 0.08,
-    };
+    // Experiment 1's Regime 3: Laplace 0.3 plus 4.5 to 7.5 σ0 spikes at 5.5 % per step.
+    let spikes = DisturbanceConfig::experiment1().segments[2].process;
     // (process, theoretical excess kurtosis, tolerance on it)
     let cases = [
         (Process::Gaussian { sigma: 0.08 }, Some(0.0), 0.05),

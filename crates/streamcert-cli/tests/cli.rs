@@ -194,22 +194,25 @@ fn invalid_configurations_are_refused_before_reading() {
     }
 }
 
+/// `streamcert compose --rates R --gains G <extra>`.
+fn compose(rates: &std::path::Path, gains: &std::path::Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "compose",
+        "--rates",
+        rates.to_str().expect("utf8"),
+        "--gains",
+        gains.to_str().expect("utf8"),
+    ];
+    args.extend_from_slice(extra);
+    run(&args, b"")
+}
+
 #[test]
 fn compose_two_subsystems_equals_lemma_1() {
     let (rates, gains) = (tmp("compose-rates.txt"), tmp("compose-gains.txt"));
     std::fs::write(&rates, "0.8\n1.2\n").expect("write");
     std::fs::write(&gains, "0 0.5\n0.5 0\n").expect("write");
-    let out = run(
-        &[
-            "compose",
-            "--rates",
-            rates.to_str().expect("utf8"),
-            "--gains",
-            gains.to_str().expect("utf8"),
-            "--json",
-        ],
-        b"",
-    );
+    let out = compose(&rates, &gains, &["--json"]);
     assert!(out.status.success(), "{}", text(&out.stderr));
     let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).expect("json");
     let lemma = streamcert_compose::lemma1_rate(0.8, 1.2, 0.5).expect("valid");
@@ -218,36 +221,14 @@ fn compose_two_subsystems_equals_lemma_1() {
     assert!((v["critical_scale"].as_f64().expect("scale") * 0.5 - warn).abs() < 1e-9);
     // Sparse triplets give a certified rate no larger than the exact one.
     std::fs::write(&gains, "i,j,gamma\n0,1,0.5\n1,0,0.5\n").expect("write");
-    let out = run(
-        &[
-            "compose",
-            "--rates",
-            rates.to_str().expect("utf8"),
-            "--gains",
-            gains.to_str().expect("utf8"),
-            "--gains-format",
-            "triplets",
-            "--method",
-            "sparse",
-            "--json",
-        ],
-        b"",
-    );
+    let out =
+        compose(&rates, &gains, &["--gains-format", "triplets", "--method", "sparse", "--json"]);
     let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).expect("json");
     let r = v["rate"].as_f64().expect("rate");
     assert!(r <= lemma + 1e-12 && r > lemma - 1e-3, "{r} vs {lemma}");
     // A negative gain is an input error.
     std::fs::write(&gains, "0 -0.5\n0.5 0\n").expect("write");
-    let out = run(
-        &[
-            "compose",
-            "--rates",
-            rates.to_str().expect("utf8"),
-            "--gains",
-            gains.to_str().expect("utf8"),
-        ],
-        b"",
-    );
+    let out = compose(&rates, &gains, &[]);
     assert_eq!(out.status.code(), Some(3));
     assert!(text(&out.stderr).contains(">= 0"));
 }

@@ -105,15 +105,26 @@ impl SlidingKurtosis {
 
     /// The values in the window, oldest first.
     pub fn values(&self) -> impl Iterator<Item = f64> + '_ {
+        let (older, newer) = self.slices();
+        older.iter().chain(newer).copied()
+    }
+
+    /// The window as two contiguous runs, oldest first (the ring may wrap once).
+    fn slices(&self) -> (&[f64], &[f64]) {
         let n = self.buf.len();
-        let start = (self.head + n - self.len) % n;
-        (0..self.len).map(move |k| self.buf[(start + k) % n])
+        if self.len < n {
+            // Not yet wrapped: the values fill `[0, len)` (`head == len`).
+            (&self.buf[..self.len], &[])
+        } else {
+            (&self.buf[self.head..], &self.buf[..self.head])
+        }
     }
 
     /// Add a value, evicting the oldest when the window is full.
     ///
     /// # Errors
     /// [`AmbiguityError::NonFinite`]; the value is not absorbed.
+    #[inline]
     pub fn push(&mut self, x: f64) -> Result<(), AmbiguityError> {
         if !x.is_finite() {
             return Err(AmbiguityError::NonFinite(x));
@@ -165,9 +176,10 @@ impl SlidingKurtosis {
             self.since_recompute = 0;
             return;
         }
-        let mean = self.values().sum::<f64>() / lenf;
+        let (older, newer) = self.slices();
+        let mean = (older.iter().sum::<f64>() + newer.iter().sum::<f64>()) / lenf;
         let mut s = [0.0; 4];
-        for x in self.values() {
+        for &x in older.iter().chain(newer) {
             let d = x - mean;
             let d2 = d * d;
             s[0] += d;
@@ -202,21 +214,25 @@ impl SlidingKurtosis {
     /// Excess kurtosis `κ_e = m₄ / m₂² − 3` (population form `g₂`). `None` with fewer than 4
     /// values or a window whose spread is zero to rounding (no shape information).
     #[must_use]
+    #[inline]
     pub fn excess_kurtosis(&self) -> Option<f64> {
         if self.len < Self::MIN_WINDOW {
             return None;
         }
+        // With the raw sums, n² m₂ = n S₂ − S₁² and
+        // n⁴ m₄ = n³ S₄ − 4 n² S₁ S₃ + 6 n S₁² S₂ − 3 S₁⁴, so κ_e + 3 = n⁴ m₄ / (n² m₂)² needs
+        // a single division (this is on the per-sample path).
         let n = self.len as f64;
-        let a = self.s[0] / n;
-        let (p2, p3, p4) = (self.s[1] / n, self.s[2] / n, self.s[3] / n);
-        let m2 = p2 - a * a;
-        let m4 = p4 - 4.0 * a * p3 + 6.0 * a * a * p2 - 3.0 * a * a * a * a;
+        let [s1, s2, s3, s4] = self.s;
+        let s1sq = s1 * s1;
+        let m2n2 = n * s2 - s1sq;
+        let m4n4 = n * (n * (n * s4 - 4.0 * s1 * s3) + 6.0 * s1sq * s2) - 3.0 * s1sq * s1sq;
         // Spread below rounding of the shift: the shape is not defined.
-        let floor = 1e-24 * self.shift * self.shift;
-        if !(m2 > floor && m2 > 0.0) {
+        let floor = 1e-24 * self.shift * self.shift * n * n;
+        if !(m2n2 > floor && m2n2 > 0.0) {
             return None;
         }
-        Some(m4 / (m2 * m2) - 3.0)
+        Some(m4n4 / (m2n2 * m2n2) - 3.0)
     }
 }
 

@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{AmbiguityError, RobustScale, SlidingKurtosis, SpikeCounter, SpikeScale};
+use crate::{AmbiguityError, RobustScale, SlidingKurtosis, SpikeScale};
 
 /// Parameters of eq. eps_est.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -76,6 +76,7 @@ impl AmbiguityConfig {
     /// Eq. eps_est: `clip(ε_floor + α_κ max(0, κ_e) + α_s ŝ, ε_floor, ε_cap)`. An undefined
     /// kurtosis (fewer than 4 values, zero spread) counts as 0.
     #[must_use]
+    #[inline]
     pub fn radius(&self, kurtosis: Option<f64>, spike_fraction: f64) -> f64 {
         let k = kurtosis.unwrap_or(0.0).max(0.0);
         let raw = self.eps_floor + self.alpha_kurtosis * k + self.alpha_spike * spike_fraction;
@@ -98,10 +99,17 @@ pub struct Ambiguity {
 
 /// Streaming `ε(t)` from a scalar residual stream.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+///
+/// The spike count shares the moments' window: a value is counted when it enters and
+/// uncounted when the moments evict it (the same bookkeeping as [`crate::SpikeCounter`],
+/// without a second ring).
 pub struct AmbiguityRadius {
     cfg: AmbiguityConfig,
     moments: SlidingKurtosis,
-    spikes: SpikeCounter,
+    /// `σ0` of the `3 σ0` threshold, once known.
+    sigma0: Option<f64>,
+    /// Values of the window with `|x| > 3 σ0`.
+    spikes: usize,
     calibration: Option<RobustScale>,
 }
 
@@ -125,7 +133,8 @@ impl AmbiguityRadius {
         };
         Ok(Self {
             moments: SlidingKurtosis::new(cfg.tail_window)?,
-            spikes: SpikeCounter::new(cfg.tail_window, sigma0),
+            sigma0,
+            spikes: 0,
             calibration,
             cfg,
         })
@@ -141,13 +150,22 @@ impl AmbiguityRadius {
     ///
     /// # Errors
     /// [`AmbiguityError::NonFinite`]; the value is not absorbed.
+    #[inline]
     pub fn push(&mut self, x: f64) -> Result<(), AmbiguityError> {
+        let evicted = self.moments.oldest();
         self.moments.push(x)?;
-        self.spikes.push(x);
-        if let Some(cal) = &mut self.calibration {
-            let was = cal.value();
-            if let (None, Some(sigma0)) = (was, cal.push(x)) {
-                self.spikes.set_scale(sigma0, self.moments.values());
+        if let Some(sigma0) = self.sigma0 {
+            let threshold = 3.0 * sigma0;
+            self.spikes += usize::from(x.abs() > threshold);
+            if let Some(e) = evicted {
+                self.spikes -= usize::from(e.abs() > threshold);
+            }
+        } else if let Some(cal) = &mut self.calibration {
+            if let Some(sigma0) = cal.push(x) {
+                // Frozen now: count the spikes already in the window.
+                self.sigma0 = Some(sigma0);
+                let threshold = 3.0 * sigma0;
+                self.spikes = self.moments.values().filter(|v| v.abs() > threshold).count();
             }
         }
         Ok(())
@@ -155,14 +173,16 @@ impl AmbiguityRadius {
 
     /// `ε(t)` with its inputs.
     #[must_use]
+    #[inline]
     pub fn snapshot(&self) -> Ambiguity {
         let kurtosis = self.moments.excess_kurtosis();
-        let spike_fraction = self.spikes.fraction();
+        let len = self.moments.len();
+        let spike_fraction = if len == 0 { 0.0 } else { self.spikes as f64 / len as f64 };
         Ambiguity {
             eps: self.cfg.radius(kurtosis, spike_fraction),
             kurtosis,
             spike_fraction,
-            sigma0: self.spikes.threshold().map(|t| t / 3.0),
+            sigma0: self.sigma0,
         }
     }
 

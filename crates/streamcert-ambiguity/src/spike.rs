@@ -93,26 +93,19 @@ pub struct SpikeCounter {
     head: usize,
     len: usize,
     count: usize,
-    threshold: Option<f64>,
+    sigma0: Option<f64>,
 }
 
 impl SpikeCounter {
     /// A counter over `window >= 1` values with threshold `3 σ0` once `σ0` is known.
     #[must_use]
     pub fn new(window: usize, sigma0: Option<f64>) -> Self {
-        Self {
-            flags: vec![false; window.max(1)],
-            head: 0,
-            len: 0,
-            count: 0,
-            threshold: sigma0.map(|s| 3.0 * s),
-        }
+        Self { flags: vec![false; window.max(1)], head: 0, len: 0, count: 0, sigma0 }
     }
 
     /// Set `σ0` and recount the window from its values (oldest first).
     pub fn set_scale(&mut self, sigma0: f64, window_values: impl Iterator<Item = f64>) {
-        let threshold = 3.0 * sigma0;
-        self.threshold = Some(threshold);
+        self.sigma0 = Some(sigma0);
         self.len = 0;
         self.head = 0;
         self.count = 0;
@@ -122,9 +115,10 @@ impl SpikeCounter {
     }
 
     /// Record one value.
+    #[inline]
     pub fn push(&mut self, x: f64) {
         let n = self.flags.len();
-        let spike = self.threshold.is_some_and(|t| x.abs() > t);
+        let spike = self.sigma0.is_some_and(|s| x.abs() > 3.0 * s);
         if self.len == n {
             self.count -= usize::from(self.flags[self.head]);
         } else {
@@ -144,7 +138,13 @@ impl SpikeCounter {
     /// The threshold `3 σ0`, once known.
     #[must_use]
     pub fn threshold(&self) -> Option<f64> {
-        self.threshold
+        self.sigma0.map(|s| 3.0 * s)
+    }
+
+    /// The scale `σ0`, once known.
+    #[must_use]
+    pub fn sigma0(&self) -> Option<f64> {
+        self.sigma0
     }
 }
 

@@ -557,7 +557,12 @@ impl Certifier {
     }
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.
+    #[inline]
     fn ambiguity_snapshot(&self) -> Option<(f64, Option<f64>, f64)> {
+        if let [single] = &self.ambiguity[..] {
+            let s = single.snapshot();
+            return Some((s.eps, s.kurtosis, s.spike_fraction));
+        }
         let mut out: Option<(f64, Option<f64>, f64)> = None;
         for a in &self.ambiguity {
             let s = a.snapshot();
@@ -579,7 +584,21 @@ impl Certifier {
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity
     /// estimators; when not ready, say why.
     fn evaluate(&mut self) -> (Option<Ready>, usize, Option<NotCertified>) {
-        let (p, m) = (self.cfg.regression.outputs, self.cfg.regression.inputs);
+        // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
+        if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {
+            self.evaluate_dims(1, 1)
+        } else {
+            self.evaluate_dims(self.cfg.regression.outputs, self.cfg.regression.inputs)
+        }
+    }
+
+    /// [`evaluate`](Self::evaluate) with the configured dimensions passed in.
+    #[inline(always)]
+    fn evaluate_dims(
+        &mut self,
+        p: usize,
+        m: usize,
+    ) -> (Option<Ready>, usize, Option<NotCertified>) {
         let d = p + m;
         let residual_source = self.cfg.residuals;
         let est = self.regression.estimate();
@@ -598,31 +617,47 @@ impl Certifier {
             return (None, columns, blocked);
         }
         let (rms, lambda_min) = (est.rms_residual, est.gram_lambda_min);
-        // J_cl = J_obs + B_obs K, then its symmetric part.
-        let k = &self.cfg.gain;
+        // J_cl = J_obs + B_obs K (views of exactly p × d and m × p, so literal dimensions
+        // leave no bounds checks), then its symmetric part.
+        let (theta, k) = (&est.theta[..p * d], &self.cfg.gain[..m * p]);
+        let jcl = &mut self.jcl[..p * p];
         for i in 0..p {
             for j in 0..p {
-                let mut v = est.theta[i * d + j];
+                let mut v = theta[i * d + j];
                 for l in 0..m {
-                    v += est.theta[i * d + p + l] * k[l * p + j];
+                    v += theta[i * d + p + l] * k[l * p + j];
                 }
-                self.jcl[i * p + j] = v;
+                jcl[i * p + j] = v;
             }
         }
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.
-        if !self.ambiguity.is_empty() && self.regression.residual(residual_source, &mut self.resid)
+        let scalar_theta = (d == 2).then(|| [est.theta[0], est.theta[1]]);
+        if let ([amb], ResidualSource::OneStep, Some(th), Some((z1, dy1))) = (
+            &mut self.ambiguity[..],
+            residual_source,
+            scalar_theta,
+            self.regression.newest_interval(),
+        ) {
+            // p = m = 1 with the default residual, written out.
+            let _ = amb.push(dy1[0] - (th[0] * z1[0] + th[1] * z1[1]));
+        } else if !self.ambiguity.is_empty()
+            && self.regression.residual(residual_source, &mut self.resid)
         {
-            for (amb, &r) in self.ambiguity.iter_mut().zip(&self.resid) {
+            for (amb, &r) in self.ambiguity.iter_mut().zip(&self.resid[..p]) {
                 // A non-finite residual is not absorbed (AmbiguityError::NonFinite).
                 let _ = amb.push(r);
             }
         }
-        for i in 0..p {
-            for j in i..p {
-                self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
+        let lambda_max = if p == 1 {
+            self.jcl[0]
+        } else {
+            for i in 0..p {
+                for j in i..p {
+                    self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
+                }
             }
-        }
-        let lambda_max = linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1;
+            linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1
+        };
         let beta_hat = -lambda_max;
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();

@@ -364,8 +364,11 @@ pub struct SlidingRegression {
     piv: Vec<usize>,
     z: Vec<f64>,
     dy: Vec<f64>,
-    // The newest single sample interval: regressor and output increment.
-    z1: Vec<f64>,
+    // Per-interval regressors `[∫y; ∫u]` over `[t_{j−1}, t_j]`, ring aligned with the sample
+    // ring (slot `j` holds the interval that ends at sample slot `j`); a column sums `h` of
+    // them.
+    hist_z1: Vec<f64>,
+    // The newest single sample interval's output increment.
     dy1: Vec<f64>,
     // `work` holds the Cholesky factor of the latest Ready ordinary estimate.
     #[serde(default)]
@@ -415,7 +418,7 @@ impl SlidingRegression {
             piv: vec![0; d],
             z: vec![0.0; d],
             dy: vec![0.0; p],
-            z1: vec![0.0; d],
+            hist_z1: vec![0.0; (h + 1) * d],
             dy1: vec![0.0; p],
             factor_valid: false,
         })
@@ -472,6 +475,7 @@ impl SlidingRegression {
     /// # Errors
     /// [`RegressionError::DimensionMismatch`], [`RegressionError::NonFinite`],
     /// [`RegressionError::NonIncreasingTime`].
+    #[inline]
     pub fn check_sample(&self, t: f64, y: &[f64], u: &[f64]) -> Result<(), RegressionError> {
         let (p, m) = (self.cfg.outputs, self.cfg.inputs);
         if y.len() != p {
@@ -491,9 +495,17 @@ impl SlidingRegression {
         if !t.is_finite() {
             return Err(RegressionError::NonFinite { field: "t", index: 0, value: t });
         }
-        for (field, v) in [("y", y), ("u", u)] {
-            if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
-                return Err(RegressionError::NonFinite { field, index, value });
+        // One branch for the common all-finite case; the search for the culprit only runs on
+        // a bad sample.
+        let mut finite = true;
+        for x in y.iter().chain(u) {
+            finite &= x.is_finite();
+        }
+        if !finite {
+            for (field, v) in [("y", y), ("u", u)] {
+                if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                    return Err(RegressionError::NonFinite { field, index, value });
+                }
             }
         }
         if let Some(previous) = self.last_time() {
@@ -511,8 +523,114 @@ impl SlidingRegression {
     /// [`RegressionError::Overflow`] means finite samples overflowed a column or the window's
     /// sums; the window was cleared so no estimate is built on it.
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<(), RegressionError> {
+        if let (&[y], &[u]) = (y, u) {
+            if self.cfg.outputs == 1
+                && self.cfg.inputs == 1
+                && self.cfg.estimator == Estimator::Ordinary
+            {
+                return self.push_scalar(t, y, u);
+            }
+        }
+        self.push_dims(t, y, u, self.cfg.outputs, self.cfg.inputs)
+    }
+
+    /// [`push`](Self::push) for the paper's case `p = m = 1` with the ordinary estimator:
+    /// the same arithmetic as the general path in the same order (so the same bits), written
+    /// out for scalars so that the per-sample cost is a few dozen instructions.
+    #[inline(always)]
+    fn push_scalar(&mut self, t: f64, y: f64, u: f64) -> Result<(), RegressionError> {
+        if !(t.is_finite() && y.is_finite() && u.is_finite()) {
+            // Reports which value is bad; it always fails here.
+            self.check_sample(t, &[y], &[u])?;
+        }
+        let cap = self.cfg.horizon + 1;
+        let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
+        if self.hist_len == 0 {
+            self.hist_head = 0;
+        } else {
+            let prev = self.hist_head;
+            let t0 = self.hist_t[prev];
+            if t <= t0 {
+                return Err(RegressionError::NonIncreasingTime { previous: t0, got: t });
+            }
+            let (y0, u0) = (self.hist_y[prev], self.hist_u[prev]);
+            let k = next(prev, cap);
+            let dt = t - t0;
+            let half = 0.5 * dt;
+            let z1 = &mut self.hist_z1[2 * k..2 * k + 2];
+            z1[0] = half * (y0 + y);
+            z1[1] = if zoh { dt * u0 } else { half * (u0 + u) };
+            self.dy1[0] = y - y0;
+            self.hist_head = k;
+        }
+        let k = self.hist_head;
+        self.hist_t[k] = t;
+        self.hist_y[k] = y;
+        self.hist_u[k] = u;
+        self.hist_len = (self.hist_len + 1).min(cap);
+        if self.hist_len < cap {
+            return Ok(());
+        }
+        // The column: the `h` interval regressors after the oldest sample, oldest first.
+        let oldest = next(k, cap);
+        let ring = &self.hist_z1[..2 * cap];
+        let (mut zy, mut zu) = (0.0, 0.0);
+        for pair in ring[2 * (oldest + 1)..].chunks_exact(2) {
+            zy += pair[0];
+            zu += pair[1];
+        }
+        for pair in ring[..2 * oldest].chunks_exact(2) {
+            zy += pair[0];
+            zu += pair[1];
+        }
+        let dy = y - self.hist_y[oldest];
+        if !(zy.is_finite() && zu.is_finite() && dy.is_finite()) {
+            self.reset();
+            return Err(RegressionError::Overflow);
+        }
+        self.z[..2].copy_from_slice(&[zy, zu]);
+        self.dy[0] = dy;
+        let q = self.col_next;
+        let (g, c, s) = (&mut self.g[..4], &mut self.c[..2], &mut self.s[..1]);
+        let zo = &mut self.col_z[2 * q..2 * q + 2];
+        let dyo = &mut self.col_dy[q..=q];
+        if self.col_len == self.cfg.window {
+            let (o0, o1, od) = (zo[0], zo[1], dyo[0]);
+            g[0] += zy * zy - o0 * o0;
+            g[1] += zy * zu - o0 * o1;
+            g[3] += zu * zu - o1 * o1;
+            c[0] += dy * zy - od * o0;
+            c[1] += dy * zu - od * o1;
+            s[0] += dy * dy - od * od;
+        } else {
+            g[0] += zy * zy;
+            g[1] += zy * zu;
+            g[3] += zu * zu;
+            c[0] += dy * zy;
+            c[1] += dy * zu;
+            s[0] += dy * dy;
+        }
+        zo.copy_from_slice(&[zy, zu]);
+        dyo[0] = dy;
+        if !(g[0].is_finite() && g[3].is_finite() && s[0].is_finite()) {
+            self.reset();
+            return Err(RegressionError::Overflow);
+        }
+        self.finish_column(q)
+    }
+
+    /// [`push`](Self::push) with the configured dimensions passed in.
+    #[inline(always)]
+    fn push_dims(
+        &mut self,
+        t: f64,
+        y: &[f64],
+        u: &[f64],
+        p: usize,
+        m: usize,
+    ) -> Result<(), RegressionError> {
         self.check_sample(t, y, u)?;
-        let (p, m, h) = (self.cfg.outputs, self.cfg.inputs, self.cfg.horizon);
+        let h = self.cfg.horizon;
         let d = p + m;
         let cap = h + 1;
         self.hist_head = if self.hist_len == 0 { 0 } else { next(self.hist_head, cap) };
@@ -522,18 +640,17 @@ impl SlidingRegression {
         copy(&mut self.hist_u[k * m..(k + 1) * m], u);
         self.hist_len = (self.hist_len + 1).min(cap);
         if self.hist_len >= 2 {
-            self.build_interval();
+            self.build_interval(p, m);
         }
         if self.hist_len < cap {
             return Ok(());
         }
-        // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
-        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
-            self.build_column(1, 1);
-        } else {
-            self.build_column(self.cfg.outputs, self.cfg.inputs);
+        self.build_column(p, m);
+        let mut finite = true;
+        for v in self.z[..d].iter().chain(&self.dy[..p]) {
+            finite &= v.is_finite();
         }
-        if !self.z.iter().chain(self.dy.iter()).all(|v| v.is_finite()) {
+        if !finite {
             self.reset();
             return Err(RegressionError::Overflow);
         }
@@ -546,27 +663,28 @@ impl SlidingRegression {
                 return Ok(());
             }
         }
-        self.insert_column()
+        self.insert_column(p, d)
     }
 
-    /// The newest interval `[t_{k−1}, t_k]`: `z1 = [∫y; ∫u]` by the configured rules and
-    /// `dy1 = y_k − y_{k−1}`.
-    fn build_interval(&mut self) {
-        let (p, m, cap) = (self.cfg.outputs, self.cfg.inputs, self.cfg.horizon + 1);
+    /// The newest interval `[t_{k−1}, t_k]`: its regressor `[∫y; ∫u]` by the configured rules
+    /// into the interval ring, and `dy1 = y_k − y_{k−1}`.
+    #[inline(always)]
+    fn build_interval(&mut self, p: usize, m: usize) {
+        let (d, cap) = (p + m, self.cfg.horizon + 1);
         let b = self.hist_head;
         let a = if b == 0 { cap - 1 } else { b - 1 };
         let dt = self.hist_t[b] - self.hist_t[a];
+        let half = 0.5 * dt;
+        let z1 = &mut self.hist_z1[b * d..(b + 1) * d];
         for i in 0..p {
             let (ya, yb) = (self.hist_y[a * p + i], self.hist_y[b * p + i]);
-            self.z1[i] = 0.5 * dt * (ya + yb);
+            z1[i] = half * (ya + yb);
             self.dy1[i] = yb - ya;
         }
+        let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
         for j in 0..m {
             let (ua, ub) = (self.hist_u[a * m + j], self.hist_u[b * m + j]);
-            self.z1[p + j] = match self.cfg.input_integral {
-                InputIntegral::Trapezoidal => 0.5 * dt * (ua + ub),
-                InputIntegral::ZeroOrderHold => dt * ua,
-            };
+            z1[p + j] = if zoh { dt * ua } else { half * (ua + ub) };
         }
     }
 
@@ -575,12 +693,15 @@ impl SlidingRegression {
     /// noise that the `h`-step columns average away.
     #[must_use]
     pub fn newest_interval(&self) -> Option<(&[f64], &[f64])> {
-        (self.hist_len >= 2).then_some((&self.z1[..], &self.dy1[..]))
+        let d = self.d();
+        let b = self.hist_head;
+        (self.hist_len >= 2).then_some((&self.hist_z1[b * d..(b + 1) * d], &self.dy1[..]))
     }
 
     /// `aᵀ (Z Zᵀ + λ I)⁻¹ a` for each column `a` of the `d × k` row-major matrix `t`, written
-    /// into `out` (`k × k`, row-major: `out = tᵀ (ZZᵀ + λI)⁻¹ t`), from the Cholesky factor of
-    /// the latest [`estimate`](Self::estimate). `scratch` needs `d · k` values. `O(d² k)`.
+    /// into `out` (`k × k`, row-major: `out = tᵀ (ZZᵀ + λI)⁻¹ t`), for the Gram matrix of the
+    /// latest [`estimate`](Self::estimate) (from its Cholesky factor; closed-form inverse when
+    /// `d = 2`). `scratch` needs `d · k` values. `O(d² k)`.
     ///
     /// Returns `false` (leaving `out` alone) unless the latest estimate was
     /// [`EstimateStatus::Ready`] with [`Estimator::Ordinary`].
@@ -594,6 +715,19 @@ impl SlidingRegression {
         let d = self.d();
         if self.cfg.estimator != Estimator::Ordinary || !self.factor_valid {
             return false;
+        }
+        if d == 2 {
+            // `work` holds the ridged Gram matrix [a b; b c] (closed-form path of `estimate`).
+            let (a, b, c) = (self.work[0], self.work[1], self.work[3]);
+            let inv = 1.0 / (a * c - b * b);
+            for i in 0..k {
+                let (xi, yi) = (t[i], t[k + i]);
+                for j in 0..k {
+                    let (xj, yj) = (t[j], t[k + j]);
+                    out[i * k + j] = (c * xi * xj - b * (xi * yj + yi * xj) + a * yi * yj) * inv;
+                }
+            }
+            return true;
         }
         // y_j = L⁻¹ t_j, then out[i][j] = y_i · y_j.
         for j in 0..k {
@@ -618,6 +752,7 @@ impl SlidingRegression {
     /// latest [`estimate`](Self::estimate) call. Call it only after an estimate whose status
     /// was [`EstimateStatus::Ready`]; returns `false` (leaving `out` alone) when the interval
     /// does not exist yet.
+    #[inline]
     pub fn residual(&self, source: ResidualSource, out: &mut [f64]) -> bool {
         let d = self.d();
         let pair = match source {
@@ -632,43 +767,27 @@ impl SlidingRegression {
         true
     }
 
-    /// Build `z = [∫y; ∫u]` and `dy = y_new − y_old` over the last `h` intervals.
+    /// Build `z = [∫y; ∫u]` (the sum of the last `h` interval regressors, oldest first) and
+    /// `dy = y_new − y_old`.
     #[inline(always)]
     fn build_column(&mut self, p: usize, m: usize) {
-        let h = self.cfg.horizon;
-        let cap = h + 1;
+        let d = p + m;
+        let cap = self.cfg.horizon + 1;
         let newest = self.hist_head;
         let oldest = next(newest, cap);
-        let (zy, zu) = self.z.split_at_mut(p);
-        zy.fill(0.0);
-        zu.fill(0.0);
-        let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
-        let mut a = oldest;
-        for _ in 0..h {
-            let b = next(a, cap);
-            let dt = self.hist_t[b] - self.hist_t[a];
-            let half = 0.5 * dt;
-            let (ya, yb) = (&self.hist_y[a * p..(a + 1) * p], &self.hist_y[b * p..(b + 1) * p]);
-            for ((z, &va), &vb) in zy.iter_mut().zip(ya).zip(yb) {
-                *z += half * (va + vb);
+        let z = &mut self.z[..d];
+        z.fill(0.0);
+        // The `h` intervals after the oldest sample, oldest first: two contiguous runs of the
+        // ring.
+        let ring = &self.hist_z1[..cap * d];
+        let (wrapped, tail) = ring.split_at(oldest * d);
+        for interval in tail[d..].chunks_exact(d).chain(wrapped.chunks_exact(d)) {
+            for (zi, &vi) in z.iter_mut().zip(interval) {
+                *zi += vi;
             }
-            let (ua, ub) = (&self.hist_u[a * m..(a + 1) * m], &self.hist_u[b * m..(b + 1) * m]);
-            if zoh {
-                for (z, &va) in zu.iter_mut().zip(ua) {
-                    *z += dt * va;
-                }
-            } else {
-                for ((z, &va), &vb) in zu.iter_mut().zip(ua).zip(ub) {
-                    *z += half * (va + vb);
-                }
-            }
-            a = b;
         }
-        let (yn, yo) = (
-            &self.hist_y[newest * p..(newest + 1) * p],
-            &self.hist_y[oldest * p..(oldest + 1) * p],
-        );
-        for ((d, &vn), &vo) in self.dy.iter_mut().zip(yn).zip(yo) {
+        let (yn, yo) = (&self.hist_y[newest * p..(newest + 1) * p], &self.hist_y[oldest * p..]);
+        for ((d, &vn), &vo) in self.dy[..p].iter_mut().zip(yn).zip(yo) {
             *d = vn - vo;
         }
     }
@@ -713,16 +832,17 @@ impl SlidingRegression {
 
     /// `true` when the running sums are finite. By Cauchy–Schwarz the diagonals of `G` and
     /// `S` bound `C`; the instrumented sums are checked whole.
-    fn statistics_finite(&self) -> bool {
-        let (p, d) = (self.cfg.outputs, self.d());
+    #[inline(always)]
+    fn statistics_finite(&self, p: usize, d: usize) -> bool {
         (0..d).all(|i| self.g[i * d + i].is_finite())
             && (0..p).all(|i| self.s[i * p + i].is_finite())
             && (self.cfg.estimator == Estimator::Ordinary
                 || self.gw.iter().chain(self.cw.iter()).all(|v| v.is_finite()))
     }
 
-    fn insert_column(&mut self) -> Result<(), RegressionError> {
-        let (p, d, mm) = (self.cfg.outputs, self.d(), self.cfg.window);
+    #[inline(always)]
+    fn insert_column(&mut self, p: usize, d: usize) -> Result<(), RegressionError> {
+        let mm = self.cfg.window;
         let q = self.col_next;
         let instrumented = self.cfg.estimator == Estimator::Instrumented;
         if instrumented {
@@ -738,20 +858,23 @@ impl SlidingRegression {
                 .copy_from_slice(&self.zhist[oldest * d..(oldest + 1) * d]);
             self.accumulate(q, 1.0);
         } else if self.col_len == mm {
-            if p == 1 && d == 2 {
-                self.replace_column(q, 1, 2);
-            } else {
-                self.replace_column(q, p, d);
-            }
+            self.replace_column(q, p, d);
         } else {
             self.col_z[q * d..(q + 1) * d].copy_from_slice(&self.z);
             self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
             self.accumulate(q, 1.0);
         }
-        if !self.statistics_finite() {
+        if !self.statistics_finite(p, d) {
             self.reset();
             return Err(RegressionError::Overflow);
         }
+        self.finish_column(q)
+    }
+
+    /// Advance the column ring past slot `q` and refresh the statistics when due.
+    #[inline(always)]
+    fn finish_column(&mut self, q: usize) -> Result<(), RegressionError> {
+        let mm = self.cfg.window;
         self.col_next = next(q, mm);
         self.col_len = (self.col_len + 1).min(mm);
         self.since_refresh += 1;
@@ -766,23 +889,26 @@ impl SlidingRegression {
     /// configured dimensions, passed in so call sites with literals get unrolled code.
     #[inline(always)]
     fn replace_column(&mut self, q: usize, p: usize, d: usize) {
-        let (z, dy) = (&self.z, &self.dy);
+        // Views of exactly the configured lengths: with literal `p`, `d` every index below is
+        // a constant the compiler proves in bounds.
+        let (z, dy) = (&self.z[..d], &self.dy[..p]);
+        let (g, c, s) = (&mut self.g[..d * d], &mut self.c[..p * d], &mut self.s[..p * p]);
         let zo = &mut self.col_z[q * d..(q + 1) * d];
         let dyo = &mut self.col_dy[q * p..(q + 1) * p];
         for i in 0..d {
             let (zi, oi) = (z[i], zo[i]);
-            let row = &mut self.g[i * d..(i + 1) * d];
+            let row = &mut g[i * d..(i + 1) * d];
             for j in i..d {
                 row[j] += zi * z[j] - oi * zo[j];
             }
         }
         for i in 0..p {
             let (di, oi) = (dy[i], dyo[i]);
-            let row = &mut self.c[i * d..(i + 1) * d];
+            let row = &mut c[i * d..(i + 1) * d];
             for j in 0..d {
                 row[j] += di * z[j] - oi * zo[j];
             }
-            let row = &mut self.s[i * p..(i + 1) * p];
+            let row = &mut s[i * p..(i + 1) * p];
             for j in i..p {
                 row[j] += di * dy[j] - oi * dyo[j];
             }
@@ -853,6 +979,7 @@ impl SlidingRegression {
     }
 
     /// Solve the window: `O(d³ + p d²)`, no allocation.
+    #[inline]
     pub fn estimate(&mut self) -> Estimate<'_> {
         if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
             self.estimate_dims(1, 1)
@@ -883,14 +1010,32 @@ impl SlidingRegression {
             return out;
         }
         let (lo, hi) = linalg::sym_eig_extremes(&self.g, d, &mut self.work);
-        out.gram_lambda_min = lo / n as f64;
-        out.gram_lambda_max = hi / n as f64;
+        let inv_n = 1.0 / n as f64;
+        out.gram_lambda_min = lo * inv_n;
+        out.gram_lambda_max = hi * inv_n;
         if !(hi > 0.0 && lo > self.cfg.min_excitation_ratio * hi) {
             out.status = EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
             return out;
         }
         let ridge = self.cfg.ridge;
         match self.cfg.estimator {
+            Estimator::Ordinary if d == 2 => {
+                // p = m = 1: the 2 × 2 system by its closed-form inverse; `work` keeps the
+                // ridged Gram matrix itself (read by `gram_inverse_form`).
+                let (a, b, c) = (self.g[0] + ridge, self.g[1], self.g[3] + ridge);
+                let det = a * c - b * b;
+                if !(a > 0.0 && det > 0.0 && det.is_finite()) {
+                    out.status =
+                        EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
+                    return out;
+                }
+                let inv = 1.0 / det;
+                let (c0, c1) = (self.c[0], self.c[1]);
+                self.theta[0] = (c * c0 - b * c1) * inv;
+                self.theta[1] = (a * c1 - b * c0) * inv;
+                self.work[..4].copy_from_slice(&[a, b, b, c]);
+                self.factor_valid = true;
+            }
             Estimator::Ordinary => {
                 for i in 0..d {
                     for j in 0..d {
@@ -945,7 +1090,7 @@ impl SlidingRegression {
             }
             rss += quad;
         }
-        out.rms_residual = (rss.max(0.0) / (p * n) as f64).sqrt();
+        out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
         out.theta = &self.theta;
         out
     }
@@ -977,7 +1122,7 @@ impl SlidingRegression {
             ("piv", self.piv.len(), fresh.piv.len()),
             ("z", self.z.len(), fresh.z.len()),
             ("dy", self.dy.len(), fresh.dy.len()),
-            ("z1", self.z1.len(), fresh.z1.len()),
+            ("hist_z1", self.hist_z1.len(), fresh.hist_z1.len()),
             ("dy1", self.dy1.len(), fresh.dy1.len()),
         ];
         if let Some((name, got, want)) = sizes.iter().find(|(_, g, w)| g != w) {

@@ -139,10 +139,9 @@ pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
             let mean = 0.5 * (p + r);
             let diff = 0.5 * (p - r);
             // √(diff² + q²) without the cost of `hypot`, which it falls back to on overflow.
-            let mut half = (diff * diff + q * q).sqrt();
-            if !half.is_finite() {
-                half = diff.hypot(q);
-            }
+            // The test is on the radicand, so the branch does not wait for the square root.
+            let radicand = diff * diff + q * q;
+            let half = if radicand.is_finite() { radicand.sqrt() } else { diff.hypot(q) };
             (mean - half, mean + half)
         }
         _ => {

@@ -122,6 +122,44 @@ fn eps_tracks_the_tail_shape() {
     assert!(cap_s > 0.9 && eps_s > 0.3, "spike eps {eps_s}, share at cap {cap_s}");
 }
 
+/// The spike fraction and `ε` of the streaming radius against a batch count over the same
+/// window at every step, with a fixed `σ0` and with the MAD calibration (whose frozen `σ0`
+/// recounts the window already held).
+#[test]
+fn spike_fraction_and_eps_equal_a_batch_count_at_every_step() {
+    let spikes = Process::LaplaceSpikes {
+        scale: 0.3,
+        spike_prob: 0.055,
+        spike_min: 4.5,
+        spike_max: 7.5,
+        sigma0: 0.08,
+    };
+    let xs = stream(spikes, 5_000, 21);
+    for (window, scale) in [
+        (150, SpikeScale::Fixed { sigma0: 0.08 }),
+        (150, SpikeScale::Calibrated { samples: 100 }),
+        (7, SpikeScale::Calibrated { samples: 30 }),
+    ] {
+        let cfg = AmbiguityConfig { spike_scale: scale, ..AmbiguityConfig::paper(window) };
+        let mut amb = AmbiguityRadius::new(cfg).expect("valid");
+        for (i, &x) in xs.iter().enumerate() {
+            amb.push(x).expect("finite");
+            let snap = amb.snapshot();
+            let w = &xs[(i + 1).saturating_sub(window)..=i];
+            let want = snap.sigma0.map_or(0.0, |s0| {
+                w.iter().filter(|v| v.abs() > 3.0 * s0).count() as f64 / w.len() as f64
+            });
+            assert!(
+                (snap.spike_fraction - want).abs() <= 1e-15,
+                "window {window} step {i}: fraction {} vs {want}",
+                snap.spike_fraction
+            );
+            assert_eq!(snap.eps, cfg.radius(snap.kurtosis, snap.spike_fraction));
+            assert!(amb.is_consistent());
+        }
+    }
+}
+
 #[test]
 fn calibrated_scale_is_the_gaussian_sigma() {
     let (_, _, _, sigma0) = mean_snapshot(Process::Gaussian { sigma: 0.08 }, 13);

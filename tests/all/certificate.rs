@@ -195,6 +195,12 @@ fn checkpoint_and_restore_continue_bit_identically() {
     // A corrupted checkpoint is refused, not trusted.
     assert!(Certifier::restore(&json.replace("\"window\":150", "\"window\":151")).is_err());
     assert!(Certifier::restore("{").is_err());
+    // A spike count that disagrees with the values in the window is refused too.
+    let at = json.find("\"spikes\":").expect("spike count serialised") + "\"spikes\":".len();
+    let digits = json[at..].chars().take_while(char::is_ascii_digit).count();
+    let count: usize = json[at..at + digits].parse().expect("a count");
+    let tampered = format!("{}{}{}", &json[..at], count + 1, &json[at + digits..]);
+    assert!(Certifier::restore(&tampered).is_err());
 }
 
 #[test]

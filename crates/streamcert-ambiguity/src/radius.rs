@@ -110,6 +110,8 @@ pub struct AmbiguityRadius {
     sigma0: Option<f64>,
     /// Values of the window with `|x| > 3 σ0`.
     spikes: usize,
+    /// `1 / N_tail`.
+    inv_window: f64,
     calibration: Option<RobustScale>,
 }
 
@@ -135,6 +137,7 @@ impl AmbiguityRadius {
             moments: SlidingKurtosis::new(cfg.tail_window)?,
             sigma0,
             spikes: 0,
+            inv_window: 1.0 / cfg.tail_window as f64,
             calibration,
             cfg,
         })
@@ -177,7 +180,14 @@ impl AmbiguityRadius {
     pub fn snapshot(&self) -> Ambiguity {
         let kurtosis = self.moments.excess_kurtosis();
         let len = self.moments.len();
-        let spike_fraction = if len == 0 { 0.0 } else { self.spikes as f64 / len as f64 };
+        // Full window (every sample after warm-up): multiply by the reciprocal computed once.
+        let spike_fraction = if len == self.cfg.tail_window {
+            self.spikes as f64 * self.inv_window
+        } else if len == 0 {
+            0.0
+        } else {
+            self.spikes as f64 / len as f64
+        };
         Ambiguity {
             eps: self.cfg.radius(kurtosis, spike_fraction),
             kurtosis,
@@ -190,5 +200,25 @@ impl AmbiguityRadius {
     #[must_use]
     pub fn moments(&self) -> &SlidingKurtosis {
         &self.moments
+    }
+
+    /// `true` when a deserialised state agrees with its own configuration: window length,
+    /// cached `1 / N_tail`, spike count no larger than the window and equal to a recount of
+    /// the values it holds, `σ0` known exactly when it should be. `O(N_tail)`; meant for
+    /// checkpoint restore, not for the per-sample path.
+    #[must_use]
+    pub fn is_consistent(&self) -> bool {
+        let window_ok = self.moments.window() == self.cfg.tail_window
+            && self.inv_window == 1.0 / self.cfg.tail_window as f64;
+        let recount = self
+            .sigma0
+            .map_or(0, |s0| self.moments.values().filter(|v| v.abs() > 3.0 * s0).count());
+        let sigma_ok = match self.cfg.spike_scale {
+            SpikeScale::Fixed { sigma0 } => self.sigma0 == Some(sigma0),
+            SpikeScale::Calibrated { .. } => {
+                self.sigma0 == self.calibration.as_ref().and_then(RobustScale::value)
+            }
+        };
+        window_ok && sigma_ok && self.spikes == recount
     }
 }

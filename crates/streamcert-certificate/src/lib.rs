@@ -698,7 +698,9 @@ impl Certifier {
         c.regression.check_state().map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
         let p = c.cfg.regression.outputs;
         if c.ambiguity.len() != if c.cfg.ambiguity.is_some() { p } else { 0 }
-            || c.ambiguity.iter().any(|a| Some(*a.config()) != c.cfg.ambiguity)
+            || c.ambiguity
+                .iter()
+                .any(|a| Some(*a.config()) != c.cfg.ambiguity || !a.is_consistent())
         {
             return Err(CertifyError::Checkpoint(
                 "ambiguity state does not match its configuration".into(),

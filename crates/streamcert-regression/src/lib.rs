@@ -692,6 +692,7 @@ impl SlidingRegression {
     /// once two samples are in. Its residual `ΔY − Θ̂ Z` keeps the tails of the per-step
     /// noise that the `h`-step columns average away.
     #[must_use]
+    #[inline]
     pub fn newest_interval(&self) -> Option<(&[f64], &[f64])> {
         let d = self.d();
         let b = self.hist_head;
@@ -1022,7 +1023,8 @@ impl SlidingRegression {
             Estimator::Ordinary if d == 2 => {
                 // p = m = 1: the 2 × 2 system by its closed-form inverse; `work` keeps the
                 // ridged Gram matrix itself (read by `gram_inverse_form`).
-                let (a, b, c) = (self.g[0] + ridge, self.g[1], self.g[3] + ridge);
+                let g = &self.g[..4];
+                let (a, b, c) = (g[0] + ridge, g[1], g[3] + ridge);
                 let det = a * c - b * b;
                 if !(a > 0.0 && det > 0.0 && det.is_finite()) {
                     out.status =
@@ -1031,8 +1033,9 @@ impl SlidingRegression {
                 }
                 let inv = 1.0 / det;
                 let (c0, c1) = (self.c[0], self.c[1]);
-                self.theta[0] = (c * c0 - b * c1) * inv;
-                self.theta[1] = (a * c1 - b * c0) * inv;
+                let theta = &mut self.theta[..2];
+                theta[0] = (c * c0 - b * c1) * inv;
+                theta[1] = (a * c1 - b * c0) * inv;
                 self.work[..4].copy_from_slice(&[a, b, b, c]);
                 self.factor_valid = true;
             }
@@ -1076,16 +1079,18 @@ impl SlidingRegression {
             }
         }
         // RSS = tr S − 2 tr(Θ Cᵀ) + tr(Θ G Θᵀ).
+        // Views of exactly the configured lengths (no bounds checks with literal p, d).
+        let (g, c, s) = (&self.g[..d * d], &self.c[..p * d], &self.s[..p * p]);
         let mut rss = 0.0;
         for i in 0..p {
-            rss += self.s[i * p + i];
+            rss += s[i * p + i];
             let th = &self.theta[i * d..(i + 1) * d];
             let mut quad = 0.0;
             for a in 0..d {
-                rss -= 2.0 * th[a] * self.c[i * d + a];
-                quad += th[a] * th[a] * self.g[a * d + a];
+                rss -= 2.0 * th[a] * c[i * d + a];
+                quad += th[a] * th[a] * g[a * d + a];
                 for b in a + 1..d {
-                    quad += 2.0 * th[a] * th[b] * self.g[a * d + b];
+                    quad += 2.0 * th[a] * th[b] * g[a * d + b];
                 }
             }
             rss += quad;

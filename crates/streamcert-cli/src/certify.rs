@@ -60,6 +60,12 @@ pub struct Summary {
     pub first_deploy_gauss: Option<f64>,
     /// First time the Wasserstein gate opened.
     pub first_deploy_wass: Option<f64>,
+    /// Rows with the calibrated gate open (0 unless `[calibration]` is enabled).
+    #[serde(default)]
+    pub calibrated_open: u64,
+    /// First time the calibrated gate opened.
+    #[serde(default)]
+    pub first_deploy_calibrated: Option<f64>,
     /// Time of the last accepted row.
     pub last_time: Option<f64>,
 }
@@ -75,6 +81,11 @@ impl Summary {
     pub fn share_wass(&self) -> f64 {
         if self.rows == 0 { 0.0 } else { self.wass_open as f64 / self.rows as f64 }
     }
+    /// Share of accepted rows with the calibrated gate open.
+    #[must_use]
+    pub fn share_calibrated(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.calibrated_open as f64 / self.rows as f64 }
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -84,7 +95,9 @@ struct Checkpoint {
 }
 
 /// The CSV header of the output.
-pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass";
+/// The calibrated columns stay empty (and `calibrated_open` 0) unless `[calibration]` is
+/// enabled.
+pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass,rho_calibrated,cert_calibrated,calibrated_open";
 
 fn num(v: Option<f64>) -> String {
     v.map_or(String::new(), |x| format!("{x}"))
@@ -95,7 +108,7 @@ fn row_csv(e: &Evidence) -> String {
         r.map_or(String::new(), |r| r.to_string().replace(',', ";"))
     };
     format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{}\n",
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
         e.t,
         num(e.beta_hat),
         num(e.rho),
@@ -107,7 +120,10 @@ fn row_csv(e: &Evidence) -> String {
         u8::from(e.gauss_gate.open),
         u8::from(e.wass_gate.open),
         reason(e.reason),
-        reason(e.wass_reason)
+        reason(e.wass_reason),
+        num(e.rho_calibrated),
+        num(e.cert_calibrated),
+        u8::from(e.calibrated_gate.open)
     )
 }
 
@@ -118,6 +134,8 @@ fn row_json(e: &Evidence) -> String {
         "spike_fraction": e.spike_fraction, "cert_gauss": e.cert_gauss, "cert_wass": e.cert_wass,
         "gauss_open": e.gauss_gate.open, "wass_open": e.wass_gate.open,
         "reason_gauss": reason(e.reason), "reason_wass": reason(e.wass_reason),
+        "rho_calibrated": e.rho_calibrated, "cert_calibrated": e.cert_calibrated,
+        "calibrated_open": e.calibrated_gate.open,
     });
     format!("{v}\n")
 }
@@ -208,6 +226,9 @@ pub fn run<R: BufRead, W: Write>(
         summary.wass_open += u64::from(ev.wass_gate.open);
         summary.first_deploy_gauss = summary.first_deploy_gauss.or(ev.gauss_gate.first_opened_at);
         summary.first_deploy_wass = summary.first_deploy_wass.or(ev.wass_gate.first_opened_at);
+        summary.calibrated_open += u64::from(ev.calibrated_gate.open);
+        summary.first_deploy_calibrated =
+            summary.first_deploy_calibrated.or(ev.calibrated_gate.first_opened_at);
         summary.last_time = Some(s.t);
         let line = match opts.format {
             Format::Csv => row_csv(&ev),

@@ -2,7 +2,7 @@
 
 use serde::Deserialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
-use streamcert_certificate::{Certifier, CertifierConfig, ResidualSource};
+use streamcert_certificate::{Calibration, Certifier, CertifierConfig, ResidualSource};
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
 use crate::CliError;
@@ -48,6 +48,13 @@ alpha_spike = 2.0
 # 1.4826 * MAD of the first `tail_window` residuals.
 # sigma0 = 0.08
 residuals = "one_step"  # or "horizon"
+
+[calibration]
+# A third certificate beside the paper's two: the radius comes from the regression's own
+# uncertainty (no c), and its gate opens for a non-contracting controller with probability at
+# most delta over the whole run (ordinary estimator only; see the README for the assumptions).
+enabled = false
+delta = 0.01
 "#;
 
 #[derive(Debug, Deserialize)]
@@ -60,6 +67,26 @@ struct File {
     regression: Regression,
     #[serde(default)]
     ambiguity: Ambiguity,
+    #[serde(default)]
+    calibration: CalibrationSection,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CalibrationSection {
+    enabled: bool,
+    #[serde(default = "default_delta")]
+    delta: f64,
+}
+
+fn default_delta() -> f64 {
+    0.01
+}
+
+impl Default for CalibrationSection {
+    fn default() -> Self {
+        Self { enabled: false, delta: default_delta() }
+    }
 }
 
 /// Input column names.
@@ -206,6 +233,9 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
         });
     }
     certifier.residuals = a.residuals;
+    if f.calibration.enabled {
+        certifier.calibration = Some(Calibration { delta: f.calibration.delta });
+    }
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
     Ok(Config { columns: f.columns, certifier })
@@ -230,5 +260,17 @@ mod tests {
         assert!(parse(&shape, "x").unwrap_err().to_string().contains("m × p"));
         let invalid = DEFAULT_CONFIG.replace("conservatism = 0.1", "conservatism = -1.0");
         assert!(parse(&invalid, "x").unwrap_err().to_string().contains("conservatism"));
+        let risk =
+            DEFAULT_CONFIG.replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 1.5");
+        assert!(parse(&risk, "x").unwrap_err().to_string().contains("delta"));
+    }
+
+    #[test]
+    fn calibration_section_selects_the_calibrated_certificate() {
+        assert_eq!(parse(DEFAULT_CONFIG, "default").unwrap().certifier.calibration, None);
+        let on =
+            DEFAULT_CONFIG.replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.05");
+        let c = parse(&on, "x").unwrap();
+        assert_eq!(c.certifier.calibration, Some(Calibration { delta: 0.05 }));
     }
 }

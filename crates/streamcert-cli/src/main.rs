@@ -180,20 +180,32 @@ fn run(cli: Cli) -> Result<(), CliError> {
                         "rows": s.rows, "skipped": s.skipped,
                         "share_gauss_gate_open": s.share_gauss(), "share_wass_gate_open": s.share_wass(),
                         "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
+                        "share_calibrated_gate_open": s.share_calibrated(),
+                        "first_deploy_calibrated": s.first_deploy_calibrated,
                         "last_time": s.last_time,
                     });
                     std::fs::write(&file, format!("{v}\n"))
                         .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
                 }
-                None => eprintln!(
-                    "summary: {} rows, {} skipped; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
-                    s.rows,
-                    s.skipped,
-                    100.0 * s.share_gauss(),
-                    s.first_deploy_gauss.map_or("never".into(), |t| format!("t = {t}")),
-                    100.0 * s.share_wass(),
-                    s.first_deploy_wass.map_or("never".into(), |t| format!("t = {t}")),
-                ),
+                None => {
+                    eprintln!(
+                        "summary: {} rows, {} skipped; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
+                        s.rows,
+                        s.skipped,
+                        100.0 * s.share_gauss(),
+                        s.first_deploy_gauss.map_or("never".into(), |t| format!("t = {t}")),
+                        100.0 * s.share_wass(),
+                        s.first_deploy_wass.map_or("never".into(), |t| format!("t = {t}")),
+                    );
+                    if cfg.certifier.calibration.is_some() {
+                        eprintln!(
+                            "calibrated gate (risk delta over the run) open {:.1} % (first at {})",
+                            100.0 * s.share_calibrated(),
+                            s.first_deploy_calibrated
+                                .map_or("never".into(), |t| format!("t = {t}")),
+                        );
+                    }
+                }
             }
             Ok(())
         }

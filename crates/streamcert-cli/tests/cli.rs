@@ -88,6 +88,31 @@ fn simulate_pipes_into_certify() {
 }
 
 #[test]
+fn calibration_section_adds_the_calibrated_certificate() {
+    let cfg = config("calibrated");
+    let on = std::fs::read_to_string(&cfg)
+        .expect("config")
+        .replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.01");
+    std::fs::write(&cfg, on).expect("write config");
+    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &simulate("6"));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
+    assert!(lines[0].ends_with(",rho_calibrated,cert_calibrated,calibrated_open"));
+    let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
+    assert_eq!(last.len(), 15);
+    let beta: f64 = last[1].parse().expect("beta_hat");
+    let rho_cal: f64 = last[12].parse().expect("rho_calibrated");
+    let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
+    assert!(rho_cal > 0.0 && (cert_cal - (beta - rho_cal)).abs() <= 1e-12 * beta.abs().max(1.0));
+    assert!(text(&out.stderr).contains("calibrated gate (risk delta over the run)"));
+    // Off by default: the columns are empty.
+    let plain =
+        run(&["certify", "--config", config("plain").to_str().expect("utf8")], &simulate("6"));
+    let row = text(&plain.stdout).lines().last().expect("rows").to_string();
+    assert!(row.ends_with(",,,0"), "{row}");
+}
+
+#[test]
 fn split_and_resume_equals_one_run() {
     let cfg = config("resume");
     let c = cfg.to_str().expect("utf8");

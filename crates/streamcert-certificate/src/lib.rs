@@ -527,7 +527,12 @@ impl Certifier {
         let wass_gate = self.wass.update(t, cert_wass);
         let rho_calibrated = ready.and_then(|r| r.rho_cal);
         let cert_calibrated = ready.and_then(|r| r.rho_cal.map(|rc| r.beta_hat - rc));
-        let calibrated_gate = self.calibrated.update(t, cert_calibrated);
+        // Without a calibration the calibrated gate never sees a certificate: it stays closed.
+        let calibrated_gate = if self.cfg.calibration.is_some() {
+            self.calibrated.update(t, cert_calibrated)
+        } else {
+            self.calibrated.state()
+        };
         let reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let wass_reason = if amb.is_none() {
             Some(NotCertified::NoAmbiguityModel)
@@ -664,19 +669,26 @@ impl Certifier {
         if !(beta_hat.is_finite() && rho.is_finite()) {
             return (None, columns, Some(NotCertified::InsufficientExcitation));
         }
-        let rho_cal = self.cfg.calibration.and_then(|c| {
-            let d = p + m;
-            let (tmat, form) = (&self.tmat, &mut self.form);
-            let (scratch, eig) = self.form_scratch.split_at_mut(d * p);
-            if !self.regression.gram_inverse_form(tmat, p, scratch, form) {
-                return None;
-            }
-            self.looks += 1;
-            let form_max = linalg::sym_eig_extremes(form, p, eig).1;
-            let risk = look_risk(c.delta, self.looks);
-            Some(calibrated_radius(self.cfg.regression.horizon, rms, form_max, p, risk))
-        });
+        let rho_cal = match self.cfg.calibration {
+            Some(c) => self.calibrated_radius_now(c.delta, rms),
+            None => None,
+        };
         (Some(Ready { beta_hat, rho, rms, lambda_min, rho_cal }), columns, None)
+    }
+
+    /// The calibrated radius for this look ([`calibrated_radius`]), from the latest estimate;
+    /// counts the look. `None` when the estimate has no Gram factor.
+    fn calibrated_radius_now(&mut self, delta: f64, rms: f64) -> Option<f64> {
+        let (p, m) = (self.cfg.regression.outputs, self.cfg.regression.inputs);
+        let d = p + m;
+        let (scratch, eig) = self.form_scratch.split_at_mut(d * p);
+        if !self.regression.gram_inverse_form(&self.tmat, p, scratch, &mut self.form) {
+            return None;
+        }
+        self.looks += 1;
+        let form_max = linalg::sym_eig_extremes(&self.form, p, eig).1;
+        let risk = look_risk(delta, self.looks);
+        Some(calibrated_radius(self.cfg.regression.horizon, rms, form_max, p, risk))
     }
 
     /// Serialise the full streaming state as JSON (floats round-trip exactly).

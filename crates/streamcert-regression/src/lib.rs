@@ -365,14 +365,16 @@ pub struct SlidingRegression {
     z: Vec<f64>,
     dy: Vec<f64>,
     // Per-interval regressors `[∫y; ∫u]` over `[t_{j−1}, t_j]`, ring aligned with the sample
-    // ring (slot `j` holds the interval that ends at sample slot `j`); a column sums `h` of
-    // them.
+    // ring (slot `j` holds the interval that ends at sample slot `j`), stored twice (slots `j`
+    // and `j + h + 1`) so the `h` intervals of a column are one contiguous run.
     hist_z1: Vec<f64>,
     // The newest single sample interval's output increment.
     dy1: Vec<f64>,
     // `work` holds the Cholesky factor of the latest Ready ordinary estimate.
     #[serde(default)]
     factor_valid: bool,
+    // `1 / M`, so the per-sample estimate needs no division for it (checked on restore).
+    inv_window: f64,
 }
 
 impl SlidingRegression {
@@ -418,9 +420,10 @@ impl SlidingRegression {
             piv: vec![0; d],
             z: vec![0.0; d],
             dy: vec![0.0; p],
-            hist_z1: vec![0.0; (h + 1) * d],
+            hist_z1: vec![0.0; 2 * (h + 1) * d],
             dy1: vec![0.0; p],
             factor_valid: false,
+            inv_window: 1.0 / mm as f64,
         })
     }
 
@@ -539,7 +542,8 @@ impl SlidingRegression {
     /// out for scalars so that the per-sample cost is a few dozen instructions.
     #[inline(always)]
     fn push_scalar(&mut self, t: f64, y: f64, u: f64) -> Result<(), RegressionError> {
-        if !(t.is_finite() && y.is_finite() && u.is_finite()) {
+        // `x − x` is 0 for a finite x and NaN otherwise: one comparison tests all three.
+        if (t - t) + (y - y) + (u - u) != 0.0 {
             // Reports which value is bad; it always fails here.
             self.check_sample(t, &[y], &[u])?;
         }
@@ -557,9 +561,9 @@ impl SlidingRegression {
             let k = next(prev, cap);
             let dt = t - t0;
             let half = 0.5 * dt;
-            let z1 = &mut self.hist_z1[2 * k..2 * k + 2];
-            z1[0] = half * (y0 + y);
-            z1[1] = if zoh { dt * u0 } else { half * (u0 + u) };
+            let z1 = [half * (y0 + y), if zoh { dt * u0 } else { half * (u0 + u) }];
+            self.hist_z1[2 * k..2 * k + 2].copy_from_slice(&z1);
+            self.hist_z1[2 * (k + cap)..2 * (k + cap) + 2].copy_from_slice(&z1);
             self.dy1[0] = y - y0;
             self.hist_head = k;
         }
@@ -573,18 +577,13 @@ impl SlidingRegression {
         }
         // The column: the `h` interval regressors after the oldest sample, oldest first.
         let oldest = next(k, cap);
-        let ring = &self.hist_z1[..2 * cap];
         let (mut zy, mut zu) = (0.0, 0.0);
-        for pair in ring[2 * (oldest + 1)..].chunks_exact(2) {
-            zy += pair[0];
-            zu += pair[1];
-        }
-        for pair in ring[..2 * oldest].chunks_exact(2) {
+        for pair in self.hist_z1[2 * (oldest + 1)..2 * (oldest + cap)].chunks_exact(2) {
             zy += pair[0];
             zu += pair[1];
         }
         let dy = y - self.hist_y[oldest];
-        if !(zy.is_finite() && zu.is_finite() && dy.is_finite()) {
+        if (zy - zy) + (zu - zu) + (dy - dy) != 0.0 {
             self.reset();
             return Err(RegressionError::Overflow);
         }
@@ -612,7 +611,7 @@ impl SlidingRegression {
         }
         zo.copy_from_slice(&[zy, zu]);
         dyo[0] = dy;
-        if !(g[0].is_finite() && g[3].is_finite() && s[0].is_finite()) {
+        if (g[0] - g[0]) + (g[3] - g[3]) + (s[0] - s[0]) != 0.0 {
             self.reset();
             return Err(RegressionError::Overflow);
         }
@@ -675,7 +674,8 @@ impl SlidingRegression {
         let a = if b == 0 { cap - 1 } else { b - 1 };
         let dt = self.hist_t[b] - self.hist_t[a];
         let half = 0.5 * dt;
-        let z1 = &mut self.hist_z1[b * d..(b + 1) * d];
+        let (first, mirror) = self.hist_z1.split_at_mut(cap * d);
+        let z1 = &mut first[b * d..(b + 1) * d];
         for i in 0..p {
             let (ya, yb) = (self.hist_y[a * p + i], self.hist_y[b * p + i]);
             z1[i] = half * (ya + yb);
@@ -686,6 +686,7 @@ impl SlidingRegression {
             let (ua, ub) = (self.hist_u[a * m + j], self.hist_u[b * m + j]);
             z1[p + j] = if zoh { dt * ua } else { half * (ua + ub) };
         }
+        mirror[b * d..(b + 1) * d].copy_from_slice(z1);
     }
 
     /// The newest single sample interval `(Z, ΔY)` (one-step regressor and output increment),
@@ -778,11 +779,9 @@ impl SlidingRegression {
         let oldest = next(newest, cap);
         let z = &mut self.z[..d];
         z.fill(0.0);
-        // The `h` intervals after the oldest sample, oldest first: two contiguous runs of the
-        // ring.
-        let ring = &self.hist_z1[..cap * d];
-        let (wrapped, tail) = ring.split_at(oldest * d);
-        for interval in tail[d..].chunks_exact(d).chain(wrapped.chunks_exact(d)) {
+        // The `h` intervals after the oldest sample, oldest first: one contiguous run of the
+        // mirrored ring.
+        for interval in self.hist_z1[(oldest + 1) * d..(oldest + cap) * d].chunks_exact(d) {
             for (zi, &vi) in z.iter_mut().zip(interval) {
                 *zi += vi;
             }
@@ -1011,7 +1010,8 @@ impl SlidingRegression {
             return out;
         }
         let (lo, hi) = linalg::sym_eig_extremes(&self.g, d, &mut self.work);
-        let inv_n = 1.0 / n as f64;
+        // Full window (every sample after warm-up): the reciprocal computed at construction.
+        let inv_n = if n == self.cfg.window { self.inv_window } else { 1.0 / n as f64 };
         out.gram_lambda_min = lo * inv_n;
         out.gram_lambda_max = hi * inv_n;
         if !(hi > 0.0 && lo > self.cfg.min_excitation_ratio * hi) {
@@ -1142,7 +1142,8 @@ impl SlidingRegression {
             && self.zhist_head < cap
             && self.col_len <= self.cfg.window
             && self.col_next < self.cfg.window
-            && self.since_refresh < self.cfg.refresh_period.max(1);
+            && self.since_refresh < self.cfg.refresh_period.max(1)
+            && self.inv_window == fresh.inv_window;
         if !ok {
             return Err(RegressionError::CorruptState("ring counters out of range".into()));
         }

@@ -85,9 +85,12 @@ fn regression_update(c: &mut Criterion) {
 
 fn certifier_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("certifier_step");
-    let cases = [(1usize, 1usize, 0u8), (1, 1, 1), (1, 1, 2), (10, 10, 0), (10, 10, 1)];
+    // Variant 3 is the naive baseline of the full step: the same Gaussian + Wasserstein
+    // certifier with `refresh_period = 1`, so the regression statistics are recomputed from the
+    // whole window at every sample (`O(M d²)`).
+    let cases = [(1usize, 1usize, 0u8), (1, 1, 1), (1, 1, 2), (1, 1, 3), (10, 10, 0), (10, 10, 1)];
     for (p, m, variant) in cases {
-        let wasserstein = variant == 1;
+        let wasserstein = variant == 1 || variant == 3;
         let d = p + m;
         let len = 4096;
         let data = stream(p, m, len);
@@ -101,8 +104,15 @@ fn certifier_step(c: &mut Criterion) {
         if variant == 2 {
             cfg.calibration = Some(Calibration { delta: 0.01 });
         }
-        let name = ["gaussian", "gaussian_and_wasserstein", "gaussian_and_calibrated"]
-            [usize::from(variant)];
+        if variant == 3 {
+            cfg.regression.refresh_period = 1;
+        }
+        let name = [
+            "gaussian",
+            "gaussian_and_wasserstein",
+            "gaussian_and_calibrated",
+            "naive_gaussian_and_wasserstein",
+        ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
         for s in data.chunks(d).take(200) {

@@ -86,6 +86,23 @@ pub fn certificate_surface(beta_hat: f64, rho: f64, eps: &[f64], out: &mut [f64]
 /// uncertainty and spends the risk `δ` over all the looks of the run, so that
 /// `P(the calibrated gate ever opens for a candidate whose true rate is below β_margin) <= δ`
 /// under the assumptions stated in [`calibrated_radius`].
+///
+/// Method: a confidence bound for a least-squares coefficient (Gaussian or sub-Gaussian
+/// tails; for `p > 1` the χ² tail of Laurent and Massart, Ann. Statist. 2000, with Weyl's
+/// eigenvalue perturbation inequality), an overlap factor `h` for the serial correlation of
+/// the columns (a Newey–West style bound with `Σ|ρ_l| = h`), and a union bound over looks with
+/// a summable spending sequence (Bonferroni over a sequential test, as in alpha-spending;
+/// valid for any stopping rule).
+///
+/// For a control engineer: the paper's `c` sets how many "uncertainty units" are subtracted
+/// from `β̂`, but nobody says how large a unit is or how often the gate is allowed to be wrong.
+/// Here the unit is one standard deviation of the `β̂` estimate computed from this window (how
+/// noisy the residuals are and how well the data excite the direction of the candidate gain),
+/// and the number of units grows slowly with every sample looked at, so that the chance of ever
+/// deploying a non-contracting controller stays below `δ` however long the gate watches. The
+/// price is power: when the window does not determine `J_cl` (short window, little excitation
+/// in the direction `[I; K]`, several outputs), the calibrated gate stays closed where the
+/// paper's would open; `cargo xtask validity` shows both effects.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Calibration {

@@ -324,6 +324,13 @@ fn copy(dst: &mut [f64], src: &[f64]) {
     }
 }
 
+/// `true` when all three values are finite: `0 · x` is `±0` for a finite `x` and NaN for an
+/// infinite or NaN one, so one comparison tests the three (the per-sample path's check).
+#[inline(always)]
+fn finite3(a: f64, b: f64, c: f64) -> bool {
+    0.0 * a + 0.0 * b + 0.0 * c == 0.0
+}
+
 /// `(i + 1) mod cap` without a division.
 #[inline]
 fn next(i: usize, cap: usize) -> usize {
@@ -542,8 +549,7 @@ impl SlidingRegression {
     /// out for scalars so that the per-sample cost is a few dozen instructions.
     #[inline(always)]
     fn push_scalar(&mut self, t: f64, y: f64, u: f64) -> Result<(), RegressionError> {
-        // `x − x` is 0 for a finite x and NaN otherwise: one comparison tests all three.
-        if (t - t) + (y - y) + (u - u) != 0.0 {
+        if !finite3(t, y, u) {
             // Reports which value is bad; it always fails here.
             self.check_sample(t, &[y], &[u])?;
         }
@@ -583,7 +589,7 @@ impl SlidingRegression {
             zu += pair[1];
         }
         let dy = y - self.hist_y[oldest];
-        if (zy - zy) + (zu - zu) + (dy - dy) != 0.0 {
+        if !finite3(zy, zu, dy) {
             self.reset();
             return Err(RegressionError::Overflow);
         }
@@ -611,7 +617,7 @@ impl SlidingRegression {
         }
         zo.copy_from_slice(&[zy, zu]);
         dyo[0] = dy;
-        if (g[0] - g[0]) + (g[3] - g[3]) + (s[0] - s[0]) != 0.0 {
+        if !finite3(g[0], g[3], s[0]) {
             self.reset();
             return Err(RegressionError::Overflow);
         }

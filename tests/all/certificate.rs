@@ -330,6 +330,41 @@ fn calibrated_radius_matches_its_formula() {
     assert!(looks > 3000);
 }
 
+/// `p = 2` (the Cholesky path of `gram_inverse_form` and the χ²_{p²} tail) against nalgebra:
+/// `ρ_cal = √(h σ̂² λ_max(Tᵀ(G + λI)⁻¹T) q)`, `q = p² + 2√(p² x) + 2x`, `x = ln(1/δ_k)`.
+#[test]
+fn calibrated_radius_matches_its_formula_for_two_outputs() {
+    let gain = vec![-0.5, 0.1, 0.0, -0.8];
+    let cfg = CertifierConfig {
+        calibration: Some(streamcert::certificate::Calibration { delta: 0.01 }),
+        ..config(2, 2, gain.clone(), 1.0)
+    };
+    let mut cert = Certifier::new(cfg).expect("valid");
+    let traj = run_scenario(&two_state(), 3);
+    let t = nalgebra::DMatrix::from_fn(4, 2, |r, c| {
+        if r < 2 { f64::from(u8::from(r == c)) } else { gain[(r - 2) * 2 + c] }
+    });
+    let mut looks = 0u64;
+    for i in 0..traj.len() {
+        let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
+        let Some(rho_cal) = ev.rho_calibrated else { continue };
+        looks += 1;
+        let (g, _, _) = cert.regression().statistics();
+        // Only the upper triangle of G is maintained.
+        let gram = nalgebra::DMatrix::from_fn(4, 4, |r, c| {
+            g[r.min(c) * 4 + r.max(c)] + if r == c { 1e-4 } else { 0.0 }
+        });
+        let form = t.transpose() * gram.try_inverse().expect("invertible") * &t;
+        let form_max = form.symmetric_eigen().eigenvalues.max();
+        let x = (1.0 / streamcert::certificate::look_risk(0.01, looks)).ln();
+        let q = 4.0 + 2.0 * (4.0 * x).sqrt() + 2.0 * x;
+        let rms = ev.rms_residual.expect("ready");
+        let expected = (5.0 * rms * rms * form_max * q).sqrt();
+        assert!((rho_cal - expected).abs() < 1e-8 * expected, "{rho_cal} vs {expected}");
+    }
+    assert!(looks > 1000, "looks {looks}");
+}
+
 #[test]
 fn calibrated_gate_rarely_deploys_a_non_contracting_candidate() {
     // δ = 0.01 over 100 runs: P(Bin(100, 0.01) > 4) < 0.4 %, so more than 4 openings would be

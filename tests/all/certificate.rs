@@ -306,27 +306,48 @@ fn non_contracting_scalar() -> LinearScenario {
     }
 }
 
-#[test]
-fn calibrated_radius_matches_its_formula() {
-    let k = -0.2;
-    let mut cert = Certifier::new(calibrated_config(k)).expect("valid");
-    let traj = run_scenario(&non_contracting_scalar(), 2);
+/// Run `cfg` over a scenario and compare every calibrated radius with `expected(G, RMS(R),
+/// δ_k)` (the regression's upper-triangular `G`) within `tol` relative; returns the number of
+/// looks.
+fn check_calibrated_radius(
+    cfg: CertifierConfig,
+    scenario: &LinearScenario,
+    seed: u64,
+    tol: f64,
+    expected: impl Fn(&[f64], f64, f64) -> f64,
+) -> u64 {
+    let mut cert = Certifier::new(cfg).expect("valid");
+    let traj = run_scenario(scenario, seed);
     let mut looks = 0u64;
     for i in 0..traj.len() {
         let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
         let Some(rho_cal) = ev.rho_calibrated else { continue };
         looks += 1;
-        // Oracle: Tᵀ (G + λI)⁻¹ T by nalgebra from the regression's statistics.
         let (g, _, _) = cert.regression().statistics();
-        let gram = nalgebra::Matrix2::new(g[0] + 1e-4, g[1], g[1], g[3] + 1e-4);
-        let t = nalgebra::Vector2::new(1.0, k);
-        let form = (t.transpose() * gram.try_inverse().expect("invertible") * t)[(0, 0)];
         let risk = streamcert::certificate::look_risk(0.01, looks);
-        let rms = ev.rms_residual.expect("ready");
-        let expected = (5.0 * rms * rms * form * 2.0 * (1.0 / risk).ln()).sqrt();
-        assert!((rho_cal - expected).abs() < 1e-9 * expected, "{rho_cal} vs {expected}");
+        let want = expected(g, ev.rms_residual.expect("ready"), risk);
+        assert!((rho_cal - want).abs() < tol * want, "look {looks}: {rho_cal} vs {want}");
         assert_eq!(ev.cert_calibrated, Some(ev.beta_hat.expect("ready") - rho_cal));
     }
+    looks
+}
+
+#[test]
+fn calibrated_radius_matches_its_formula() {
+    let k = -0.2;
+    // Oracle: Tᵀ (G + λI)⁻¹ T by nalgebra, Gaussian tail q = 2 ln(1/δ_k).
+    let looks = check_calibrated_radius(
+        calibrated_config(k),
+        &non_contracting_scalar(),
+        2,
+        1e-9,
+        |g, rms, risk| {
+            let gram = nalgebra::Matrix2::new(g[0] + 1e-4, g[1], g[1], g[3] + 1e-4);
+            let t = nalgebra::Vector2::new(1.0, k);
+            let form = (t.transpose() * gram.try_inverse().expect("invertible") * t)[(0, 0)];
+            (5.0 * rms * rms * form * 2.0 * (1.0 / risk).ln()).sqrt()
+        },
+    );
     assert!(looks > 3000);
 }
 
@@ -339,29 +360,20 @@ fn calibrated_radius_matches_its_formula_for_two_outputs() {
         calibration: Some(streamcert::certificate::Calibration { delta: 0.01 }),
         ..config(2, 2, gain.clone(), 1.0)
     };
-    let mut cert = Certifier::new(cfg).expect("valid");
-    let traj = run_scenario(&two_state(), 3);
     let t = nalgebra::DMatrix::from_fn(4, 2, |r, c| {
         if r < 2 { f64::from(u8::from(r == c)) } else { gain[(r - 2) * 2 + c] }
     });
-    let mut looks = 0u64;
-    for i in 0..traj.len() {
-        let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
-        let Some(rho_cal) = ev.rho_calibrated else { continue };
-        looks += 1;
-        let (g, _, _) = cert.regression().statistics();
+    let looks = check_calibrated_radius(cfg, &two_state(), 3, 1e-8, |g, rms, risk| {
         // Only the upper triangle of G is maintained.
         let gram = nalgebra::DMatrix::from_fn(4, 4, |r, c| {
             g[r.min(c) * 4 + r.max(c)] + if r == c { 1e-4 } else { 0.0 }
         });
         let form = t.transpose() * gram.try_inverse().expect("invertible") * &t;
         let form_max = form.symmetric_eigen().eigenvalues.max();
-        let x = (1.0 / streamcert::certificate::look_risk(0.01, looks)).ln();
+        let x = (1.0 / risk).ln();
         let q = 4.0 + 2.0 * (4.0 * x).sqrt() + 2.0 * x;
-        let rms = ev.rms_residual.expect("ready");
-        let expected = (5.0 * rms * rms * form_max * q).sqrt();
-        assert!((rho_cal - expected).abs() < 1e-8 * expected, "{rho_cal} vs {expected}");
-    }
+        (5.0 * rms * rms * form_max * q).sqrt()
+    });
     assert!(looks > 1000, "looks {looks}");
 }
 

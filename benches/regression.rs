@@ -9,9 +9,11 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::ambiguity::AmbiguityConfig;
-use streamcert::certificate::{Calibration, Certifier, CertifierConfig};
-use streamcert::regression::{RegressionConfig, SlidingRegression};
+use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
+use streamcert::certificate::{
+    Calibration, Certifier, CertifierConfig, ResidualSource, certificate_value,
+};
+use streamcert::regression::{EstimateStatus, RegressionConfig, SlidingRegression};
 
 /// A pre-generated stream of `len` samples with `p` outputs and `m` inputs.
 fn stream(p: usize, m: usize, len: usize) -> Vec<f64> {
@@ -135,5 +137,50 @@ fn certifier_step(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, regression_update, certifier_step);
+/// What the arithmetic of the `p = m = 1` step costs without the certifier's bookkeeping: the
+/// same regression update and estimate, `β̂`, `ρ` (eq. rho), the one-step residual into the
+/// ambiguity radius, `ε` and both certificate values, assembled from the public crates, but
+/// no gates, no reasons and no `Evidence`. A measuring device, not an API: it says how much of
+/// the full step is computation and how much is the evidence it returns.
+fn computation_only(c: &mut Criterion) {
+    let mut group = c.benchmark_group("certifier_step");
+    let (len, k_gain, conservatism) = (4096usize, -1.0f64, 0.2f64);
+    let data = stream(1, 1, len);
+    let cfg = RegressionConfig::new(1, 1, 150, 5, 1e-4);
+    let mut reg = SlidingRegression::new(cfg).expect("valid");
+    let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150)).expect("valid");
+    let mut resid = [0.0];
+    let mut t = 0.0;
+    let mut k = 0usize;
+    group.bench_function(
+        BenchmarkId::new("computation_only_gaussian_and_wasserstein", "p1_m1_M150"),
+        |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                t += 0.01;
+                let s = &data[2 * k..2 * k + 2];
+                reg.push(black_box(t), &s[..1], &s[1..]).expect("valid");
+                let est = reg.estimate();
+                let Some(rms) = (est.status == EstimateStatus::Ready).then_some(est.rms_residual)
+                else {
+                    return black_box(None);
+                };
+                let beta_hat = -(est.j_obs(0, 0) + est.b_obs(0, 0) * k_gain);
+                let rho = conservatism * (1.0 + k_gain.abs()) * rms
+                    / (est.gram_lambda_min + cfg.ridge).sqrt();
+                if reg.residual(ResidualSource::OneStep, &mut resid) {
+                    amb.push(resid[0]).expect("finite");
+                }
+                let eps = amb.snapshot().eps;
+                black_box(Some((
+                    certificate_value(beta_hat, rho, 0.0),
+                    certificate_value(beta_hat, rho, eps),
+                )))
+            });
+        },
+    );
+    group.finish();
+}
+
+criterion_group!(benches, regression_update, certifier_step, computation_only);
 criterion_main!(benches);

@@ -581,26 +581,19 @@ impl Certifier {
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.
     #[inline]
     fn ambiguity_snapshot(&self) -> Option<(f64, Option<f64>, f64)> {
-        if let [single] = &self.ambiguity[..] {
-            let s = single.snapshot();
-            return Some((s.eps, s.kurtosis, s.spike_fraction));
-        }
-        let mut out: Option<(f64, Option<f64>, f64)> = None;
-        for a in &self.ambiguity {
+        let (first, rest) = self.ambiguity.split_first()?;
+        let s = first.snapshot();
+        let (mut eps, mut kurtosis, mut spikes) = (s.eps, s.kurtosis, s.spike_fraction);
+        for a in rest {
             let s = a.snapshot();
-            out = Some(match out {
-                None => (s.eps, s.kurtosis, s.spike_fraction),
-                Some((e, k, f)) => (
-                    e.max(s.eps),
-                    match (k, s.kurtosis) {
-                        (Some(x), Some(y)) => Some(x.max(y)),
-                        (x, y) => x.or(y),
-                    },
-                    f.max(s.spike_fraction),
-                ),
-            });
+            eps = eps.max(s.eps);
+            kurtosis = match (kurtosis, s.kurtosis) {
+                (Some(x), Some(y)) => Some(x.max(y)),
+                (x, y) => x.or(y),
+            };
+            spikes = spikes.max(s.spike_fraction);
         }
-        out
+        Some((eps, kurtosis, spikes))
     }
 
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity
@@ -660,7 +653,9 @@ impl Certifier {
             scalar_theta,
             self.regression.newest_interval(),
         ) {
-            // p = m = 1 with the default residual, written out.
+            // p = m = 1 with the default residual, written out: going through `residual` and
+            // the `resid` buffer costs about 10 % of the whole step (measured A/B with
+            // criterion), and this is the paper's case.
             let _ = amb.push(dy1[0] - (th[0] * z1[0] + th[1] * z1[1]));
         } else if !self.ambiguity.is_empty()
             && self.regression.residual(residual_source, &mut self.resid)
@@ -670,16 +665,12 @@ impl Certifier {
                 let _ = amb.push(r);
             }
         }
-        let lambda_max = if p == 1 {
-            self.jcl[0]
-        } else {
-            for i in 0..p {
-                for j in i..p {
-                    self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
-                }
+        for i in 0..p {
+            for j in i..p {
+                self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
             }
-            linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1
-        };
+        }
+        let lambda_max = linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1;
         let beta_hat = -lambda_max;
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();

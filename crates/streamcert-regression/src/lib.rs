@@ -593,8 +593,6 @@ impl SlidingRegression {
             self.reset();
             return Err(RegressionError::Overflow);
         }
-        self.z[..2].copy_from_slice(&[zy, zu]);
-        self.dy[0] = dy;
         let q = self.col_next;
         let (g, c, s) = (&mut self.g[..4], &mut self.c[..2], &mut self.s[..1]);
         let zo = &mut self.col_z[2 * q..2 * q + 2];
@@ -760,17 +758,27 @@ impl SlidingRegression {
     /// latest [`estimate`](Self::estimate) call. Call it only after an estimate whose status
     /// was [`EstimateStatus::Ready`]; returns `false` (leaving `out` alone) when the interval
     /// does not exist yet.
-    #[inline]
+    #[inline(always)]
     pub fn residual(&self, source: ResidualSource, out: &mut [f64]) -> bool {
-        let d = self.d();
+        // Literal dimensions for the paper's p = m = 1 let the compiler unroll the products.
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+            self.residual_dims(source, out, 1, 2)
+        } else {
+            self.residual_dims(source, out, self.cfg.outputs, self.d())
+        }
+    }
+
+    /// [`residual`](Self::residual) with the configured dimensions passed in.
+    #[inline(always)]
+    fn residual_dims(&self, source: ResidualSource, out: &mut [f64], p: usize, d: usize) -> bool {
         let pair = match source {
             ResidualSource::OneStep => self.newest_interval(),
             ResidualSource::Horizon => self.newest_column(),
         };
         let Some((z, dy)) = pair else { return false };
-        for (i, o) in out.iter_mut().enumerate().take(self.cfg.outputs) {
-            let th = &self.theta[i * d..(i + 1) * d];
-            *o = dy[i] - th.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
+        let (z, dy, theta) = (&z[..d], &dy[..p], &self.theta[..p * d]);
+        for ((o, &dyi), th) in out[..p].iter_mut().zip(dy).zip(theta.chunks_exact(d)) {
+            *o = dyi - th.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
         }
         true
     }

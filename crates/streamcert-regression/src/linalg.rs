@@ -128,8 +128,11 @@ pub const fn eig_work_len(n: usize) -> usize {
 /// implicit QL iteration (EISPACK `tred1`/`tql1`, as in Numerical Recipes `tred2`/`tqli`
 /// without eigenvectors): `O(n³)` with a small constant, backward stable. Returns NaNs if
 /// the iteration fails to converge (it does not for finite input).
+///
+/// The closed forms are always inlined (with a literal `n` at the call site they reduce to a
+/// few instructions); the iterative method for `n > 2` stays out of line.
 #[must_use]
-#[inline]
+#[inline(always)]
 pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
     match n {
         0 => (f64::NAN, f64::NAN),
@@ -144,28 +147,32 @@ pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
             let half = if radicand.is_finite() { radicand.sqrt() } else { diff.hypot(q) };
             (mean - half, mean + half)
         }
-        _ => {
-            let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
-            let (d, e) = rest.split_at_mut(n);
-            // Lower triangle of w from the upper triangle of a.
-            for i in 0..n {
-                for j in 0..=i {
-                    w[i * n + j] = a[j * n + i];
-                }
-            }
-            tridiagonalise(w, n, d, e);
-            if !tridiagonal_ql(d, e) {
-                return (f64::NAN, f64::NAN);
-            }
-            let mut lo = f64::INFINITY;
-            let mut hi = f64::NEG_INFINITY;
-            for &v in d.iter() {
-                lo = lo.min(v);
-                hi = hi.max(v);
-            }
-            (lo, hi)
+        _ => sym_eig_extremes_iterative(a, n, work),
+    }
+}
+
+/// [`sym_eig_extremes`] for `n > 2`: Householder tridiagonalisation and implicit QL.
+#[inline(never)]
+fn sym_eig_extremes_iterative(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
+    let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
+    let (d, e) = rest.split_at_mut(n);
+    // Lower triangle of w from the upper triangle of a.
+    for i in 0..n {
+        for j in 0..=i {
+            w[i * n + j] = a[j * n + i];
         }
     }
+    tridiagonalise(w, n, d, e);
+    if !tridiagonal_ql(d, e) {
+        return (f64::NAN, f64::NAN);
+    }
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for &v in d.iter() {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    (lo, hi)
 }
 
 /// Householder reduction of the symmetric matrix held in the lower triangle of `a` to

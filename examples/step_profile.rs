@@ -1,0 +1,69 @@
+//! A loop over one per-sample path, for instruction counts under valgrind (which, unlike wall
+//! time, do not depend on the other tenants of a shared machine).
+//!
+//! ```sh
+//! cargo build --release --example step_profile
+//! for n in 100000 300000; do
+//!   valgrind --tool=cachegrind --cache-sim=no --cachegrind-out-file=/dev/null \
+//!     target/release/examples/step_profile step $n 2>&1 | grep "I *refs"
+//! done   # (difference) / 200000 = instructions per sample
+//! ```
+//!
+//! Modes: `update` (`SlidingRegression::push`), `estimate` (push + estimate), `ambiguity`
+//! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein);
+//! all for `p = m = 1`, `M = 150`, `h = 5`, on the stream of `benches/regression.rs`.
+
+use std::hint::black_box;
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
+use streamcert::certificate::{Certifier, CertifierConfig};
+use streamcert::regression::{RegressionConfig, SlidingRegression};
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let mode = args.next().unwrap_or_else(|| "step".into());
+    let samples: usize = args.next().map_or(Ok(1_000_000), |s| s.parse())?;
+    let len = 4096;
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut state = [0.0f64; 2];
+    let mut data = Vec::with_capacity(2 * len);
+    for _ in 0..len {
+        for v in &mut state {
+            *v = 0.95 * *v + rng.random::<f64>() - 0.5;
+        }
+        data.extend_from_slice(&state);
+    }
+    let reg_cfg = RegressionConfig::new(1, 1, 150, 5, 1e-4);
+    let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
+    cfg.ambiguity = Some(AmbiguityConfig::paper(150));
+    let mut cert = Certifier::new(cfg)?;
+    let mut reg = SlidingRegression::new(reg_cfg)?;
+    let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
+    let mut t = 0.0;
+    for i in 0..samples {
+        let k = i % len;
+        t += 0.01;
+        let (y, u) = (&data[2 * k..2 * k + 1], &data[2 * k + 1..2 * k + 2]);
+        match mode.as_str() {
+            "update" => reg.push(black_box(t), y, u)?,
+            "estimate" => {
+                reg.push(black_box(t), y, u)?;
+                black_box(reg.estimate().rms_residual);
+            }
+            "ambiguity" => {
+                // A white residual-like value: the innovation of the AR(0.95) stream.
+                let prev = data[(2 * k + 2 * len - 2) % (2 * len)];
+                amb.push(black_box(data[2 * k] - 0.95 * prev))?;
+                black_box(amb.snapshot().eps);
+            }
+            "step" => {
+                let ev = cert.push(black_box(t), y, u)?;
+                black_box((ev.cert_gauss, ev.cert_wass, ev.wass_gate.open));
+            }
+            other => return Err(format!("unknown mode {other}").into()),
+        }
+    }
+    Ok(())
+}

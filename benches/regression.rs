@@ -104,7 +104,7 @@ fn certifier_step(c: &mut Criterion) {
             cfg.ambiguity = Some(AmbiguityConfig::paper(150));
         }
         if variant == 2 {
-            cfg.calibration = Some(Calibration { delta: 0.01 });
+            cfg.calibration = Some(Calibration::new(0.01));
         }
         if variant == 3 {
             cfg.regression.refresh_period = 1;

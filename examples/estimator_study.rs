@@ -32,6 +32,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         dither_hold: 0.5,
         dt: 0.01,
         steps: 30_000,
+        noise_gain: None,
+        sensor_noise: 0.0,
+        switch: None,
     };
     println!(
         "## Noise bias of the closed-loop rate estimate (true rate 2.0, 40 seeds, full 300 s window)\n"
@@ -79,6 +82,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 dither_hold: 0.1,
                 dt: 0.01,
                 steps: 1500,
+                noise_gain: None,
+                sensor_noise: 0.0,
+                switch: None,
             };
             for seed in 0..10 {
                 let traj = scenario.run(seed)?;

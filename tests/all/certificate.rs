@@ -39,6 +39,9 @@ fn two_state() -> LinearScenario {
         dither_hold: 0.1,
         dt: 0.01,
         steps: 2000,
+        noise_gain: None,
+        sensor_noise: 0.0,
+        switch: None,
     }
 }
 
@@ -288,119 +291,4 @@ fn one_step_residuals_keep_the_laplace_tails_that_horizon_residuals_average_away
     // (overlapping columns are not independent, so only the ordering and rough size are tested).
     assert!(one_step > 2.0, "one-step kurtosis {one_step}");
     assert!(horizon < 1.2 && horizon < one_step - 1.0, "horizon kurtosis {horizon}");
-}
-
-fn calibrated_config(k: f64) -> CertifierConfig {
-    CertifierConfig {
-        calibration: Some(streamcert::certificate::Calibration { delta: 0.01 }),
-        ..config(1, 1, vec![k], 1.0)
-    }
-}
-
-fn non_contracting_scalar() -> LinearScenario {
-    // ẏ = 0.5 y + u + w explored by u = −y + PRBS; candidate K = −0.2 has true rate −0.3.
-    LinearScenario {
-        dither_hold: 0.2,
-        steps: 4000,
-        ..scalar(0.5, -1.0, Process::Gaussian { sigma: 0.1 }, 1.0)
-    }
-}
-
-/// Run `cfg` over a scenario and compare every calibrated radius with `expected(G, RMS(R),
-/// δ_k)` (the regression's upper-triangular `G`) within `tol` relative; returns the number of
-/// looks.
-fn check_calibrated_radius(
-    cfg: CertifierConfig,
-    scenario: &LinearScenario,
-    seed: u64,
-    tol: f64,
-    expected: impl Fn(&[f64], f64, f64) -> f64,
-) -> u64 {
-    let mut cert = Certifier::new(cfg).expect("valid");
-    let traj = run_scenario(scenario, seed);
-    let mut looks = 0u64;
-    for i in 0..traj.len() {
-        let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
-        let Some(rho_cal) = ev.rho_calibrated else { continue };
-        looks += 1;
-        let (g, _, _) = cert.regression().statistics();
-        let risk = streamcert::certificate::look_risk(0.01, looks);
-        let want = expected(g, ev.rms_residual.expect("ready"), risk);
-        assert!((rho_cal - want).abs() < tol * want, "look {looks}: {rho_cal} vs {want}");
-        assert_eq!(ev.cert_calibrated, Some(ev.beta_hat.expect("ready") - rho_cal));
-    }
-    looks
-}
-
-#[test]
-fn calibrated_radius_matches_its_formula() {
-    let k = -0.2;
-    // Oracle: Tᵀ (G + λI)⁻¹ T by nalgebra, Gaussian tail q = 2 ln(1/δ_k).
-    let looks = check_calibrated_radius(
-        calibrated_config(k),
-        &non_contracting_scalar(),
-        2,
-        1e-9,
-        |g, rms, risk| {
-            let gram = nalgebra::Matrix2::new(g[0] + 1e-4, g[1], g[1], g[3] + 1e-4);
-            let t = nalgebra::Vector2::new(1.0, k);
-            let form = (t.transpose() * gram.try_inverse().expect("invertible") * t)[(0, 0)];
-            (5.0 * rms * rms * form * 2.0 * (1.0 / risk).ln()).sqrt()
-        },
-    );
-    assert!(looks > 3000);
-}
-
-/// `p = 2` (the Cholesky path of `gram_inverse_form` and the χ²_{p²} tail) against nalgebra:
-/// `ρ_cal = √(h σ̂² λ_max(Tᵀ(G + λI)⁻¹T) q)`, `q = p² + 2√(p² x) + 2x`, `x = ln(1/δ_k)`.
-#[test]
-fn calibrated_radius_matches_its_formula_for_two_outputs() {
-    let gain = vec![-0.5, 0.1, 0.0, -0.8];
-    let cfg = CertifierConfig {
-        calibration: Some(streamcert::certificate::Calibration { delta: 0.01 }),
-        ..config(2, 2, gain.clone(), 1.0)
-    };
-    let t = nalgebra::DMatrix::from_fn(4, 2, |r, c| {
-        if r < 2 { f64::from(u8::from(r == c)) } else { gain[(r - 2) * 2 + c] }
-    });
-    let looks = check_calibrated_radius(cfg, &two_state(), 3, 1e-8, |g, rms, risk| {
-        // Only the upper triangle of G is maintained.
-        let gram = nalgebra::DMatrix::from_fn(4, 4, |r, c| {
-            g[r.min(c) * 4 + r.max(c)] + if r == c { 1e-4 } else { 0.0 }
-        });
-        let form = t.transpose() * gram.try_inverse().expect("invertible") * &t;
-        let form_max = form.symmetric_eigen().eigenvalues.max();
-        let x = (1.0 / risk).ln();
-        let q = 4.0 + 2.0 * (4.0 * x).sqrt() + 2.0 * x;
-        (5.0 * rms * rms * form_max * q).sqrt()
-    });
-    assert!(looks > 1000, "looks {looks}");
-}
-
-#[test]
-fn calibrated_gate_rarely_deploys_a_non_contracting_candidate() {
-    // δ = 0.01 over 100 runs: P(Bin(100, 0.01) > 4) < 0.4 %, so more than 4 openings would be
-    // evidence against the guarantee. The contracting candidate (rate 1.0) must open in most.
-    let (mut false_opens, mut true_opens) = (0, 0);
-    for seed in 0..100 {
-        let traj = run_scenario(&non_contracting_scalar(), 500 + seed);
-        for (k, counter) in [(-0.2, &mut false_opens), (-1.5, &mut true_opens)] {
-            let mut cert = Certifier::new(calibrated_config(k)).expect("valid");
-            let opened = (0..traj.len()).any(|i| {
-                cert.push(traj.t[i], traj.output(i), traj.input(i))
-                    .expect("valid")
-                    .calibrated_gate
-                    .open
-            });
-            *counter += usize::from(opened);
-        }
-    }
-    assert!(
-        false_opens <= 4,
-        "calibrated gate opened for {false_opens} of 100 non-contracting runs"
-    );
-    assert!(
-        true_opens >= 90,
-        "calibrated gate opened for only {true_opens} of 100 contracting runs"
-    );
 }

@@ -1,6 +1,7 @@
 //! Cross-crate and property tests of streamcert: one test binary, one module per topic.
 
 mod ambiguity;
+mod calibrated;
 mod certificate;
 mod compose;
 mod dynamics;

@@ -261,6 +261,9 @@ fn scalar_estimate_converges_with_strong_dither() {
         dither_hold: 0.2,
         dt: 0.01,
         steps: 4000,
+        noise_gain: None,
+        sensor_noise: 0.0,
+        switch: None,
     };
     for seed in 0..5 {
         let (a, b) = scalar_estimate(&stream, Estimator::Ordinary, seed);
@@ -314,6 +317,9 @@ fn recovers_a_three_output_two_input_system() {
         dither_hold: 0.1,
         dt: 0.005,
         steps: 20_000,
+        noise_gain: None,
+        sensor_noise: 0.0,
+        switch: None,
     };
     let traj = run_scenario(&stream, 8);
     let cfg = RegressionConfig {

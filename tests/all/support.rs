@@ -31,5 +31,8 @@ pub(crate) fn scalar(a: f64, k_explore: f64, noise: Process, dither: f64) -> Lin
         dither_hold: 0.1,
         dt: 0.01,
         steps: 1000,
+        noise_gain: None,
+        sensor_noise: 0.0,
+        switch: None,
     }
 }

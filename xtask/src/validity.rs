@@ -69,7 +69,7 @@ fn certifier(n: usize, k: &[f64], c: Option<f64>, window: usize) -> Result<Certi
     };
     let mut cfg = CertifierConfig::new(reg, k.to_vec(), c.unwrap_or(1.0), MARGIN, 10);
     if c.is_none() {
-        cfg.calibration = Some(Calibration { delta: DELTA });
+        cfg.calibration = Some(Calibration::new(DELTA));
     }
     Ok(Certifier::new(cfg)?)
 }
@@ -111,6 +111,9 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                             dither_hold: 0.2,
                             dt: 0.01,
                             steps: 4000,
+                            noise_gain: None,
+                            sensor_noise: 0.0,
+                            switch: None,
                         };
                         let traj = scenario.run(90_000 + run as u64)?;
                         for (mi, (_, c)) in methods.iter().enumerate() {

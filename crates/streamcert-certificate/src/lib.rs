@@ -49,8 +49,11 @@
 //! # Ok::<(), streamcert_certificate::CertifyError>(())
 //! ```
 
+mod calibrated;
 mod gate;
 
+use calibrated::{CalibratedState, CalibratedVerdict};
+pub use calibrated::{Calibration, WindowLook, calibrated_radius, look_risk, t_quantile};
 pub use gate::{Gate, GateState};
 
 use serde::{Deserialize, Serialize};
@@ -76,82 +79,6 @@ pub fn certificate_surface(beta_hat: f64, rho: f64, eps: &[f64], out: &mut [f64]
     for (o, &e) in out[..eps.len()].iter_mut().zip(eps) {
         *o = certificate_value(beta_hat, rho, e);
     }
-}
-
-/// The calibrated certificate (an addition to the paper; see [`calibrated_radius`]).
-///
-/// The paper's `ρ = c (1 + ‖K‖) RMS(R) / √(λ_min + λ)` has a tuned constant `c` and is checked
-/// at every sample, so it gives no stated probability of deploying a controller that does not
-/// contract. The calibrated mode replaces `c` by a radius derived from the regression's own
-/// uncertainty and spends the risk `δ` over all the looks of the run, so that
-/// `P(the calibrated gate ever opens for a candidate whose true rate is below β_margin) <= δ`
-/// under the assumptions stated in [`calibrated_radius`].
-///
-/// Method: a confidence bound for a least-squares coefficient (Gaussian or sub-Gaussian
-/// tails; for `p > 1` the χ² tail of Laurent and Massart, Ann. Statist. 2000, with Weyl's
-/// eigenvalue perturbation inequality), an overlap factor `h` for the serial correlation of
-/// the columns (a Newey–West style bound with `Σ|ρ_l| = h`), and a union bound over looks with
-/// a summable spending sequence (Bonferroni over a sequential test, as in alpha-spending;
-/// valid for any stopping rule).
-///
-/// For a control engineer: the paper's `c` sets how many "uncertainty units" are subtracted
-/// from `β̂`, but nobody says how large a unit is or how often the gate is allowed to be wrong.
-/// Here the unit is one standard deviation of the `β̂` estimate computed from this window (how
-/// noisy the residuals are and how well the data excite the direction of the candidate gain),
-/// and the number of units grows slowly with every sample looked at, so that the chance of ever
-/// deploying a non-contracting controller stays below `δ` however long the gate watches. The
-/// price is power: when the window does not determine `J_cl` (short window, little excitation
-/// in the direction `[I; K]`, several outputs), the calibrated gate stays closed where the
-/// paper's would open; `cargo xtask validity` shows both effects.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Calibration {
-    /// Risk `δ ∈ (0, 1)` over the whole run (default of the CLI: 0.01).
-    pub delta: f64,
-}
-
-/// Risk spent at the `k`-th look (`k >= 1`): `δ_k = 6 δ / (π² k²)`, so `Σ_k δ_k = δ` over an
-/// unbounded run (a union bound over every look, valid for any stopping rule).
-#[must_use]
-pub fn look_risk(delta: f64, k: u64) -> f64 {
-    let k = k.max(1) as f64;
-    6.0 * delta / (std::f64::consts::PI * std::f64::consts::PI * k * k)
-}
-
-/// The calibrated radius for one look:
-///
-/// ```text
-/// ρ_cal = √( h · σ̂² · λ_max(Tᵀ (ZZᵀ + λI)⁻¹ T) · q(δ_k) ),   T = [I_p; K],   σ̂ = RMS(R)
-/// q = 2 ln(1/δ_k)                              (p = 1: Gaussian Chernoff bound)
-/// q = p² + 2 √(p² ln(1/δ_k)) + 2 ln(1/δ_k)     (p > 1: Laurent–Massart χ² bound)
-/// ```
-///
-/// Derivation: `Θ̂ − Θ = R Zᵀ (ZZᵀ + λI)⁻¹` (ridge bias neglected), so
-/// `ΔJ_cl = (Θ̂ − Θ) T`. Each column residual is the sum of the `h` per-step noise increments of
-/// its interval; overlapping columns share up to `h − 1` of them, so the autocorrelation has
-/// `Σ_l |ρ_l| = h` and, by Cauchy–Schwarz lag by lag, the variance of any linear functional is
-/// at most `h` times the i.i.d. one, `σ² aᵀ(ZZᵀ+λI)⁻¹a`. For `p = 1`, `β̂ − β* = −ΔJ_cl` is a
-/// scalar with variance at most `h σ² TᵀG⁻¹T`; for `p > 1`, Weyl's inequality gives
-/// `|λ_max(sym J̃) − λ_max(sym J)| <= ‖ΔJ_cl‖₂ <= ‖ΔJ_cl‖_F`, a quadratic form bounded by the
-/// `χ²_{p²}` tail. With probability at least `1 − δ_k`, `β̂ − ρ_cal <= β*`.
-///
-/// Assumptions (when they fail the guarantee is void, and the Wasserstein radius is the
-/// paper's hedge against heavier tails): the system is linear (or its Jacobian constant) over
-/// the window; the per-step process noise is white, independent of the inputs, with
-/// (sub-)Gaussian tails for the window sum (heavy-tailed noise with finite variance is covered
-/// only through the central limit theorem); the excitation is exogenous and dominates the
-/// noise in the regressor (otherwise the ordinary estimate is biased, see
-/// `Estimator::Instrumented`); `σ̂` is a plug-in estimate; the ridge bias is negligible.
-#[must_use]
-pub fn calibrated_radius(horizon: usize, rms: f64, form_max: f64, p: usize, risk: f64) -> f64 {
-    let x = (1.0 / risk).ln();
-    let q = if p == 1 {
-        2.0 * x
-    } else {
-        let k = (p * p) as f64;
-        k + 2.0 * (k * x).sqrt() + 2.0 * x
-    };
-    (horizon as f64 * rms * rms * form_max.max(0.0) * q).sqrt()
 }
 
 /// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
@@ -255,15 +182,7 @@ impl CertifierConfig {
             a.validate()?;
         }
         if let Some(c) = &self.calibration {
-            if !(c.delta > 0.0 && c.delta < 1.0) {
-                return bad("calibration.delta", format!("must lie in (0, 1), got {}", c.delta));
-            }
-            if self.regression.estimator != streamcert_regression::Estimator::Ordinary {
-                return bad(
-                    "calibration",
-                    "the calibrated radius is derived for the ordinary (ridge) estimator".into(),
-                );
-            }
+            c.validate(&self.regression, self.margin)?;
         }
         Ok(())
     }
@@ -325,6 +244,17 @@ pub enum NotCertified {
     SkippedSample,
     /// No ambiguity model is configured, so there is no Wasserstein certificate.
     NoAmbiguityModel,
+    /// No calibration is configured, so there is no calibrated certificate.
+    NoCalibration,
+    /// Calibrated certificate: a window whose latest look is at least as recent as every
+    /// standing certificate bounds the rate from above below the margin (the loop stopped
+    /// contracting enough, for example after a plant change).
+    RateDropped {
+        /// The window length that gives the bound.
+        window: usize,
+        /// Its upper bound `β̂_w + ρ_w`.
+        upper: f64,
+    },
 }
 
 impl std::fmt::Display for NotCertified {
@@ -343,6 +273,11 @@ impl std::fmt::Display for NotCertified {
             }
             Self::SkippedSample => f.write_str("bad sample skipped"),
             Self::NoAmbiguityModel => f.write_str("no ambiguity model configured"),
+            Self::NoCalibration => f.write_str("no calibration configured"),
+            Self::RateDropped { window, upper } => write!(
+                f,
+                "window {window}: the rate is at most {upper:.4}, below the margin (dynamics changed?)"
+            ),
         }
     }
 }
@@ -374,12 +309,18 @@ pub struct Evidence {
     pub wass_gate: GateState,
     /// Why the Wasserstein gate is closed (`None` when open).
     pub wass_reason: Option<NotCertified>,
-    /// Calibrated radius `ρ_cal` ([`calibrated_radius`]), when configured.
+    /// Calibrated radius `ρ_w` of the window that gives the calibrated certificate
+    /// ([`calibrated_radius`]), when configured and a look stands.
     pub rho_calibrated: Option<f64>,
-    /// Calibrated certificate `β̂ − ρ_cal`.
+    /// Calibrated certificate `β̂_w − ρ_w` (the largest standing window look; its `β̂_w` is the
+    /// instrumented estimate of that window, not `beta_hat`).
     pub cert_calibrated: Option<f64>,
+    /// Window length `M_w` (columns) of that look.
+    pub calibrated_window: Option<usize>,
     /// The calibrated certificate's gate (false-deployment probability at most `δ`).
     pub calibrated_gate: GateState,
+    /// Why the calibrated gate is closed (`None` when open).
+    pub calibrated_reason: Option<NotCertified>,
     /// `RMS(R)`.
     pub rms_residual: Option<f64>,
     /// `λ_min(Z Zᵀ / M)`.
@@ -399,11 +340,8 @@ pub struct Certifier {
     samples: u64,
     skipped: u64,
     wass: Gate,
-    calibrated: Gate,
-    looks: u64,
-    tmat: Vec<f64>,
-    form: Vec<f64>,
-    form_scratch: Vec<f64>,
+    calibrated_gate: Gate,
+    calibrated: Option<CalibratedState>,
     ambiguity: Vec<AmbiguityRadius>,
     resid: Vec<f64>,
     jcl: Vec<f64>,
@@ -418,7 +356,6 @@ struct Ready {
     rho: f64,
     rms: f64,
     lambda_min: f64,
-    rho_cal: Option<f64>,
 }
 
 impl Certifier {
@@ -442,17 +379,11 @@ impl Certifier {
             gain_norm: linalg::spectral_norm(&cfg.gain, m, p),
             gauss: Gate::new(cfg.margin, cfg.consecutive),
             wass: Gate::new(cfg.margin, cfg.consecutive),
-            calibrated: Gate::new(cfg.margin, cfg.consecutive),
-            looks: 0,
-            // T = [I_p; K] (d × p, row-major).
-            tmat: (0..(p + m) * p)
-                .map(|idx| {
-                    let (r, c) = (idx / p, idx % p);
-                    if r < p { f64::from(u8::from(r == c)) } else { cfg.gain[(r - p) * p + c] }
-                })
-                .collect(),
-            form: vec![0.0; p * p],
-            form_scratch: vec![0.0; (p + m) * p + linalg::eig_work_len(p)],
+            calibrated_gate: Gate::new(cfg.margin, cfg.consecutive),
+            calibrated: cfg
+                .calibration
+                .map(|c| CalibratedState::new(c, &cfg.regression, &cfg.gain))
+                .transpose()?,
             ambiguity: match &cfg.ambiguity {
                 Some(a) => (0..p).map(|_| AmbiguityRadius::new(*a)).collect::<Result<_, _>>()?,
                 None => Vec::new(),
@@ -491,6 +422,14 @@ impl Certifier {
         self.skipped
     }
 
+    /// The latest look of each calibrated window, shortest window first (empty without a
+    /// calibration; `None` for a window that has not looked yet or whose last look had no
+    /// estimate).
+    #[must_use]
+    pub fn calibrated_looks(&self) -> &[Option<WindowLook>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.looks())
+    }
+
     /// The underlying regression.
     #[must_use]
     pub fn regression(&self) -> &SlidingRegression {
@@ -524,7 +463,9 @@ impl Certifier {
                         wass_reason: Some(NotCertified::SkippedSample),
                         rho_calibrated: None,
                         cert_calibrated: None,
-                        calibrated_gate: self.calibrated.update(t, None),
+                        calibrated_window: None,
+                        calibrated_gate: self.calibrated_gate.update(t, None),
+                        calibrated_reason: Some(NotCertified::SkippedSample),
                         rms_residual: None,
                         gram_lambda_min: None,
                         columns: self.regression.columns(),
@@ -542,14 +483,7 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let rho_calibrated = ready.and_then(|r| r.rho_cal);
-        let cert_calibrated = ready.and_then(|r| r.rho_cal.map(|rc| r.beta_hat - rc));
-        // Without a calibration the calibrated gate never sees a certificate: it stays closed.
-        let calibrated_gate = if self.cfg.calibration.is_some() {
-            self.calibrated.update(t, cert_calibrated)
-        } else {
-            self.calibrated.state()
-        };
+        let (calibrated_gate, calibrated_reason, best) = self.calibrated_step(t);
         let reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let wass_reason = if amb.is_none() {
             Some(NotCertified::NoAmbiguityModel)
@@ -569,13 +503,30 @@ impl Certifier {
             cert_wass,
             wass_gate,
             wass_reason,
-            rho_calibrated,
-            cert_calibrated,
+            rho_calibrated: best.map(|b| b.radius),
+            cert_calibrated: best.map(|b| b.certificate()),
+            calibrated_window: best.map(|b| b.window),
             calibrated_gate,
+            calibrated_reason,
             rms_residual: ready.map(|r| r.rms),
             gram_lambda_min: ready.map(|r| r.lambda_min),
             columns,
         })
+    }
+
+    /// Feed the newest column to the calibrated certificate, update its gate, say why closed.
+    fn calibrated_step(&mut self, t: f64) -> (GateState, Option<NotCertified>, Option<WindowLook>) {
+        let Some(state) = &mut self.calibrated else {
+            // Without a calibration the calibrated gate never sees a certificate.
+            return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None);
+        };
+        let built = self.regression.columns_built();
+        let CalibratedVerdict { best, blocked } =
+            state.update(t, built, self.regression.newest_column(), self.cfg.margin);
+        let cert = best.map(|b| b.certificate());
+        let gate = self.calibrated_gate.update(t, cert);
+        let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
+        (gate, reason, best)
     }
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.
@@ -677,26 +628,7 @@ impl Certifier {
         if !(beta_hat.is_finite() && rho.is_finite()) {
             return (None, columns, Some(NotCertified::InsufficientExcitation));
         }
-        let rho_cal = match self.cfg.calibration {
-            Some(c) => self.calibrated_radius_now(c.delta, rms),
-            None => None,
-        };
-        (Some(Ready { beta_hat, rho, rms, lambda_min, rho_cal }), columns, None)
-    }
-
-    /// The calibrated radius for this look ([`calibrated_radius`]), from the latest estimate;
-    /// counts the look. `None` when the estimate has no Gram factor.
-    fn calibrated_radius_now(&mut self, delta: f64, rms: f64) -> Option<f64> {
-        let (p, m) = (self.cfg.regression.outputs, self.cfg.regression.inputs);
-        let d = p + m;
-        let (scratch, eig) = self.form_scratch.split_at_mut(d * p);
-        if !self.regression.gram_inverse_form(&self.tmat, p, scratch, &mut self.form) {
-            return None;
-        }
-        self.looks += 1;
-        let form_max = linalg::sym_eig_extremes(&self.form, p, eig).1;
-        let risk = look_risk(delta, self.looks);
-        Some(calibrated_radius(self.cfg.regression.horizon, rms, form_max, p, risk))
+        (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None)
     }
 
     /// Serialise the full streaming state as JSON (floats round-trip exactly).
@@ -730,10 +662,12 @@ impl Certifier {
             || c.jcl.len() != p * p
             || c.work.len() != p * p
             || c.resid.len() != p
-            || c.tmat.len() != (p + c.cfg.regression.inputs) * p
-            || c.form.len() != p * p
+            || c.calibrated.is_some() != c.cfg.calibration.is_some()
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
+        }
+        if let Some(state) = &c.calibrated {
+            state.check(&c.cfg.regression, &c.cfg.gain)?;
         }
         Ok(c)
     }

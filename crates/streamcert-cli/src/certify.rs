@@ -96,8 +96,9 @@ struct Checkpoint {
 
 /// The CSV header of the output.
 /// The calibrated columns stay empty (and `calibrated_open` 0) unless `[calibration]` is
-/// enabled.
-pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass,rho_calibrated,cert_calibrated,calibrated_open";
+/// enabled; `cert_calibrated` is `β̂_w − ρ_w` of the window `calibrated_window` (its own
+/// instrumented estimate, not `beta_hat`).
+pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass,rho_calibrated,cert_calibrated,calibrated_window,calibrated_open,reason_calibrated";
 
 fn num(v: Option<f64>) -> String {
     v.map_or(String::new(), |x| format!("{x}"))
@@ -108,7 +109,7 @@ fn row_csv(e: &Evidence) -> String {
         r.map_or(String::new(), |r| r.to_string().replace(',', ";"))
     };
     format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
         e.t,
         num(e.beta_hat),
         num(e.rho),
@@ -123,7 +124,9 @@ fn row_csv(e: &Evidence) -> String {
         reason(e.wass_reason),
         num(e.rho_calibrated),
         num(e.cert_calibrated),
-        u8::from(e.calibrated_gate.open)
+        e.calibrated_window.map_or(String::new(), |w| w.to_string()),
+        u8::from(e.calibrated_gate.open),
+        reason(e.calibrated_reason)
     )
 }
 
@@ -135,7 +138,8 @@ fn row_json(e: &Evidence) -> String {
         "gauss_open": e.gauss_gate.open, "wass_open": e.wass_gate.open,
         "reason_gauss": reason(e.reason), "reason_wass": reason(e.wass_reason),
         "rho_calibrated": e.rho_calibrated, "cert_calibrated": e.cert_calibrated,
-        "calibrated_open": e.calibrated_gate.open,
+        "calibrated_window": e.calibrated_window, "calibrated_open": e.calibrated_gate.open,
+        "reason_calibrated": reason(e.calibrated_reason),
     });
     format!("{v}\n")
 }

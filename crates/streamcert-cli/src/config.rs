@@ -50,11 +50,16 @@ alpha_spike = 2.0
 residuals = "one_step"  # or "horizon"
 
 [calibration]
-# A third certificate beside the paper's two: the radius comes from the regression's own
-# uncertainty (no c), and its gate opens for a non-contracting controller with probability at
-# most delta over the whole run (ordinary estimator only; see the README for the assumptions).
+# A third certificate beside the paper's two: an instrumented regression on several windows
+# (M, 2M, 4M, ...) with a radius from its own uncertainty (no c); its gate opens for a
+# controller whose true rate is below the margin with probability at most delta over the whole
+# run (see the README for the assumptions). Needs margin > 0 and window >= h (p + m + 2).
 enabled = false
 delta = 0.01
+# windows = 4            # M, 2M, 4M, 8M
+# max_window = 1200      # drop windows longer than this (default: none)
+# look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
+# instrument_lag = 1     # samples between the instrument's interval and the column's
 "#;
 
 #[derive(Debug, Deserialize)]
@@ -77,6 +82,14 @@ struct CalibrationSection {
     enabled: bool,
     #[serde(default = "default_delta")]
     delta: f64,
+    #[serde(default)]
+    windows: Option<usize>,
+    #[serde(default)]
+    max_window: Option<usize>,
+    #[serde(default)]
+    look_spacing: Option<f64>,
+    #[serde(default)]
+    instrument_lag: Option<usize>,
 }
 
 fn default_delta() -> f64 {
@@ -85,7 +98,28 @@ fn default_delta() -> f64 {
 
 impl Default for CalibrationSection {
     fn default() -> Self {
-        Self { enabled: false, delta: default_delta() }
+        Self {
+            enabled: false,
+            delta: default_delta(),
+            windows: None,
+            max_window: None,
+            look_spacing: None,
+            instrument_lag: None,
+        }
+    }
+}
+
+impl CalibrationSection {
+    /// The library's settings: every omitted key takes the library's default.
+    fn calibration(&self) -> Calibration {
+        let d = Calibration::new(self.delta);
+        Calibration {
+            windows: self.windows.unwrap_or(d.windows),
+            max_window: self.max_window.or(d.max_window),
+            look_spacing: self.look_spacing.unwrap_or(d.look_spacing),
+            instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
+            ..d
+        }
     }
 }
 
@@ -234,7 +268,7 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     }
     certifier.residuals = a.residuals;
     if f.calibration.enabled {
-        certifier.calibration = Some(Calibration { delta: f.calibration.delta });
+        certifier.calibration = Some(f.calibration.calibration());
     }
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
@@ -271,6 +305,16 @@ mod tests {
         let on =
             DEFAULT_CONFIG.replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.05");
         let c = parse(&on, "x").unwrap();
-        assert_eq!(c.certifier.calibration, Some(Calibration { delta: 0.05 }));
+        assert_eq!(c.certifier.calibration, Some(Calibration::new(0.05)));
+        let tuned = on.replace("# windows = 4 ", "windows = 2 ");
+        let c = parse(&tuned, "x").unwrap();
+        assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(2));
+        // A window below h (p + m + 2) has no calibrated bound: refused, naming the smallest.
+        let short = on.replace("window = 150 ", "window = 10 ");
+        assert!(
+            parse(&short, "x").unwrap_err().to_string().contains("smallest valid window is 20")
+        );
+        let zero_margin = on.replace("margin = 0.05", "margin = 0.0");
+        assert!(parse(&zero_margin, "x").unwrap_err().to_string().contains("margin"));
     }
 }

@@ -97,19 +97,23 @@ fn calibration_section_adds_the_calibrated_certificate() {
     let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &simulate("6"));
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
-    assert!(lines[0].ends_with(",rho_calibrated,cert_calibrated,calibrated_open"));
+    assert!(lines[0].ends_with(
+        ",rho_calibrated,cert_calibrated,calibrated_window,calibrated_open,reason_calibrated"
+    ));
     let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
-    assert_eq!(last.len(), 15);
-    let beta: f64 = last[1].parse().expect("beta_hat");
+    assert_eq!(last.len(), 17);
     let rho_cal: f64 = last[12].parse().expect("rho_calibrated");
     let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
-    assert!(rho_cal > 0.0 && (cert_cal - (beta - rho_cal)).abs() <= 1e-12 * beta.abs().max(1.0));
+    let window: usize = last[14].parse().expect("calibrated_window");
+    assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200].contains(&window));
+    // The gate is open exactly when no reason is given.
+    assert_eq!(last[15] == "1", last[16].is_empty(), "{last:?}");
     assert!(text(&out.stderr).contains("calibrated gate (risk delta over the run)"));
     // Off by default: the columns are empty.
     let plain =
         run(&["certify", "--config", config("plain").to_str().expect("utf8")], &simulate("6"));
     let row = text(&plain.stdout).lines().last().expect("rows").to_string();
-    assert!(row.ends_with(",,,0"), "{row}");
+    assert!(row.ends_with(",,,,0,no calibration configured"), "{row}");
 }
 
 #[test]

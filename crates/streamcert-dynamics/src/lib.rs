@@ -45,7 +45,7 @@ pub use dither::{Dither, DitherConfig};
 pub use error::DynamicsError;
 pub use g5::{Coupling, G5, G5Config, LocalRates};
 pub use linear::LinearSystem;
-pub use scenario::LinearScenario;
+pub use scenario::{LinearScenario, PlantSwitch};
 pub use simulate::{Integrator, NoiseScaling, SimConfig, Trajectory, simulate};
 pub use system::Dynamics;
 

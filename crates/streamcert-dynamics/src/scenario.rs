@@ -1,16 +1,29 @@
 //! Known-answer data sets: a linear system under exploratory output feedback.
 
+use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
 use crate::{
-    Disturbance, DisturbanceConfig, Dither, DitherConfig, DynamicsError, Integrator, LinearSystem,
-    NoiseScaling, Process, SimConfig, Trajectory, simulate,
+    Disturbance, DisturbanceConfig, Dither, DitherConfig, Dynamics, DynamicsError, Integrator,
+    LinearSystem, NoiseScaling, Process, SimConfig, Trajectory, seeded_rng, simulate,
 };
 
-/// `dx = (A x + B u) dt + dη` (independent noise on every state, SDE scaling), fully
-/// measured (`y = x`), under the exploration policy `u = K_explore y + d(t)` where `d` is an
-/// independent PRBS per input, held over each step. The ground truth of every estimator test:
-/// the closed-loop Jacobian under a candidate `K` is `A + B K` exactly.
+/// A change of the plant during a run: from time `at` on, the state matrix is `a`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlantSwitch {
+    /// Switching time in seconds.
+    pub at: f64,
+    /// The new `A`, `n × n` row-major.
+    pub a: Vec<f64>,
+}
+
+/// `dx = (A x + B u) dt + E dη` (SDE scaling), measured as `y = x + v` with white Gaussian
+/// sensor noise `v` of standard deviation `sensor_noise`, under the exploration policy
+/// `u = K_explore y + d(t)` where `d` is an independent PRBS per input, held over each step.
+/// The controller sees the same noisy `y` that is recorded. The ground truth of every
+/// estimator test: the closed-loop Jacobian under a candidate `K` is `A + B K` exactly (before
+/// and after a [`PlantSwitch`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LinearScenario {
@@ -22,7 +35,7 @@ pub struct LinearScenario {
     pub a: Vec<f64>,
     /// `B`, `n × m` row-major.
     pub b: Vec<f64>,
-    /// Noise process on every state (scaled by `√dt`, [`NoiseScaling::Sde`]).
+    /// Noise process of every channel (scaled by `√dt`, [`NoiseScaling::Sde`]).
     pub noise: Process,
     /// Exploration gain `K_explore`, `m × n` row-major.
     pub k_explore: Vec<f64>,
@@ -34,25 +47,102 @@ pub struct LinearScenario {
     pub dt: f64,
     /// Number of steps.
     pub steps: usize,
+    /// Disturbance gain `E`, `n × q` row-major, one independent channel per column (default
+    /// `None`: the identity, independent noise on every state). A column of ones is
+    /// common-mode noise; unequal diagonal entries give unequal noise across outputs.
+    #[serde(default)]
+    pub noise_gain: Option<Vec<f64>>,
+    /// Standard deviation of the white Gaussian sensor noise on every output (default 0).
+    #[serde(default)]
+    pub sensor_noise: f64,
+    /// A change of `A` during the run (default none).
+    #[serde(default)]
+    pub switch: Option<PlantSwitch>,
+}
+
+/// `LinearSystem` with `y = x`, whose `A` may switch once.
+struct Plant {
+    sys: LinearSystem,
+    switch: Option<(f64, Vec<f64>)>,
+}
+
+impl Dynamics for Plant {
+    fn state_dim(&self) -> usize {
+        self.sys.state_dim()
+    }
+    fn input_dim(&self) -> usize {
+        self.sys.input_dim()
+    }
+    fn output_dim(&self) -> usize {
+        self.sys.output_dim()
+    }
+    fn disturbance_dim(&self) -> usize {
+        self.sys.disturbance_dim()
+    }
+    fn drift(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
+        self.sys.drift(t, x, u, dx);
+        if let Some((at, a2)) = &self.switch {
+            if t >= *at {
+                // Replace A x by A₂ x.
+                let (n, a) = (x.len(), self.sys.a());
+                for i in 0..n {
+                    for j in 0..n {
+                        dx[i] += (a2[i * n + j] - a[i * n + j]) * x[j];
+                    }
+                }
+            }
+        }
+    }
+    fn output(&self, x: &[f64], y: &mut [f64]) {
+        self.sys.output(x, y);
+    }
+    fn disturbance_gain(&self) -> &[f64] {
+        self.sys.disturbance_gain()
+    }
 }
 
 impl LinearScenario {
+    /// The state matrix in force at time `t` (`A`, or the switched one).
+    #[must_use]
+    pub fn a_at(&self, t: f64) -> &[f64] {
+        match &self.switch {
+            Some(s) if t >= s.at => &s.a,
+            _ => &self.a,
+        }
+    }
+
     /// Simulate with Euler–Maruyama from `x = 0`. Every draw derives from `seed`.
     ///
     /// # Errors
     /// Any configuration error of the system, the noise, the dither or the simulation, and
-    /// [`DynamicsError::DimensionMismatch`] for a wrong `K_explore` length.
+    /// [`DynamicsError::DimensionMismatch`] for a wrong `K_explore`, noise gain or switched
+    /// `A` length; [`DynamicsError::Negative`] for a negative sensor noise.
     pub fn run(&self, seed: u64) -> Result<Trajectory, DynamicsError> {
         let (n, m) = (self.n, self.m);
+        let mismatch =
+            |name, expected, got| DynamicsError::DimensionMismatch { name, expected, got };
         if self.k_explore.len() != m * n {
-            return Err(DynamicsError::DimensionMismatch {
-                name: "k_explore",
-                expected: m * n,
-                got: self.k_explore.len(),
-            });
+            return Err(mismatch("k_explore", m * n, self.k_explore.len()));
         }
+        crate::non_negative("sensor_noise", self.sensor_noise)?;
         let eye: Vec<f64> = (0..n * n).map(|k| if k / n == k % n { 1.0 } else { 0.0 }).collect();
-        let sys = LinearSystem::new(n, m, n, n, self.a.clone(), self.b.clone(), eye.clone(), eye)?;
+        let e = self.noise_gain.clone().unwrap_or_else(|| eye.clone());
+        if e.is_empty() || e.len() % n != 0 {
+            return Err(mismatch("noise_gain", n, e.len()));
+        }
+        let q = e.len() / n;
+        let switch = match &self.switch {
+            Some(s) if s.a.len() != n * n => return Err(mismatch("switch.a", n * n, s.a.len())),
+            Some(s) => {
+                for &v in &s.a {
+                    crate::finite("switch.a", v)?;
+                }
+                Some((crate::finite("switch.at", s.at)?, s.a.clone()))
+            }
+            None => None,
+        };
+        let sys = LinearSystem::new(n, m, n, q, self.a.clone(), self.b.clone(), eye, e)?;
+        let plant = Plant { sys, switch };
         let cfg = SimConfig {
             dt: self.dt,
             steps: self.steps,
@@ -62,7 +152,7 @@ impl LinearScenario {
             noise_scaling: NoiseScaling::Sde,
         };
         let noise = DisturbanceConfig::stationary(self.noise);
-        let mut dist = (0..n)
+        let mut dist = (0..q)
             .map(|j| {
                 Disturbance::new(noise.clone(), seed.wrapping_mul(1000).wrapping_add(j as u64))
             })
@@ -72,10 +162,26 @@ impl LinearScenario {
             .map(|j| Dither::new(prbs, seed.wrapping_mul(1000).wrapping_add(500 + j as u64)))
             .collect::<Result<Vec<_>, _>>()?;
         let k = &self.k_explore;
-        simulate(&sys, &cfg, &mut dist, |t, y, u| {
-            for i in 0..m {
-                u[i] = (0..n).map(|j| k[i * n + j] * y[j]).sum::<f64>() + dithers[i].value(t);
+        let sigma_v = self.sensor_noise;
+        let mut sensor_rng = seeded_rng(seed.wrapping_mul(1000).wrapping_add(900));
+        let mut v = Vec::with_capacity(if sigma_v > 0.0 { (self.steps + 1) * n } else { 0 });
+        let mut y_meas = vec![0.0; n];
+        let mut traj = simulate(&plant, &cfg, &mut dist, |t, y, u| {
+            for (i, ym) in y_meas.iter_mut().enumerate() {
+                *ym = y[i];
+                if sigma_v > 0.0 {
+                    let z: f64 = StandardNormal.sample(&mut sensor_rng);
+                    v.push(sigma_v * z);
+                    *ym += sigma_v * z;
+                }
             }
-        })
+            for i in 0..m {
+                u[i] = (0..n).map(|j| k[i * n + j] * y_meas[j]).sum::<f64>() + dithers[i].value(t);
+            }
+        })?;
+        for (y, dv) in traj.y.iter_mut().zip(&v) {
+            *y += dv;
+        }
+        Ok(traj)
     }
 }

@@ -63,6 +63,9 @@
 //! ```
 
 pub mod linalg;
+mod windows;
+
+pub use windows::{InstrumentedWindows, WindowEstimate};
 
 use serde::{Deserialize, Serialize};
 
@@ -382,6 +385,9 @@ pub struct SlidingRegression {
     factor_valid: bool,
     // `1 / M`, so the per-sample estimate needs no division for it (checked on restore).
     inv_window: f64,
+    // Columns built since construction or the last reset.
+    #[serde(default)]
+    built: u64,
 }
 
 impl SlidingRegression {
@@ -431,6 +437,7 @@ impl SlidingRegression {
             dy1: vec![0.0; p],
             factor_valid: false,
             inv_window: 1.0 / mm as f64,
+            built: 0,
         })
     }
 
@@ -463,6 +470,14 @@ impl SlidingRegression {
         Some((&self.col_z[q * d..(q + 1) * d], &self.col_dy[q * p..(q + 1) * p]))
     }
 
+    /// Columns built since construction or the last [`reset`](Self::reset) (the window
+    /// clears itself on [`RegressionError::Overflow`]): a consumer of
+    /// [`newest_column`](Self::newest_column) compares it with the count it last saw.
+    #[must_use]
+    pub fn columns_built(&self) -> u64 {
+        self.built
+    }
+
     fn d(&self) -> usize {
         self.cfg.outputs + self.cfg.inputs
     }
@@ -470,6 +485,7 @@ impl SlidingRegression {
     /// Forget every sample and column (the configuration is kept).
     pub fn reset(&mut self) {
         self.factor_valid = false;
+        self.built = 0;
         self.hist_len = 0;
         self.zhist_len = 0;
         self.col_len = 0;
@@ -889,6 +905,7 @@ impl SlidingRegression {
     #[inline(always)]
     fn finish_column(&mut self, q: usize) -> Result<(), RegressionError> {
         let mm = self.cfg.window;
+        self.built += 1;
         self.col_next = next(q, mm);
         self.col_len = (self.col_len + 1).min(mm);
         self.since_refresh += 1;

@@ -286,6 +286,9 @@ pub(crate) struct CalibratedState {
     /// Columns until the next look, per window (0: look at the next full column).
     until_look: Vec<usize>,
     looks: Vec<u64>,
+    /// `t_ν(1 − δ)` per window for the upper bound (`ν` is fixed once a window is full;
+    /// NaN until the first look).
+    upper_t: Vec<f64>,
     latest: Vec<Option<WindowLook>>,
     est: WindowEstimate,
     sym: Vec<f64>,
@@ -316,6 +319,7 @@ impl CalibratedState {
             shares: lengths.iter().map(|&w| w as f64 / total).collect(),
             until_look: vec![0; lengths.len()],
             looks: vec![0; lengths.len()],
+            upper_t: vec![f64::NAN; lengths.len()],
             latest: vec![None; lengths.len()],
             windows,
             tmat,
@@ -399,7 +403,10 @@ impl CalibratedState {
         let nu = (self.est.columns / self.horizon) as f64 - d as f64;
         let risk = look_risk(self.cal.delta, self.shares[w], k);
         let radius = calibrated_radius(variance, nu, risk);
-        let upper = beta_hat + calibrated_radius(variance, nu, self.cal.delta);
+        if self.upper_t[w].is_nan() {
+            self.upper_t[w] = t_quantile(nu, self.cal.delta);
+        }
+        let upper = beta_hat + self.upper_t[w] * variance.max(0.0).sqrt();
         self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
             window: self.windows.windows()[w],
             look: k,
@@ -456,6 +463,14 @@ impl CalibratedState {
             && self.shares == fresh.shares
             && self.until_look.len() == fresh.until_look.len()
             && self.looks.len() == fresh.looks.len()
+            && self.upper_t.len() == fresh.upper_t.len()
+            && self.upper_t.iter().zip(self.windows.windows()).all(|(&t, &m)| {
+                t.is_nan()
+                    || t == t_quantile(
+                        (m / self.horizon) as f64 - (reg.outputs + reg.inputs) as f64,
+                        self.cal.delta,
+                    )
+            })
             && self.latest.len() == fresh.latest.len()
             && self.est.matches(&fresh.est)
             && self.sym.len() == fresh.sym.len()

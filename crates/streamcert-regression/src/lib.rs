@@ -380,9 +380,6 @@ pub struct SlidingRegression {
     hist_z1: Vec<f64>,
     // The newest single sample interval's output increment.
     dy1: Vec<f64>,
-    // `work` holds the Cholesky factor of the latest Ready ordinary estimate.
-    #[serde(default)]
-    factor_valid: bool,
     // `1 / M`, so the per-sample estimate needs no division for it (checked on restore).
     inv_window: f64,
     // Columns built since construction or the last reset.
@@ -435,7 +432,6 @@ impl SlidingRegression {
             dy: vec![0.0; p],
             hist_z1: vec![0.0; 2 * (h + 1) * d],
             dy1: vec![0.0; p],
-            factor_valid: false,
             inv_window: 1.0 / mm as f64,
             built: 0,
         })
@@ -484,7 +480,6 @@ impl SlidingRegression {
 
     /// Forget every sample and column (the configuration is kept).
     pub fn reset(&mut self) {
-        self.factor_valid = false;
         self.built = 0;
         self.hist_len = 0;
         self.zhist_len = 0;
@@ -718,56 +713,6 @@ impl SlidingRegression {
         let d = self.d();
         let b = self.hist_head;
         (self.hist_len >= 2).then_some((&self.hist_z1[b * d..(b + 1) * d], &self.dy1[..]))
-    }
-
-    /// `aᵀ (Z Zᵀ + λ I)⁻¹ a` for each column `a` of the `d × k` row-major matrix `t`, written
-    /// into `out` (`k × k`, row-major: `out = tᵀ (ZZᵀ + λI)⁻¹ t`), for the Gram matrix of the
-    /// latest [`estimate`](Self::estimate) (from its Cholesky factor; closed-form inverse when
-    /// `d = 2`). `scratch` needs `d · k` values. `O(d² k)`.
-    ///
-    /// Returns `false` (leaving `out` alone) unless the latest estimate was
-    /// [`EstimateStatus::Ready`] with [`Estimator::Ordinary`].
-    pub fn gram_inverse_form(
-        &self,
-        t: &[f64],
-        k: usize,
-        scratch: &mut [f64],
-        out: &mut [f64],
-    ) -> bool {
-        let d = self.d();
-        if self.cfg.estimator != Estimator::Ordinary || !self.factor_valid {
-            return false;
-        }
-        if d == 2 {
-            // `work` holds the ridged Gram matrix [a b; b c] (closed-form path of `estimate`).
-            let (a, b, c) = (self.work[0], self.work[1], self.work[3]);
-            let inv = 1.0 / (a * c - b * b);
-            for i in 0..k {
-                let (xi, yi) = (t[i], t[k + i]);
-                for j in 0..k {
-                    let (xj, yj) = (t[j], t[k + j]);
-                    out[i * k + j] = (c * xi * xj - b * (xi * yj + yi * xj) + a * yi * yj) * inv;
-                }
-            }
-            return true;
-        }
-        // y_j = L⁻¹ t_j, then out[i][j] = y_i · y_j.
-        for j in 0..k {
-            let y = &mut scratch[j * d..(j + 1) * d];
-            for r in 0..d {
-                let mut s = t[r * k + j];
-                for c in 0..r {
-                    s -= self.work[r * d + c] * y[c];
-                }
-                y[r] = s / self.work[r * d + r];
-            }
-        }
-        for i in 0..k {
-            for j in 0..k {
-                out[i * k + j] = (0..d).map(|r| scratch[i * d + r] * scratch[j * d + r]).sum();
-            }
-        }
-        true
     }
 
     /// Residual `out ← ΔY − Θ̂ Z` (length `p`) over the chosen interval, with the `Θ̂` of the
@@ -1024,7 +969,6 @@ impl SlidingRegression {
     #[inline(always)]
     fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
         let d = p + m;
-        self.factor_valid = false;
         let n = self.col_len;
         let mut out = Estimate {
             status: EstimateStatus::Ready,
@@ -1052,8 +996,7 @@ impl SlidingRegression {
         let ridge = self.cfg.ridge;
         match self.cfg.estimator {
             Estimator::Ordinary if d == 2 => {
-                // p = m = 1: the 2 × 2 system by its closed-form inverse; `work` keeps the
-                // ridged Gram matrix itself (read by `gram_inverse_form`).
+                // p = m = 1: the 2 × 2 system by its closed-form inverse.
                 let g = &self.g[..4];
                 let (a, b, c) = (g[0] + ridge, g[1], g[3] + ridge);
                 let det = a * c - b * b;
@@ -1067,8 +1010,6 @@ impl SlidingRegression {
                 let theta = &mut self.theta[..2];
                 theta[0] = (c * c0 - b * c1) * inv;
                 theta[1] = (a * c1 - b * c0) * inv;
-                self.work[..4].copy_from_slice(&[a, b, b, c]);
-                self.factor_valid = true;
             }
             Estimator::Ordinary => {
                 for i in 0..d {
@@ -1087,7 +1028,6 @@ impl SlidingRegression {
                     row.copy_from_slice(&self.c[i * d..(i + 1) * d]);
                     linalg::cholesky_solve_in_place(&self.work, d, row);
                 }
-                self.factor_valid = true;
             }
             Estimator::Instrumented => {
                 // Row i of Θ solves (Z Wᵀ + λI)ᵀ x = (ΔY Wᵀ)[i, :].

@@ -10,7 +10,8 @@
 //! ```
 //!
 //! Modes: `update` (`SlidingRegression::push`), `estimate` (push + estimate), `ambiguity`
-//! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein);
+//! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein),
+//! `calibrated` (`Certifier::push`, Gaussian + calibrated with its default four windows);
 //! all for `p = m = 1`, `M = 150`, `h = 5`, on the stream of `benches/regression.rs`.
 
 use std::hint::black_box;
@@ -18,7 +19,7 @@ use std::hint::black_box;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
-use streamcert::certificate::{Certifier, CertifierConfig};
+use streamcert::certificate::{Calibration, Certifier, CertifierConfig};
 use streamcert::regression::{RegressionConfig, SlidingRegression};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -39,6 +40,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cfg.ambiguity = Some(AmbiguityConfig::paper(150));
     let mut cert = Certifier::new(cfg)?;
+    // Gaussian + calibrated (δ = 0.01, four windows), as the bench's `gaussian_and_calibrated`.
+    let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
+    cal_cfg.calibration = Some(Calibration::new(0.01));
+    let mut cal = Certifier::new(cal_cfg)?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
     let mut t = 0.0;
@@ -61,6 +66,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "step" => {
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.cert_gauss, ev.cert_wass, ev.wass_gate.open));
+            }
+            "calibrated" => {
+                let ev = cal.push(black_box(t), y, u)?;
+                black_box((ev.cert_gauss, ev.cert_calibrated, ev.calibrated_gate.open));
             }
             other => return Err(format!("unknown mode {other}").into()),
         }

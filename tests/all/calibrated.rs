@@ -56,14 +56,15 @@ fn clopper_pearson_upper(k: usize, n: usize) -> f64 {
 }
 
 #[test]
-fn instrumented_windows_equal_a_batch_recompute_at_every_step() {
+fn instrumented_windows_equal_a_batch_recompute_at_every_column() {
     let windows = [20, 40, 80];
-    let lag = 2;
+    let (lag, intervals) = (2, 3);
     let scenario = LinearScenario { steps: 900, ..short_window_plant() };
     let traj = run_scenario(&scenario, 4);
     let mut reg = SlidingRegression::new(RegressionConfig::new(1, 1, 20, H, 0.0)).expect("valid");
-    let mut win = InstrumentedWindows::new(1, 1, H, lag, &windows).expect("valid");
+    let mut win = InstrumentedWindows::new(1, 1, H, lag, intervals, &windows).expect("valid");
     let mut cols: Vec<([f64; 2], f64)> = Vec::new();
+    let reach = intervals * H + lag;
     for i in 0..traj.len() {
         reg.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
         if reg.columns_built() as usize == cols.len() {
@@ -73,28 +74,31 @@ fn instrumented_windows_equal_a_batch_recompute_at_every_step() {
         win.push_column(z, dy);
         cols.push(([z[0], z[1]], dy[0]));
         for (w, &mw) in windows.iter().enumerate() {
-            // Instrumented column j pairs Z_j with W_j = Z_{j−h−L}.
-            let first = (H + lag).max(cols.len().saturating_sub(mw));
-            let mut want = [[0.0f64; 4]; 6];
-            for j in first..cols.len() {
+            // Column j pairs Z_j with W_j = [Z_{j−h−L}; Z_{j−2h−L}; Z_{j−3h−L}]; a window is
+            // the newest complete blocks of h instrumented columns.
+            let complete = cols.len().saturating_sub(reach) / H;
+            let end = reach + complete * H;
+            let first = end - complete.min(mw / H) * H;
+            let (mut n, mut cw, mut hm) = ([0.0f64; 12], [0.0f64; 6], [0.0f64; 36]);
+            for j in first..end {
                 let (z, dy) = cols[j];
-                let wv = cols[j - H - lag].0;
-                for a in 0..2 {
+                let wv: Vec<f64> = (1..=intervals).flat_map(|l| cols[j - l * H - lag].0).collect();
+                for a in 0..6 {
                     for b in 0..2 {
-                        want[0][a * 2 + b] += z[a] * wv[b];
-                        want[2][a * 2 + b] += wv[a] * wv[b];
-                        want[3][a * 2 + b] += z[a] * z[b];
+                        n[b * 6 + a] += z[b] * wv[a];
                     }
-                    want[1][a] += dy * wv[a];
-                    want[4][a] += dy * z[a];
+                    cw[a] += dy * wv[a];
+                    for b in 0..6 {
+                        hm[a * 6 + b] += wv[a] * wv[b];
+                    }
                 }
-                want[5][0] += dy * dy;
             }
-            assert_eq!(win.columns(w), cols.len().saturating_sub(H + lag).min(mw));
-            for (got, want) in win.sums(w).iter().zip(&want) {
-                for (g, e) in got.iter().zip(want) {
-                    assert!((g - e).abs() <= 1e-9 * (1.0 + e.abs()), "window {mw}: {g} vs {e}");
-                }
+            assert_eq!(win.columns(w), end - first);
+            let mut got = vec![0.0; 12 + 6 + 36];
+            win.window_sums(w, &mut got);
+            let want: Vec<f64> = n.iter().chain(&cw).chain(&hm).copied().collect();
+            for (g, e) in got.iter().zip(&want) {
+                assert!((g - e).abs() <= 1e-9 * (1.0 + e.abs()), "window {mw}: {g} vs {e}");
             }
         }
     }
@@ -102,8 +106,10 @@ fn instrumented_windows_equal_a_batch_recompute_at_every_step() {
 }
 
 /// `β̂_w − ρ_w` at every look against the formula rebuilt with nalgebra and statrs from the
-/// stored columns (batch): `Θ̂ = Cw N⁻¹`, `X = N⁻¹T`, scores `u_q = vec(sym(R_q (XᵀW_q)ᵀ))`,
-/// block sums over `h` columns, `Ω̂ = c_h B/(B − d) Σ S Sᵀ`, `ρ = t_ν(1 − δ_{w,k}) √λ_max(Ω̂)`.
+/// stored columns (batch): two-stage least squares with three instrument intervals,
+/// `Θ̂ = Cw Q A⁻¹`, `X = Q A⁻¹ T`, scores `u_q = vec(sym(R_q (XᵀW_q)ᵀ))`,
+/// block sums over `h` columns, `Ω̂ = c_h B/(B − d) Σ S Sᵀ`, `ρ = t_ν(1 − δ_{w,k}) √λ_max(Ω̂)`
+/// with `ν` the Welch–Satterthwaite effective number of blocks less `d`.
 #[test]
 fn every_look_matches_its_formula_for_two_outputs() {
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
@@ -117,7 +123,8 @@ fn every_look_matches_its_formula_for_two_outputs() {
         ..short_window_plant()
     };
     let mut cfg = calibrated(2, gain.clone(), 150, 1);
-    cfg.calibration = Some(Calibration { windows: 2, ..Calibration::new(0.01) });
+    cfg.calibration =
+        Some(Calibration { windows: 2, instrument_intervals: 3, ..Calibration::new(0.01) });
     let traj = run_scenario(&scenario, 8);
     let mut cert = Certifier::new(cfg).expect("valid");
     let mut cols: Vec<(nalgebra::DVector<f64>, nalgebra::DVector<f64>)> = Vec::new();
@@ -126,7 +133,7 @@ fn every_look_matches_its_formula_for_two_outputs() {
     let t_mat = nalgebra::DMatrix::from_fn(4, 2, |r, c| {
         if r < 2 { f64::from(u8::from(r == c)) } else { gain[(r - 2) * 2 + c] }
     });
-    let lag = 1;
+    let (lag, intervals) = (1, 3);
     for i in 0..traj.len() {
         cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
         if cert.regression().columns_built() as usize > cols.len() {
@@ -144,35 +151,56 @@ fn every_look_matches_its_formula_for_two_outputs() {
             last[w] = Some(look.look);
             let n = [150, 300][w];
             let window = &cols[cols.len() - n..];
-            let inst = |j: usize| &cols[cols.len() - n + j - H - lag].0;
-            let mut nm = nalgebra::DMatrix::identity(4, 4) * 1e-4;
-            let mut cw = nalgebra::DMatrix::zeros(2, 4);
+            let inst = |j: usize| {
+                let at = cols.len() - n + j;
+                let parts: Vec<f64> = (1..=intervals)
+                    .flat_map(|l| cols[at - l * H - lag].0.iter().copied().collect::<Vec<_>>())
+                    .collect();
+                nalgebra::DVector::from_vec(parts)
+            };
+            let k = 4 * intervals;
+            let mut nm = nalgebra::DMatrix::zeros(4, k);
+            let mut cw = nalgebra::DMatrix::zeros(2, k);
+            let mut hm = nalgebra::DMatrix::identity(k, k) * 1e-4;
             for (j, (z, dy)) in window.iter().enumerate() {
-                nm += z * inst(j).transpose();
-                cw += dy * inst(j).transpose();
+                let wv = inst(j);
+                nm += z * wv.transpose();
+                cw += dy * wv.transpose();
+                hm += &wv * wv.transpose();
             }
-            let ninv = nm.try_inverse().expect("invertible");
-            let theta = &cw * &ninv;
-            let x = &ninv * &t_mat;
+            // Two-stage least squares: Q = H⁻¹Nᵀ, A = N Q + λI, Θ̂ = Cw Q A⁻¹, X = Q A⁻¹ T.
+            let q = hm.try_inverse().expect("invertible") * nm.transpose();
+            let ainv = (&nm * &q + nalgebra::DMatrix::identity(4, 4) * 1e-4)
+                .try_inverse()
+                .expect("invertible");
+            let theta = &cw * &q * &ainv;
+            let x = &q * &ainv * &t_mat;
             let blocks = n / H;
             let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
+            let mut weights = Vec::new();
             for b in 0..blocks {
                 let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
+                let mut weight = 0.0;
                 for j in n - (blocks - b) * H..n - (blocks - b - 1) * H {
                     let (z, dy) = &window[j];
                     let r = dy - &theta * z;
                     let g = x.transpose() * inst(j);
+                    weight += g.norm_squared();
                     let u = &r * g.transpose();
                     sum += (&u + u.transpose()) * 0.5;
                 }
                 let v = nalgebra::DVector::from_column_slice(sum.as_slice());
                 omega += &v * v.transpose();
+                weights.push(weight);
             }
+            // Welch–Satterthwaite: effective blocks (Σw)²/Σw², at most B.
+            let ess =
+                weights.iter().sum::<f64>().powi(2) / weights.iter().map(|w| w * w).sum::<f64>();
             let c_h = 3.0 * 25.0 / (2.0 * 25.0 + 1.0);
             omega *= c_h * blocks as f64 / (blocks - 4) as f64;
             let j = &theta * &t_mat;
             let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
-            let nu = blocks as f64 - 4.0;
+            let nu = ess.min(blocks as f64) - 4.0;
             let share = [150.0 / 450.0, 300.0 / 450.0][w];
             let risk = look_risk(0.01, share, look.look);
             let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
@@ -304,4 +332,18 @@ fn the_instrumented_window_is_unbiased_under_sensor_noise() {
         o - 1.0 > 0.15 && o - 1.0 > 3.0 * (iv - 1.0).abs(),
         "ordinary {o} vs instrumented {iv}"
     );
+}
+
+proptest::proptest! {
+    /// The fast Student-t quantile against statrs' inverse incomplete beta.
+    #[test]
+    fn t_quantile_matches_statrs(nu in 1.0f64..2000.0, log_risk in -27.0f64..-0.95) {
+        let risk = log_risk.exp();
+        let want = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
+        let dist = StudentsT::new(0.0, 1.0, nu).expect("valid");
+        let got = streamcert::certificate::t_quantile(nu, risk);
+        // statrs' own inverse is accurate to about 1e-9; the defining property is S(t) = risk.
+        proptest::prop_assert!((got - want).abs() <= 1e-8 * want.abs(), "{got} vs {want}");
+        proptest::prop_assert!((dist.sf(got) / risk - 1.0).abs() <= 1e-8, "S({got}) vs {risk}");
+    }
 }

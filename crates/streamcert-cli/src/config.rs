@@ -60,6 +60,7 @@ delta = 0.01
 # max_window = 1200      # drop windows longer than this (default: none)
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
+# instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
 "#;
 
 #[derive(Debug, Deserialize)]
@@ -90,6 +91,8 @@ struct CalibrationSection {
     look_spacing: Option<f64>,
     #[serde(default)]
     instrument_lag: Option<usize>,
+    #[serde(default)]
+    instrument_intervals: Option<usize>,
 }
 
 fn default_delta() -> f64 {
@@ -105,6 +108,7 @@ impl Default for CalibrationSection {
             max_window: None,
             look_spacing: None,
             instrument_lag: None,
+            instrument_intervals: None,
         }
     }
 }
@@ -118,6 +122,7 @@ impl CalibrationSection {
             max_window: self.max_window.or(d.max_window),
             look_spacing: self.look_spacing.unwrap_or(d.look_spacing),
             instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
+            instrument_intervals: self.instrument_intervals.unwrap_or(d.instrument_intervals),
             ..d
         }
     }

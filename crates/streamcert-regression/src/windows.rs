@@ -3,30 +3,38 @@
 //!
 //! Columns `(Z_q, ΔY_q)` arrive one per sample (from [`SlidingRegression`](crate::SlidingRegression)
 //! or any other source with stride one sample and horizon `h`). Column `q` is paired with the
-//! instrument
+//! instrument made of the regressors of `J` earlier intervals,
 //!
 //! ```text
-//! W_q = Z_{q − h − L}        (the regressor of the interval that ends L samples before t_q)
+//! W_q = [Z_{q − h − L}; Z_{q − 2h − L}; …; Z_{q − Jh − L}]      (k = J (p + m) values)
 //! ```
 //!
 //! where `L >= 0` is the instrument lag. `W_q` is built from samples up to `t_q − L·dt` only,
 //! so it is uncorrelated with the error `E_q = ΔY_q − Θ Z_q` whenever that error involves
 //! noise after `t_q − L·dt` only: white process noise for any `L >= 0`, white sensor noise
-//! for `L >= 1` (the trapezoidal integral of `W_q` then ends before the sample `y(t_q)`
-//! that `ΔY_q` differences), sensor noise correlated over `c` samples for `L >= c`.
+//! for `L >= 1` (the trapezoidal integral of the newest instrument interval then ends before
+//! the sample `y(t_q)` that `ΔY_q` differences), sensor noise correlated over `c` samples for
+//! `L >= c`.
 //!
-//! For each window length `M_w` (ascending) the structure keeps, over the newest `M_w`
-//! instrumented columns, the sums
+//! With `J = 1` the estimator is the just-identified instrumental-variables estimator, whose
+//! finite-sample distribution has no moments (a ratio of correlated sums): its tails are much
+//! heavier than the normal approximation says. With `J >= 2` it is two-stage least squares,
+//! over-identified by `(J − 1)(p + m)` restrictions, which has finite moments up to that
+//! order; the calibrated certificate uses `J = 3` by default.
+//!
+//! Key design decision: the statistics live in *blocks* of `h` instrumented columns. Each
+//! block keeps its own sums
 //!
 //! ```text
-//! N = Σ Z Wᵀ,  Cw = Σ ΔY Wᵀ,  H = Σ W Wᵀ,  G = Σ Z Zᵀ,  C = Σ ΔY Zᵀ,  S = Σ ΔY ΔYᵀ
+//! N_j = Σ Z Wᵀ (d × k),   Cw_j = Σ ΔY Wᵀ (p × k),   H_j = Σ W Wᵀ (k × k)
 //! ```
 //!
-//! A column costs `(W + 1)` outer products (the new one once, one eviction per window):
-//! `O(W d²)`, no allocation, independent of the window lengths. Each window is recomputed
-//! exactly from the ring every `M_w` columns, so rounding drift stays bounded.
-//! [`InstrumentedWindows::estimate`] solves one window on demand (`O(d³)`), which the
-//! calibrated certificate does only at its looks.
+//! formed from zero, and a window of `M_w` columns is the newest `⌊M_w/h⌋` complete blocks.
+//! A column costs one outer product added to the open block (`O(k d + k²)`, no allocation,
+//! independent of the window lengths and of their number), nothing is ever subtracted, so
+//! there is no rounding drift to refresh. A window's sums, and the block sums of its scores
+//! that the variance needs, are formed only when the calibrated certificate looks
+//! ([`InstrumentedWindows::estimate`]), at block boundaries.
 
 use serde::{Deserialize, Serialize};
 
@@ -37,30 +45,19 @@ use crate::{RegressionError, linalg};
 struct Layout {
     p: usize,
     d: usize,
+    k: usize,
 }
 
 impl Layout {
-    /// `N` (d × d), `Cw` (p × d), `H` (d × d), `G` (d × d), `C` (p × d), `S` (p × p).
+    /// `N` (d × k), `Cw` (p × k), `H` (k × k).
     fn stride(self) -> usize {
-        3 * self.d * self.d + 2 * self.p * self.d + self.p * self.p
-    }
-    fn n(self) -> usize {
-        0
+        self.d * self.k + self.p * self.k + self.k * self.k
     }
     fn cw(self) -> usize {
-        self.d * self.d
+        self.d * self.k
     }
     fn h(self) -> usize {
-        self.cw() + self.p * self.d
-    }
-    fn g(self) -> usize {
-        self.h() + self.d * self.d
-    }
-    fn c(self) -> usize {
-        self.g() + self.d * self.d
-    }
-    fn s(self) -> usize {
-        self.c() + self.p * self.d
+        self.cw() + self.p * self.k
     }
 }
 
@@ -72,48 +69,66 @@ pub struct WindowEstimate {
     pub ready: bool,
     /// Instrumented columns in the window.
     pub columns: usize,
-    /// `Θ̂ = Cw (N + λI)⁻¹`, `p × d` row-major.
+    /// `Θ̂`, `p × d` row-major (see [`InstrumentedWindows::estimate`]).
     pub theta: Vec<f64>,
-    /// Long-run covariance of the score, `p² × p²` row-major (see
-    /// [`InstrumentedWindows::estimate`]): for a unit `v`, the variance of
+    /// Long-run covariance of the score, `p² × p²` row-major: for a unit `v`, the variance of
     /// `vᵀ(Θ̂ − Θ)T v` is estimated by `vec(vvᵀ)ᵀ Ω̂ vec(vvᵀ) <= λ_max(Ω̂)`.
     pub score_cov: Vec<f64>,
-    /// Pivot ratio of the LU factorisation of `N + λI` (instrument strength).
+    /// Pivot ratio of the LU factorisation of `A = N H⁻¹ Nᵀ + λI` (instrument strength).
     pub pivot_ratio: f64,
-    // Scratch: an LU factor, pivots, `X = (N + λI)⁻¹ T`, and one block's score sum.
+    /// Effective number of blocks `(Σ_j w_j)² / Σ_j w_j²`, `w_j = Σ_{q in block j} ‖g_q‖²`:
+    /// the Welch–Satterthwaite degrees of freedom of `Ω̂` when the blocks carry unequal weight
+    /// (at most `B`, equal to `B` for equal weights).
+    pub effective_blocks: f64,
+    // Scratch: Cholesky factor of H + λI, Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
+    // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
+    hfac: Vec<f64>,
+    q: Vec<f64>,
     lu: Vec<f64>,
     piv: Vec<usize>,
     x: Vec<f64>,
+    row: Vec<f64>,
     block: Vec<f64>,
+    sums: Vec<f64>,
 }
 
 impl WindowEstimate {
-    /// `true` when every buffer has the length of `other`'s (a restored state's check).
+    /// Buffers for `p` outputs, `m` inputs and `intervals` instrument intervals.
     #[must_use]
-    pub fn matches(&self, other: &Self) -> bool {
-        self.theta.len() == other.theta.len()
-            && self.score_cov.len() == other.score_cov.len()
-            && self.block.len() == other.block.len()
-            && self.lu.len() == other.lu.len()
-            && self.piv.len() == other.piv.len()
-            && self.x.len() == other.x.len()
-    }
-
-    /// Buffers for `p` outputs and `m` inputs.
-    #[must_use]
-    pub fn new(p: usize, m: usize) -> Self {
+    pub fn new(p: usize, m: usize, intervals: usize) -> Self {
         let d = p + m;
+        let k = intervals * d;
         Self {
             ready: false,
             columns: 0,
             theta: vec![0.0; p * d],
             score_cov: vec![0.0; p * p * p * p],
             pivot_ratio: 0.0,
+            effective_blocks: 0.0,
+            hfac: vec![0.0; k * k],
+            q: vec![0.0; d * k],
             lu: vec![0.0; d * d],
             piv: vec![0; d],
-            x: vec![0.0; d * p],
+            x: vec![0.0; p * k],
+            row: vec![0.0; k.max(d)],
             block: vec![0.0; p * p],
+            sums: vec![0.0; Layout { p, d, k }.stride()],
         }
+    }
+
+    /// `true` when every buffer has the length of `other`'s (a restored state's check).
+    #[must_use]
+    pub fn matches(&self, other: &Self) -> bool {
+        self.theta.len() == other.theta.len()
+            && self.score_cov.len() == other.score_cov.len()
+            && self.hfac.len() == other.hfac.len()
+            && self.q.len() == other.q.len()
+            && self.lu.len() == other.lu.len()
+            && self.piv.len() == other.piv.len()
+            && self.x.len() == other.x.len()
+            && self.row.len() == other.row.len()
+            && self.block.len() == other.block.len()
+            && self.sums.len() == other.sums.len()
     }
 }
 
@@ -124,34 +139,43 @@ pub struct InstrumentedWindows {
     m: usize,
     horizon: usize,
     lag: usize,
+    intervals: usize,
+    /// Window lengths in blocks of `h` columns, ascending.
     windows: Vec<usize>,
-    // Ring of the newest `cap` columns; `head` is the next slot, `len` the columns stored.
+    // Ring of the newest `J h + L + 1` columns (the instruments' reach); `head` is the next
+    // slot, `len` the columns stored.
     ring_z: Vec<f64>,
     ring_dy: Vec<f64>,
     head: usize,
     len: usize,
     // Instrumented columns seen since the last reset.
     usable: u64,
-    // Per window: sums (`stride` values each), columns counted, columns since refresh.
-    sums: Vec<f64>,
-    counts: Vec<usize>,
-    since_refresh: Vec<usize>,
-    // One column's contribution (scratch, meaningless between calls).
+    // The open block's sums and its column count.
+    open: Vec<f64>,
+    in_open: usize,
+    // Ring of complete blocks (`stride` values each); `block_head` is the next slot.
+    blocks: Vec<f64>,
+    block_head: usize,
+    block_len: usize,
+    // One column's instrument and contribution (scratch, meaningless between calls).
+    w: Vec<f64>,
     contrib: Vec<f64>,
 }
 
 impl InstrumentedWindows {
-    /// Windows `windows` (strictly ascending, each at least `p + m`) over columns of horizon
-    /// `horizon >= 1`, with instrument lag `lag` samples.
+    /// Windows `windows` in columns (strictly ascending after rounding down to whole blocks of
+    /// `h` columns, each at least `h (p + m + 1)` columns) over columns of horizon
+    /// `horizon >= 1`, with instrument lag `lag` samples and `intervals >= 1` instrument
+    /// intervals.
     ///
     /// # Errors
     /// [`RegressionError::InvalidConfig`] for empty or unsorted windows, a window shorter than
-    /// `p + m`, or `p`, `m`, `horizon` of zero.
+    /// `h (p + m + 1)`, or `p`, `m`, `horizon`, `intervals` of zero.
     ///
     /// ```
     /// use streamcert_regression::{InstrumentedWindows, RegressionError};
-    /// assert!(InstrumentedWindows::new(1, 1, 5, 1, &[150, 300]).is_ok());
-    /// let err = InstrumentedWindows::new(1, 1, 5, 1, &[300, 150]).unwrap_err();
+    /// assert!(InstrumentedWindows::new(1, 1, 5, 1, 3, &[150, 300]).is_ok());
+    /// let err = InstrumentedWindows::new(1, 1, 5, 1, 3, &[300, 150]).unwrap_err();
     /// assert!(matches!(err, RegressionError::InvalidConfig { field: "windows", .. }));
     /// ```
     pub fn new(
@@ -159,59 +183,93 @@ impl InstrumentedWindows {
         m: usize,
         horizon: usize,
         lag: usize,
+        intervals: usize,
         windows: &[usize],
     ) -> Result<Self, RegressionError> {
         let bad = |field: &'static str, reason: String| {
             Err(RegressionError::InvalidConfig { field, reason })
         };
-        if p == 0 || m == 0 || horizon == 0 {
-            return bad("outputs", "p, m and the horizon must be at least 1".into());
+        if p == 0 || m == 0 || horizon == 0 || intervals == 0 {
+            return bad("outputs", "p, m, the horizon and the intervals must be at least 1".into());
         }
         let d = p + m;
-        if windows.is_empty() || windows.windows(2).any(|w| w[0] >= w[1]) || windows[0] < d {
+        let blocks: Vec<usize> = windows.iter().map(|&w| w / horizon).collect();
+        if blocks.is_empty() || blocks.windows(2).any(|w| w[0] >= w[1]) || blocks[0] <= d {
             return bad(
                 "windows",
-                format!("must be strictly ascending and at least p + m = {d}, got {windows:?}"),
+                format!(
+                    "must be strictly ascending in whole blocks of h = {horizon} columns and at \
+                     least h (p + m + 1) = {} columns, got {windows:?}",
+                    horizon * (d + 1)
+                ),
             );
         }
-        let lay = Layout { p, d };
-        let cap = windows[windows.len() - 1] + horizon + lag + 1;
+        let lay = Layout { p, d, k: intervals * d };
+        let cap = intervals * horizon + lag + 1;
         Ok(Self {
             p,
             m,
             horizon,
             lag,
-            windows: windows.to_vec(),
+            intervals,
             ring_z: vec![0.0; cap * d],
             ring_dy: vec![0.0; cap * p],
             head: 0,
             len: 0,
             usable: 0,
-            sums: vec![0.0; windows.len() * lay.stride()],
-            counts: vec![0; windows.len()],
-            since_refresh: vec![0; windows.len()],
+            open: vec![0.0; lay.stride()],
+            in_open: 0,
+            blocks: vec![0.0; blocks[blocks.len() - 1] * lay.stride()],
+            block_head: 0,
+            block_len: 0,
+            windows: blocks,
+            w: vec![0.0; lay.k],
             contrib: vec![0.0; lay.stride()],
         })
     }
 
     fn layout(&self) -> Layout {
-        Layout { p: self.p, d: self.p + self.m }
+        let d = self.p + self.m;
+        Layout { p: self.p, d, k: self.intervals * d }
     }
 
     fn cap(&self) -> usize {
         self.ring_z.len() / (self.p + self.m)
     }
 
-    /// The window lengths.
-    #[must_use]
-    pub fn windows(&self) -> &[usize] {
-        &self.windows
+    fn block_cap(&self) -> usize {
+        self.windows[self.windows.len() - 1]
     }
 
-    /// Instrumented columns in window `w`.
+    /// The number of windows.
+    #[must_use]
+    pub fn count(&self) -> usize {
+        self.windows.len()
+    }
+
+    /// Length of window `w` in columns (a whole number of blocks of `h`).
+    #[must_use]
+    pub fn window(&self, w: usize) -> usize {
+        self.windows[w] * self.horizon
+    }
+
+    /// Instrumented columns in window `w` (complete blocks only).
     #[must_use]
     pub fn columns(&self, w: usize) -> usize {
-        self.counts[w]
+        self.block_len.min(self.windows[w]) * self.horizon
+    }
+
+    /// `true` when window `w` holds its full length.
+    #[must_use]
+    pub fn is_full(&self, w: usize) -> bool {
+        self.block_len >= self.windows[w]
+    }
+
+    /// Complete blocks since construction or the last [`reset`](Self::reset), capped at the
+    /// longest window.
+    #[must_use]
+    pub fn blocks(&self) -> usize {
+        self.block_len
     }
 
     /// Instrumented columns seen since construction or the last [`reset`](Self::reset).
@@ -220,20 +278,24 @@ impl InstrumentedWindows {
         self.usable
     }
 
-    /// The sums of window `w`, `(N, Cw, H, G, C, S)` row-major (full matrices).
-    #[must_use]
-    pub fn sums(&self, w: usize) -> [&[f64]; 6] {
-        let lay = self.layout();
-        let (p, d) = (lay.p, lay.d);
-        let s = &self.sums[w * lay.stride()..(w + 1) * lay.stride()];
-        [
-            &s[lay.n()..lay.n() + d * d],
-            &s[lay.cw()..lay.cw() + p * d],
-            &s[lay.h()..lay.h() + d * d],
-            &s[lay.g()..lay.g() + d * d],
-            &s[lay.c()..lay.c() + p * d],
-            &s[lay.s()..lay.s() + p * p],
-        ]
+    /// The sums of window `w`, `(N, Cw, H)` row-major (full matrices), into `out` (`3` slices
+    /// of `d k`, `p k` and `k²` values, concatenated). `O(B_w (d k + k²))`.
+    pub fn window_sums(&self, w: usize, out: &mut [f64]) {
+        let stride = self.layout().stride();
+        let out = &mut out[..stride];
+        out.fill(0.0);
+        for j in 0..self.windows[w].min(self.block_len) {
+            for (o, v) in out.iter_mut().zip(self.block(j)) {
+                *o += v;
+            }
+        }
+    }
+
+    /// The sums of the block `back` blocks before the newest complete one.
+    fn block(&self, back: usize) -> &[f64] {
+        let (stride, cap) = (self.layout().stride(), self.block_cap());
+        let b = (self.block_head + cap - 1 - back) % cap;
+        &self.blocks[b * stride..(b + 1) * stride]
     }
 
     /// Forget every column.
@@ -241,9 +303,10 @@ impl InstrumentedWindows {
         self.head = 0;
         self.len = 0;
         self.usable = 0;
-        self.sums.fill(0.0);
-        self.counts.fill(0);
-        self.since_refresh.fill(0);
+        self.open.fill(0.0);
+        self.in_open = 0;
+        self.block_head = 0;
+        self.block_len = 0;
     }
 
     /// Ring slot of the column `back` columns before the newest (`back < len`).
@@ -252,42 +315,47 @@ impl InstrumentedWindows {
         (self.head + cap - 1 - back) % cap
     }
 
-    /// Write the outer products of the column `back` columns before the newest (paired with
-    /// its instrument) into `contrib`.
-    fn contribution(&mut self, back: usize) {
+    /// Add the outer products of the newest column (paired with its instrument) to the open
+    /// block.
+    fn accumulate_newest(&mut self) {
         let lay = self.layout();
-        let (p, d) = (lay.p, lay.d);
-        let q = self.slot(back);
-        let r = self.slot(back + self.horizon + self.lag);
-        let z = &self.ring_z[q * d..(q + 1) * d];
-        let dy = &self.ring_dy[q * p..(q + 1) * p];
-        let w = &self.ring_z[r * d..(r + 1) * d];
+        let (p, d, k) = (lay.p, lay.d, lay.k);
+        for j in 0..self.intervals {
+            let r = self.slot((j + 1) * self.horizon + self.lag);
+            self.w[j * d..(j + 1) * d].copy_from_slice(&self.ring_z[r * d..(r + 1) * d]);
+        }
+        let q = self.slot(0);
+        let (z, dy, w) =
+            (&self.ring_z[q * d..(q + 1) * d], &self.ring_dy[q * p..(q + 1) * p], &self.w);
         let c = &mut self.contrib;
         for i in 0..d {
-            for j in 0..d {
-                c[lay.n() + i * d + j] = z[i] * w[j];
-                c[lay.h() + i * d + j] = w[i] * w[j];
-                c[lay.g() + i * d + j] = z[i] * z[j];
+            for j in 0..k {
+                c[i * k + j] = z[i] * w[j];
             }
         }
         for i in 0..p {
-            for j in 0..d {
-                c[lay.cw() + i * d + j] = dy[i] * w[j];
-                c[lay.c() + i * d + j] = dy[i] * z[j];
+            for j in 0..k {
+                c[lay.cw() + i * k + j] = dy[i] * w[j];
             }
-            for j in 0..p {
-                c[lay.s() + i * p + j] = dy[i] * dy[j];
+        }
+        for i in 0..k {
+            for j in 0..k {
+                c[lay.h() + i * k + j] = w[i] * w[j];
             }
+        }
+        for (o, v) in self.open.iter_mut().zip(&self.contrib) {
+            *o += v;
         }
     }
 
     /// Absorb the newest column `(z, dy)` (`z` of length `p + m`, `dy` of length `p`). No
-    /// allocation; `O(W d²)`.
+    /// allocation; `O(k d + k²)`. Returns `true` when the column completed a block (the
+    /// windows changed).
     ///
     /// # Panics
     /// If `z` or `dy` has the wrong length (the caller builds them from a validated
     /// configuration).
-    pub fn push_column(&mut self, z: &[f64], dy: &[f64]) {
+    pub fn push_column(&mut self, z: &[f64], dy: &[f64]) -> bool {
         let lay = self.layout();
         let (p, d, stride) = (lay.p, lay.d, lay.stride());
         let cap = self.cap();
@@ -296,71 +364,49 @@ impl InstrumentedWindows {
         self.ring_dy[k * p..(k + 1) * p].copy_from_slice(dy);
         self.head = if k + 1 == cap { 0 } else { k + 1 };
         self.len = (self.len + 1).min(cap);
-        if self.len <= self.horizon + self.lag {
-            return;
+        if self.len < cap {
+            return false;
         }
         self.usable += 1;
-        self.contribution(0);
-        for sums in self.sums.chunks_exact_mut(stride) {
-            for (s, c) in sums.iter_mut().zip(&self.contrib) {
-                *s += c;
-            }
+        self.accumulate_newest();
+        self.in_open += 1;
+        if self.in_open < self.horizon {
+            return false;
         }
-        for w in 0..self.windows.len() {
-            let mw = self.windows[w];
-            if self.counts[w] == mw {
-                // The column that leaves window w is mw columns before the newest.
-                self.contribution(mw);
-                let sums = &mut self.sums[w * stride..(w + 1) * stride];
-                for (s, c) in sums.iter_mut().zip(&self.contrib) {
-                    *s -= c;
-                }
-            } else {
-                self.counts[w] += 1;
-            }
-            self.since_refresh[w] += 1;
-            if self.since_refresh[w] >= mw {
-                self.refresh(w);
-            }
-        }
-    }
-
-    /// Recompute window `w`'s sums exactly from the ring (`O(M_w d²)`), oldest column first.
-    pub fn refresh(&mut self, w: usize) {
-        let stride = self.layout().stride();
-        self.sums[w * stride..(w + 1) * stride].fill(0.0);
-        for back in (0..self.counts[w]).rev() {
-            self.contribution(back);
-            for (s, c) in self.sums[w * stride..(w + 1) * stride].iter_mut().zip(&self.contrib) {
-                *s += c;
-            }
-        }
-        self.since_refresh[w] = 0;
+        let b = self.block_head;
+        self.blocks[b * stride..(b + 1) * stride].copy_from_slice(&self.open);
+        self.block_head = if b + 1 == self.block_cap() { 0 } else { b + 1 };
+        self.block_len = (self.block_len + 1).min(self.block_cap());
+        self.open.fill(0.0);
+        self.in_open = 0;
+        true
     }
 
     /// Solve window `w` with ridge `λ` for the candidate directions `t` (`d × p` row-major,
-    /// `T = [I_p; K]`) into `out` (built with this structure's `p`, `m`, `h`):
+    /// `T = [I_p; K]`) into `out` (built with this structure's `p`, `m`, `J`):
     ///
     /// ```text
-    /// Θ̂ = Cw (N + λI)⁻¹,   X = (N + λI)⁻¹ T,   R_q = ΔY_q − Θ̂ Z_q,   g_q = Xᵀ W_q
-    /// u_q = vec(sym(R_q g_qᵀ))           (p² values; Σ_q u_q over the errors is vec(sym ΔJ_cl))
-    /// S_j = Σ_{q in block j} u_q         (B = ⌊n/h⌋ blocks of h columns, the newest B h)
+    /// Q = (H + λI)⁻¹ Nᵀ,   A = N Q + λI,   Θ̂ = Cw Q A⁻¹         (two-stage least squares)
+    /// X = Q A⁻¹ T,   R_q = ΔY_q − Θ̂ Z_q,   g_q = Xᵀ W_q
+    /// u_q = vec(sym(R_q g_qᵀ))        (p² values; Σ_q over the errors is vec(sym ΔJ_cl))
+    /// S_j = Σ_{q in block j} u_q      (B = ⌊n/h⌋ blocks of h columns, the newest B h)
     /// Ω̂  = c_h · B/(B − d) · Σ_j S_j S_jᵀ,   c_h = 3h² / (2h² + 1)
     /// ```
     ///
-    /// Batch means: a block sum is a sum of `h` consecutive scores, so `Ω̂` is positive
+    /// With `J = 1` this is the instrumental-variables estimator `Θ̂ = Cw N⁻¹` (up to the
+    /// ridge). Batch means: a block sum is a sum of `h` consecutive scores, so `Ω̂` is positive
     /// semi-definite by construction and the blocks are nearly independent. Neighbouring
     /// blocks still share the overlap of their columns: for white process noise the column
     /// errors have the triangular autocorrelation `1 − |l|/h`, a block's variance is then
     /// `h² − (h² − 1)/3` and the long-run variance per block `h²` (in units of one column's),
     /// hence `c_h`. White sensor noise makes neighbouring blocks negatively correlated (a sample
     /// enters `ΔY_q` and `ΔY_{q+h}` with opposite signs), so there `Ω̂` is conservative.
-    /// `B/(B − d)` makes up for the `d` fitted directions (the scores sum to zero at `Θ̂`).
-    /// Cost `O(n (d p + p²) + B p⁴)`: the calibrated certificate calls it at its looks only.
+    /// `B/(B − d)` makes up for the `d` fitted directions. Cost `O(n (k d + p²) + B p⁴ + k³)`:
+    /// the calibrated certificate calls it at its looks only.
     ///
-    /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns, `N + λI` is
-    /// singular to working precision (pivot ratio at most `min_pivot_ratio`), or a value is not
-    /// finite.
+    /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns,
+    /// `H + λI` is not positive definite, `A` is singular to working precision (pivot ratio at
+    /// most `min_pivot_ratio`), or a value is not finite.
     pub fn estimate(
         &self,
         w: usize,
@@ -370,18 +416,38 @@ impl InstrumentedWindows {
         out: &mut WindowEstimate,
     ) {
         let lay = self.layout();
-        let (p, d) = (lay.p, lay.d);
-        let n = self.counts[w];
+        let (p, d, k) = (lay.p, lay.d, lay.k);
+        let blocks = self.windows[w].min(self.block_len);
         out.ready = false;
-        out.columns = n;
-        if n / self.horizon <= d {
+        out.columns = blocks * self.horizon;
+        if blocks <= d {
             return;
         }
-        let [nm, cw, ..] = self.sums(w);
-        // Θ̂ row i solves (N + λI)ᵀ θᵢᵀ = Cwᵢᵀ.
+        self.window_sums(w, &mut out.sums);
+        let (nm, rest) = out.sums.split_at(lay.cw());
+        let (cw, hm) = rest.split_at(p * k);
+        // Q = (H + λI)⁻¹ Nᵀ: row i of Q stored as column i of Nᵀ solved against H.
+        for i in 0..k {
+            for j in 0..k {
+                out.hfac[i * k + j] = hm[i * k + j] + if i == j { ridge } else { 0.0 };
+            }
+        }
+        if !linalg::cholesky_in_place(&mut out.hfac, k) {
+            return;
+        }
+        for i in 0..d {
+            let qi = &mut out.q[i * k..(i + 1) * k];
+            qi.copy_from_slice(&nm[i * k..(i + 1) * k]);
+            linalg::cholesky_solve_in_place(&out.hfac, k, qi);
+        }
+        // A = N Q + λI (d × d, symmetric): A[i][j] = N_i · Q_j.
         for i in 0..d {
             for j in 0..d {
-                out.lu[i * d + j] = nm[j * d + i] + if i == j { ridge } else { 0.0 };
+                let mut v = if i == j { ridge } else { 0.0 };
+                for a in 0..k {
+                    v += nm[i * k + a] * out.q[j * k + a];
+                }
+                out.lu[i * d + j] = v;
             }
         }
         let ratio = linalg::lu_in_place(&mut out.lu, d, &mut out.piv);
@@ -389,67 +455,89 @@ impl InstrumentedWindows {
         if !(ratio > min_pivot_ratio) {
             return;
         }
+        // Θ̂ row i: (Cw_i Qᵀ... ) — θ_i = (Cw_i Q̃) A⁻¹ with Q̃ = (H + λI)⁻¹Nᵀ, so
+        // θ_iᵀ = A⁻¹ (N (H + λI)⁻¹ Cw_iᵀ) since A is symmetric: r_a = Q_a · Cw_i.
         for i in 0..p {
-            let row = &mut out.theta[i * d..(i + 1) * d];
-            row.copy_from_slice(&cw[i * d..(i + 1) * d]);
+            let row = &mut out.row[..d];
+            for a in 0..d {
+                let mut v = 0.0;
+                for b in 0..k {
+                    v += out.q[a * k + b] * cw[i * k + b];
+                }
+                row[a] = v;
+            }
             linalg::lu_solve_in_place(&out.lu, d, &out.piv, row);
+            out.theta[i * d..(i + 1) * d].copy_from_slice(row);
         }
-        // X = (N + λI)⁻¹ T, one column at a time (stored as p rows of d).
-        for i in 0..d {
-            for j in 0..d {
-                out.lu[i * d + j] = nm[i * d + j] + if i == j { ridge } else { 0.0 };
-            }
-        }
-        if !(linalg::lu_in_place(&mut out.lu, d, &mut out.piv) > min_pivot_ratio) {
-            return;
-        }
+        // X = Q A⁻¹ T (k × p), stored as p rows of k: column j is Qᵀ-combination of A⁻¹ T_j.
         for j in 0..p {
-            let xj = &mut out.x[j * d..(j + 1) * d];
-            for i in 0..d {
-                xj[i] = t[i * p + j];
+            let row = &mut out.row[..d];
+            for a in 0..d {
+                row[a] = t[a * p + j];
             }
-            linalg::lu_solve_in_place(&out.lu, d, &out.piv, xj);
-        }
-        // Block sums of the scores over the newest B h columns, oldest first.
-        let (pp, h) = (p * p, self.horizon);
-        let blocks = n / h;
-        out.score_cov.fill(0.0);
-        out.block.fill(0.0);
-        for (k, back) in (0..blocks * h).rev().enumerate() {
-            let q = self.slot(back);
-            let r = self.slot(back + self.horizon + self.lag);
-            let z = &self.ring_z[q * d..(q + 1) * d];
-            let dy = &self.ring_dy[q * p..(q + 1) * p];
-            let wv = &self.ring_z[r * d..(r + 1) * d];
-            for i in 0..p {
-                let th = &out.theta[i * d..(i + 1) * d];
-                let mut ri = dy[i];
+            linalg::lu_solve_in_place(&out.lu, d, &out.piv, row);
+            for b in 0..k {
+                let mut v = 0.0;
                 for a in 0..d {
-                    ri -= th[a] * z[a];
+                    v += out.q[a * k + b] * out.row[a];
                 }
-                for j in 0..p {
-                    let xj = &out.x[j * d..(j + 1) * d];
-                    let mut gj = 0.0;
-                    for a in 0..d {
-                        gj += xj[a] * wv[a];
-                    }
-                    // Both halves of sym(R g ᵀ): entry (i, j) gets R_i g_j / 2 and entry (j, i)
-                    // the same.
-                    let v = 0.5 * ri * gj;
-                    out.block[i * p + j] += v;
-                    out.block[j * p + i] += v;
-                }
-            }
-            if (k + 1) % h == 0 {
-                for a in 0..pp {
-                    for b in 0..pp {
-                        out.score_cov[a * pp + b] += out.block[a] * out.block[b];
-                    }
-                }
-                out.block.fill(0.0);
+                out.x[j * k + b] = v;
             }
         }
-        let hf = h as f64;
+        // Block sums of the scores, S_j = sym((Cw_j − Θ̂ N_j) X), and weights
+        // w_j = tr(Xᵀ H_j X), from each block's sums (oldest first).
+        let pp = p * p;
+        out.score_cov.fill(0.0);
+        let (mut sum_w, mut sum_w2) = (0.0, 0.0);
+        for back in (0..blocks).rev() {
+            let blk = self.block(back);
+            let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..]);
+            for i in 0..p {
+                // r = Cw_j,i − θ_i N_j (k values), then r · X_col.
+                let th = &out.theta[i * d..(i + 1) * d];
+                for b in 0..k {
+                    let mut v = bcw[i * k + b];
+                    for a in 0..d {
+                        v -= th[a] * bn[a * k + b];
+                    }
+                    out.row[b] = v;
+                }
+                for jj in 0..p {
+                    let xj = &out.x[jj * k..(jj + 1) * k];
+                    let mut v = 0.0;
+                    for b in 0..k {
+                        v += out.row[b] * xj[b];
+                    }
+                    out.block[i * p + jj] = v;
+                }
+            }
+            for i in 0..p {
+                for jj in i + 1..p {
+                    let s = 0.5 * (out.block[i * p + jj] + out.block[jj * p + i]);
+                    out.block[i * p + jj] = s;
+                    out.block[jj * p + i] = s;
+                }
+            }
+            for a in 0..pp {
+                for b in 0..pp {
+                    out.score_cov[a * pp + b] += out.block[a] * out.block[b];
+                }
+            }
+            let mut weight = 0.0;
+            for xj in out.x.chunks_exact(k) {
+                for a in 0..k {
+                    let mut ha = 0.0;
+                    for b in 0..k {
+                        ha += bh[a * k + b] * xj[b];
+                    }
+                    weight += xj[a] * ha;
+                }
+            }
+            sum_w += weight;
+            sum_w2 += weight * weight;
+        }
+        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        let hf = self.horizon as f64;
         let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
         let scale = overlap * blocks as f64 / (blocks - d) as f64;
         for v in &mut out.score_cov {
@@ -463,31 +551,30 @@ impl InstrumentedWindows {
     /// # Errors
     /// [`RegressionError::CorruptState`] naming the first inconsistency.
     pub fn check_state(&self) -> Result<(), RegressionError> {
-        let fresh = Self::new(self.p, self.m, self.horizon, self.lag, &self.windows)?;
+        let columns: Vec<usize> = self.windows.iter().map(|&b| b * self.horizon).collect();
+        let fresh = Self::new(self.p, self.m, self.horizon, self.lag, self.intervals, &columns)?;
         let sizes_ok = self.ring_z.len() == fresh.ring_z.len()
             && self.ring_dy.len() == fresh.ring_dy.len()
-            && self.sums.len() == fresh.sums.len()
-            && self.counts.len() == fresh.counts.len()
-            && self.since_refresh.len() == fresh.since_refresh.len()
-            && self.contrib.len() == fresh.contrib.len();
+            && self.open.len() == fresh.open.len()
+            && self.blocks.len() == fresh.blocks.len()
+            && self.w.len() == fresh.w.len()
+            && self.contrib.len() == fresh.contrib.len()
+            && self.windows == fresh.windows;
         if !sizes_ok {
             return Err(RegressionError::CorruptState("window buffers have the wrong size".into()));
         }
-        let cap = self.cap();
-        let counters_ok = self.head < cap
-            && self.len <= cap
-            && self.counts.iter().zip(&self.windows).all(|(&c, &w)| c <= w)
-            && self.since_refresh.iter().zip(&self.windows).all(|(&c, &w)| c < w)
-            && self
-                .counts
-                .iter()
-                .zip(&self.windows)
-                .all(|(&c, &w)| c as u64 == self.usable.min(w as u64))
-            && self.len as u64 <= self.usable + (self.horizon + self.lag) as u64;
+        let counters_ok = self.head < self.cap()
+            && self.len <= self.cap()
+            && self.in_open < self.horizon
+            && self.block_head < self.block_cap()
+            && self.block_len <= self.block_cap()
+            && self.block_len as u64 <= self.usable / self.horizon as u64
+            && (self.usable == 0 || self.len == self.cap());
         if !counters_ok {
             return Err(RegressionError::CorruptState("window counters out of range".into()));
         }
-        if !self.ring_z.iter().chain(&self.ring_dy).chain(&self.sums).all(|v| v.is_finite()) {
+        let mut values = self.ring_z.iter().chain(&self.ring_dy).chain(&self.open);
+        if !values.all(|v| v.is_finite()) || !self.blocks.iter().all(|v| v.is_finite()) {
             return Err(RegressionError::CorruptState("non-finite value in the windows".into()));
         }
         Ok(())

@@ -157,9 +157,8 @@ pub struct InstrumentedWindows {
     blocks: Vec<f64>,
     block_head: usize,
     block_len: usize,
-    // One column's instrument and contribution (scratch, meaningless between calls).
+    // One column's instrument (scratch, meaningless between calls).
     w: Vec<f64>,
-    contrib: Vec<f64>,
 }
 
 impl InstrumentedWindows {
@@ -224,7 +223,6 @@ impl InstrumentedWindows {
             block_len: 0,
             windows: blocks,
             w: vec![0.0; lay.k],
-            contrib: vec![0.0; lay.stride()],
         })
     }
 
@@ -284,18 +282,26 @@ impl InstrumentedWindows {
         let stride = self.layout().stride();
         let out = &mut out[..stride];
         out.fill(0.0);
-        for j in 0..self.windows[w].min(self.block_len) {
-            for (o, v) in out.iter_mut().zip(self.block(j)) {
+        let (older, newer) = self.window_blocks(w);
+        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
+            for (o, v) in out.iter_mut().zip(blk) {
                 *o += v;
             }
         }
     }
 
-    /// The sums of the block `back` blocks before the newest complete one.
-    fn block(&self, back: usize) -> &[f64] {
+    /// The blocks of window `w` as two contiguous runs of the block ring, oldest first (the
+    /// first run is empty unless the window wraps around the ring).
+    fn window_blocks(&self, w: usize) -> (&[f64], &[f64]) {
         let (stride, cap) = (self.layout().stride(), self.block_cap());
-        let b = (self.block_head + cap - 1 - back) % cap;
-        &self.blocks[b * stride..(b + 1) * stride]
+        let count = self.windows[w].min(self.block_len);
+        let head = self.block_head;
+        if count <= head {
+            (&[], &self.blocks[(head - count) * stride..head * stride])
+        } else {
+            let wrap = count - head;
+            (&self.blocks[(cap - wrap) * stride..cap * stride], &self.blocks[..head * stride])
+        }
     }
 
     /// Forget every column.
@@ -309,42 +315,46 @@ impl InstrumentedWindows {
         self.block_len = 0;
     }
 
-    /// Ring slot of the column `back` columns before the newest (`back < len`).
-    fn slot(&self, back: usize) -> usize {
-        let cap = self.cap();
-        (self.head + cap - 1 - back) % cap
+    /// Add the outer products of the column `(z, dy)` in ring slot `q`, paired with its
+    /// instrument, to the open block.
+    #[inline]
+    fn accumulate(&mut self, q: usize, z: &[f64], dy: &[f64]) {
+        // Literal dimensions for p = m = 1 with one instrument interval let the compiler
+        // unroll the outer products.
+        if self.p == 1 && self.m == 1 && self.intervals == 1 {
+            self.accumulate_dims(q, z, dy, 1, 2, 2);
+        } else {
+            let lay = self.layout();
+            self.accumulate_dims(q, z, dy, lay.p, lay.d, lay.k);
+        }
     }
 
-    /// Add the outer products of the newest column (paired with its instrument) to the open
-    /// block.
-    fn accumulate_newest(&mut self) {
-        let lay = self.layout();
-        let (p, d, k) = (lay.p, lay.d, lay.k);
+    /// [`accumulate`](Self::accumulate) with the dimensions passed in.
+    #[inline(always)]
+    fn accumulate_dims(&mut self, q: usize, z: &[f64], dy: &[f64], p: usize, d: usize, k: usize) {
+        let cap = self.cap();
         for j in 0..self.intervals {
-            let r = self.slot((j + 1) * self.horizon + self.lag);
+            let back = (j + 1) * self.horizon + self.lag;
+            let r = if q >= back { q - back } else { q + cap - back };
             self.w[j * d..(j + 1) * d].copy_from_slice(&self.ring_z[r * d..(r + 1) * d]);
         }
-        let q = self.slot(0);
-        let (z, dy, w) =
-            (&self.ring_z[q * d..(q + 1) * d], &self.ring_dy[q * p..(q + 1) * p], &self.w);
-        let c = &mut self.contrib;
-        for i in 0..d {
-            for j in 0..k {
-                c[i * k + j] = z[i] * w[j];
+        let w = &self.w[..k];
+        let (n, rest) = self.open[..d * k + p * k + k * k].split_at_mut(d * k);
+        let (cw, h) = rest.split_at_mut(p * k);
+        for (row, &zi) in n.chunks_exact_mut(k).zip(&z[..d]) {
+            for (o, &wj) in row.iter_mut().zip(w) {
+                *o += zi * wj;
             }
         }
-        for i in 0..p {
-            for j in 0..k {
-                c[lay.cw() + i * k + j] = dy[i] * w[j];
+        for (row, &di) in cw.chunks_exact_mut(k).zip(&dy[..p]) {
+            for (o, &wj) in row.iter_mut().zip(w) {
+                *o += di * wj;
             }
         }
-        for i in 0..k {
-            for j in 0..k {
-                c[lay.h() + i * k + j] = w[i] * w[j];
+        for (row, &wi) in h.chunks_exact_mut(k).zip(w) {
+            for (o, &wj) in row.iter_mut().zip(w) {
+                *o += wi * wj;
             }
-        }
-        for (o, v) in self.open.iter_mut().zip(&self.contrib) {
-            *o += v;
         }
     }
 
@@ -368,7 +378,7 @@ impl InstrumentedWindows {
             return false;
         }
         self.usable += 1;
-        self.accumulate_newest();
+        self.accumulate(k, z, dy);
         self.in_open += 1;
         if self.in_open < self.horizon {
             return false;
@@ -484,47 +494,78 @@ impl InstrumentedWindows {
                 out.x[j * k + b] = v;
             }
         }
-        // Block sums of the scores, S_j = sym((Cw_j − Θ̂ N_j) X), and weights
-        // w_j = tr(Xᵀ H_j X), from each block's sums (oldest first).
+        let (sum_w, sum_w2) = if (p, d, k) == (1, 2, 2) {
+            self.block_scores(w, out, 1, 2, 2)
+        } else {
+            self.block_scores(w, out, p, d, k)
+        };
+        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        let hf = self.horizon as f64;
+        let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
+        let scale = overlap * blocks as f64 / (blocks - d) as f64;
+        for v in &mut out.score_cov {
+            *v *= scale;
+        }
+        out.ready = out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+    }
+
+    /// The block sums of the scores of window `w`, `S_j = sym((Cw_j − Θ̂ N_j) X)`, added as
+    /// `Σ_j vec(S_j) vec(S_j)ᵀ` into `out.score_cov`, and `(Σ_j w_j, Σ_j w_j²)` for the
+    /// weights `w_j = tr(Xᵀ H_j X)`, from each block's sums (oldest first). The dimensions are
+    /// passed in so that the call site for `p = m = 1`, `J = 1` gets unrolled code.
+    #[inline(always)]
+    fn block_scores(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        p: usize,
+        d: usize,
+        k: usize,
+    ) -> (f64, f64) {
+        let lay = Layout { p, d, k };
         let pp = p * p;
-        out.score_cov.fill(0.0);
+        let score_cov = &mut out.score_cov[..pp * pp];
+        score_cov.fill(0.0);
+        let (theta, x) = (&out.theta[..p * d], &out.x[..p * k]);
+        let (row, block) = (&mut out.row[..k], &mut out.block[..pp]);
         let (mut sum_w, mut sum_w2) = (0.0, 0.0);
-        for back in (0..blocks).rev() {
-            let blk = self.block(back);
-            let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..]);
+        let (older, newer) = self.window_blocks(w);
+        let stride = lay.stride();
+        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
+            let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
             for i in 0..p {
                 // r = Cw_j,i − θ_i N_j (k values), then r · X_col.
-                let th = &out.theta[i * d..(i + 1) * d];
+                let th = &theta[i * d..(i + 1) * d];
                 for b in 0..k {
                     let mut v = bcw[i * k + b];
                     for a in 0..d {
                         v -= th[a] * bn[a * k + b];
                     }
-                    out.row[b] = v;
+                    row[b] = v;
                 }
                 for jj in 0..p {
-                    let xj = &out.x[jj * k..(jj + 1) * k];
+                    let xj = &x[jj * k..(jj + 1) * k];
                     let mut v = 0.0;
                     for b in 0..k {
-                        v += out.row[b] * xj[b];
+                        v += row[b] * xj[b];
                     }
-                    out.block[i * p + jj] = v;
+                    block[i * p + jj] = v;
                 }
             }
             for i in 0..p {
                 for jj in i + 1..p {
-                    let s = 0.5 * (out.block[i * p + jj] + out.block[jj * p + i]);
-                    out.block[i * p + jj] = s;
-                    out.block[jj * p + i] = s;
+                    let s = 0.5 * (block[i * p + jj] + block[jj * p + i]);
+                    block[i * p + jj] = s;
+                    block[jj * p + i] = s;
                 }
             }
             for a in 0..pp {
                 for b in 0..pp {
-                    out.score_cov[a * pp + b] += out.block[a] * out.block[b];
+                    score_cov[a * pp + b] += block[a] * block[b];
                 }
             }
             let mut weight = 0.0;
-            for xj in out.x.chunks_exact(k) {
+            for xj in x.chunks_exact(k) {
                 for a in 0..k {
                     let mut ha = 0.0;
                     for b in 0..k {
@@ -536,14 +577,7 @@ impl InstrumentedWindows {
             sum_w += weight;
             sum_w2 += weight * weight;
         }
-        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
-        let hf = self.horizon as f64;
-        let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
-        let scale = overlap * blocks as f64 / (blocks - d) as f64;
-        for v in &mut out.score_cov {
-            *v *= scale;
-        }
-        out.ready = out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+        (sum_w, sum_w2)
     }
 
     /// Check a deserialised state against its own dimensions.
@@ -558,7 +592,6 @@ impl InstrumentedWindows {
             && self.open.len() == fresh.open.len()
             && self.blocks.len() == fresh.blocks.len()
             && self.w.len() == fresh.w.len()
-            && self.contrib.len() == fresh.contrib.len()
             && self.windows == fresh.windows;
         if !sizes_ok {
             return Err(RegressionError::CorruptState("window buffers have the wrong size".into()));

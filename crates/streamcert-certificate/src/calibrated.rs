@@ -22,7 +22,8 @@
 //! `β̂_w = −λ_max(sym Ĵ_cl)`, and
 //!
 //! ```text
-//! ρ_w = t_ν(1 − δ_{w,k}) · √λ_max(Ω̂),      β_cal,w = β̂_w − ρ_w
+//! ρ_w = t_ν(1 − δ_{w,k}) · √σ²_max,         β_cal,w = β̂_w − ρ_w
+//! σ²_max = λ_max(Ω̂)   (p = 2: the smaller of that and the rank-one bound)
 //! Ω̂  = batch-means covariance of the scores vec(sym(R_q g_qᵀ)) over blocks of h columns
 //! ν   = min(B, (Σ_j w_j)² / Σ_j w_j²) − (p + m),   w_j = Σ_{q in block j} ‖g_q‖²
 //! ```
@@ -33,11 +34,14 @@
 //!   `λ_max(sym J_cl) = v*ᵀ sym(Ĵ − ΔJ) v* <= λ_max(sym Ĵ) − v*ᵀ ΔJ v*`, so
 //!   `β̂ − β* <= −v*ᵀ ΔJ v*` exactly: a one-sided bound needs the tail of one scalar linear
 //!   functional of the noise, not of `‖ΔJ‖` (no `χ²_{p²}` quantile, no union over
-//!   directions). Its variance is `vec(vvᵀ)ᵀ Ω vec(vvᵀ) <= λ_max(Ω)` for every unit `v`.
+//!   directions). Its variance is `vec(vvᵀ)ᵀ Ω vec(vvᵀ) <= λ_max(Ω)` for every unit `v`; for
+//!   `p = 2` the maximum over rank-one `vvᵀ` is bounded directly
+//!   ([`rank_one_variance_bound`]).
 //! * Consecutive columns overlap in `h − 1` of their `h` sample intervals; batch means over
 //!   blocks of `h` columns with the overlap factor `3h²/(2h² + 1)` estimate the long-run
-//!   variance of the scores (exact for the triangular correlation of white process noise,
-//!   conservative for white sensor noise).
+//!   variance of the scores (exact in expectation for the triangular correlation of white
+//!   process noise, conservative for white sensor noise, positive semi-definite by
+//!   construction).
 //! * `Ω̂` is estimated from `B` block sums that carry unequal weight (a window where the
 //!   dither rarely switched has a few heavy blocks): the Welch–Satterthwaite effective number
 //!   of blocks, less one per unknown, is the Student-t's degrees of freedom. With the nominal
@@ -90,9 +94,11 @@
 //!   smallest accepted window ([`Calibration::min_window`]) keeps `B − (p + m) >= 2`, and
 //!   `cargo xtask validity` measures the false-opening rate down to it.
 
+mod quantile;
+
+pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quantile};
+
 use serde::{Deserialize, Serialize};
-use statrs::distribution::{ContinuousCDF, Normal, StudentsT};
-use statrs::function::gamma::ln_gamma;
 use streamcert_regression::{InstrumentedWindows, RegressionConfig, WindowEstimate, linalg};
 
 use crate::{CertifyError, NotCertified};
@@ -230,120 +236,6 @@ impl Calibration {
         }
         Ok(())
     }
-}
-
-/// `δ_{w,k} = δ · share · 1 / (k (k + 1))`: the risk of the `k`-th look (`k >= 1`) of a window
-/// with risk share `share`; summed over `k` it is `δ · share`.
-#[must_use]
-pub fn look_risk(delta: f64, share: f64, k: u64) -> f64 {
-    let k = k.max(1) as f64;
-    delta * share / (k * (k + 1.0))
-}
-
-/// The upper `1 − risk` quantile of Student's t with `nu` degrees of freedom (`+∞` for
-/// `nu < 1` or a risk outside `(0, 1)`).
-///
-/// For `nu >= 5` and `risk < 0.5`: the Cornish–Fisher expansion of `t` in the normal quantile
-/// (four terms) as a start, then Halley steps on `ln S(t) = ln risk`, where the survival
-/// function `S(t) = I_x(ν/2, 1/2) / 2`, `x = ν/(ν + t²)`, is the regularised incomplete beta
-/// function by its continued fraction (modified Lentz) with the log-beta constant computed
-/// once, until the relative step is below `1e-13`. Otherwise, and if that does not converge in
-/// eight steps, statrs' `inverse_cdf`. Checked against statrs in the tests.
-#[must_use]
-pub fn t_quantile(nu: f64, risk: f64) -> f64 {
-    if !(nu >= 1.0 && risk > 0.0 && risk < 1.0) {
-        return f64::INFINITY;
-    }
-    if nu >= 5.0 && risk < 0.5 {
-        if let Some(t) = t_quantile_halley(nu, risk) {
-            return t;
-        }
-    }
-    match StudentsT::new(0.0, 1.0, nu) {
-        // The lower tail is computed without the cancellation of `1 − risk`.
-        Ok(dist) => -dist.inverse_cdf(risk),
-        Err(_) => f64::INFINITY,
-    }
-}
-
-/// Halley iteration for [`t_quantile`]; `None` when it does not converge.
-fn t_quantile_halley(nu: f64, risk: f64) -> Option<f64> {
-    let z = -Normal::new(0.0, 1.0).ok()?.inverse_cdf(risk);
-    let (z2, g) = (z * z, 1.0 / nu);
-    let mut t = z
-        + g * z * (z2 + 1.0) / 4.0
-        + g * g * z * ((5.0 * z2 + 16.0) * z2 + 3.0) / 96.0
-        + g * g * g * z * (((3.0 * z2 + 19.0) * z2 + 17.0) * z2 - 15.0) / 384.0;
-    let a = 0.5 * nu;
-    // ln B(ν/2, 1/2) and the log density constant ln Γ((ν+1)/2) − ln Γ(ν/2) − ½ ln(νπ).
-    let (lg_a, lg_ab) = (ln_gamma(a), ln_gamma(a + 0.5));
-    let ln_beta = lg_a + 0.5 * std::f64::consts::PI.ln() - lg_ab;
-    let ln_norm = -ln_beta - 0.5 * nu.ln();
-    let target = risk.ln();
-    for _ in 0..8 {
-        let q = nu + t * t;
-        let x = nu / q;
-        // I_x(a, 1/2) with the continued fraction, valid for x < (a + 1)/(a + 1.5).
-        if !(t > 0.0 && x < (a + 1.0) / (a + 1.5)) {
-            return None;
-        }
-        let ln_front = a * x.ln() + 0.5 * (t * t / q).ln() - ln_beta;
-        let ln_sf = ln_front + beta_continued_fraction(a, 0.5, x)?.ln() - a.ln() - 2f64.ln();
-        let ln_pdf = ln_norm - 0.5 * (nu + 1.0) * (q / nu).ln();
-        // f(t) = ln S(t) − ln risk, f' = −pdf/S, f'' = −(pdf'/S) − (pdf/S)², pdf' = −pdf (ν+1) t/q.
-        let r = (ln_pdf - ln_sf).exp();
-        let f = ln_sf - target;
-        let (f1, f2) = (-r, r * (nu + 1.0) * t / q - r * r);
-        let step = 2.0 * f * f1 / (2.0 * f1 * f1 - f * f2);
-        t -= step;
-        if step.abs() <= 1e-13 * t.abs() {
-            return Some(t);
-        }
-    }
-    None
-}
-
-/// The continued fraction of the regularised incomplete beta function `I_x(a, b)` (modified
-/// Lentz, as in Numerical Recipes' `betacf`); `None` if it does not converge.
-fn beta_continued_fraction(a: f64, b: f64, x: f64) -> Option<f64> {
-    const TINY: f64 = 1e-300;
-    let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
-    let mut c = 1.0;
-    let mut d = 1.0 - qab * x / qap;
-    if d.abs() < TINY {
-        d = TINY;
-    }
-    d = 1.0 / d;
-    let mut h = d;
-    for m in 1..=300 {
-        let (m, m2) = (f64::from(m), f64::from(2 * m));
-        let aa = m * (b - m) * x / ((qam + m2) * (a + m2));
-        d = 1.0 + aa * d;
-        d = if d.abs() < TINY { TINY } else { d };
-        c = 1.0 + aa / c;
-        c = if c.abs() < TINY { TINY } else { c };
-        d = 1.0 / d;
-        h *= d * c;
-        let aa = -(a + m) * (qab + m) * x / ((a + m2) * (qap + m2));
-        d = 1.0 + aa * d;
-        d = if d.abs() < TINY { TINY } else { d };
-        c = 1.0 + aa / c;
-        c = if c.abs() < TINY { TINY } else { c };
-        d = 1.0 / d;
-        let del = d * c;
-        h *= del;
-        if (del - 1.0).abs() < 1e-15 {
-            return Some(h);
-        }
-    }
-    None
-}
-
-/// `ρ = t_ν(1 − risk) · √(λ_max(Ω̂))` (see the module docs): `variance` is `λ_max(Ω̂)`, the
-/// largest estimated variance of `vᵀ(Ĵ_cl − J_cl)v` over unit `v`.
-#[must_use]
-pub fn calibrated_radius(variance: f64, nu: f64, risk: f64) -> f64 {
-    t_quantile(nu, risk) * variance.max(0.0).sqrt()
 }
 
 /// One window's latest look.
@@ -529,7 +421,11 @@ impl CalibratedState {
             }
         }
         let beta_hat = -linalg::sym_eig_extremes(&self.sym, p, &mut self.eig_work).1;
-        let variance = linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
+        let mut variance =
+            linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
+        if p == 2 {
+            variance = variance.min(rank_one_variance_bound(&self.est.score_cov));
+        }
         let nu = self.est.effective_blocks.min((self.est.columns / self.horizon) as f64) - d as f64;
         let risk = look_risk(self.cal.delta, self.shares[w], k);
         let radius = calibrated_radius(variance, nu, risk);

@@ -1,0 +1,115 @@
+//! [`CertifierConfig`]: the regression, the candidate gain, the paper's constants, the gate,
+//! the bad-sample policy and the optional ambiguity model and calibration, validated once.
+
+use serde::{Deserialize, Serialize};
+use streamcert_ambiguity::AmbiguityConfig;
+use streamcert_regression::{RegressionConfig, ResidualSource};
+
+use crate::{Calibration, CertifyError};
+
+/// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
+/// wrong number of values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum BadSamplePolicy {
+    /// Return the error; the sample is not absorbed (default).
+    #[default]
+    Reject,
+    /// Count it, close the gates, and return evidence with [`NotCertified::SkippedSample`];
+    /// the sample is not absorbed (integrals then span the gap, using the actual times).
+    Skip,
+}
+
+/// Configuration of a [`Certifier`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CertifierConfig {
+    /// The regression window.
+    pub regression: RegressionConfig,
+    /// Candidate gain `K`, `m × p` row-major (`u = K y`).
+    pub gain: Vec<f64>,
+    /// Conservatism constant `c > 0` of eq. rho (the paper does not give its value).
+    pub conservatism: f64,
+    /// `β_margin` (finite).
+    pub margin: f64,
+    /// `n_s >= 1`: consecutive samples at or above the margin before the gate opens.
+    pub consecutive: usize,
+    /// Bad-sample policy (default [`BadSamplePolicy::Reject`]).
+    #[serde(default)]
+    pub bad_samples: BadSamplePolicy,
+    /// Ambiguity radius of Section III; `None` reports the Gaussian certificate only.
+    #[serde(default)]
+    pub ambiguity: Option<AmbiguityConfig>,
+    /// Residuals that feed `ε` (default [`ResidualSource::OneStep`]).
+    #[serde(default)]
+    pub residuals: ResidualSource,
+    /// Calibrated certificate beside the paper's (`None`: not computed).
+    #[serde(default)]
+    pub calibration: Option<Calibration>,
+}
+
+impl CertifierConfig {
+    /// Required quantities; `bad_samples` defaults to [`BadSamplePolicy::Reject`], no ambiguity
+    /// model (set [`ambiguity`](Self::ambiguity) for the Wasserstein certificate), one-step
+    /// residuals.
+    #[must_use]
+    pub fn new(
+        regression: RegressionConfig,
+        gain: Vec<f64>,
+        conservatism: f64,
+        margin: f64,
+        consecutive: usize,
+    ) -> Self {
+        Self {
+            regression,
+            gain,
+            conservatism,
+            margin,
+            consecutive,
+            bad_samples: BadSamplePolicy::Reject,
+            ambiguity: None,
+            residuals: ResidualSource::OneStep,
+            calibration: None,
+        }
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] or the regression's configuration error.
+    pub fn validate(&self) -> Result<(), CertifyError> {
+        self.regression.validate()?;
+        let (p, m) = (self.regression.outputs, self.regression.inputs);
+        let bad = |field: &'static str, reason: String| {
+            Err(CertifyError::InvalidConfig { field, reason })
+        };
+        if self.gain.len() != m * p {
+            return bad(
+                "gain",
+                format!("K must be m × p = {m} × {p} ({} values), got {}", m * p, self.gain.len()),
+            );
+        }
+        if let Some(v) = self.gain.iter().find(|v| !v.is_finite()) {
+            return bad("gain", format!("entries must be finite, got {v}"));
+        }
+        if !(self.conservatism > 0.0 && self.conservatism.is_finite()) {
+            return bad(
+                "conservatism",
+                format!("c must be finite and > 0, got {}", self.conservatism),
+            );
+        }
+        if !self.margin.is_finite() {
+            return bad("margin", format!("must be finite, got {}", self.margin));
+        }
+        if self.consecutive == 0 {
+            return bad("consecutive", "n_s must be at least 1".into());
+        }
+        if let Some(a) = &self.ambiguity {
+            a.validate()?;
+        }
+        if let Some(c) = &self.calibration {
+            c.validate(&self.regression, self.margin)?;
+        }
+        Ok(())
+    }
+}

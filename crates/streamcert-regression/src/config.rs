@@ -1,0 +1,142 @@
+//! Configuration of the sliding regression: the integral and estimator choices and
+//! [`RegressionConfig`] with its validation.
+
+use serde::{Deserialize, Serialize};
+
+use crate::RegressionError;
+
+/// How `∫ u dτ` is computed over each sample interval `[t_j, t_{j+1}]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputIntegral {
+    /// `(t_{j+1} − t_j)(u_j + u_{j+1}) / 2`, as in the paper (exact for a piecewise-linear
+    /// input).
+    Trapezoidal,
+    /// `(t_{j+1} − t_j) u_j`: exact when the input is held from `t_j` until `t_{j+1}` (a
+    /// digital controller with a zero-order hold, and the simulator of `streamcert-dynamics`).
+    ZeroOrderHold,
+}
+
+/// Which estimator solves the window.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Estimator {
+    /// Ridge least squares `Θ̂ = ΔY Zᵀ (Z Zᵀ + λ I)⁻¹` (paper).
+    Ordinary,
+    /// Instrumental variables with the previous interval's regressor as instrument (see the
+    /// crate docs for the assumption it needs).
+    Instrumented,
+}
+
+/// The interval over which [`SlidingRegression::residual`] evaluates `ΔY − Θ̂ Z`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualSource {
+    /// The newest sample interval `[t_{k−1}, t_k]` (one-step residual; keeps the tails of the
+    /// per-step noise). Default.
+    #[default]
+    OneStep,
+    /// The newest `h`-step column (nearly Gaussian by averaging `h` increments).
+    Horizon,
+}
+
+/// Configuration of a [`SlidingRegression`]. Build with [`RegressionConfig::new`] for the
+/// documented defaults, then adjust public fields.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RegressionConfig {
+    /// Number of outputs `p >= 1`.
+    pub outputs: usize,
+    /// Number of inputs `m >= 1`.
+    pub inputs: usize,
+    /// Window length `M` in columns (`M >= p + m`).
+    pub window: usize,
+    /// Horizon `h >= 1` in samples: each column spans `h` sample intervals.
+    pub horizon: usize,
+    /// Ridge `λ >= 0` (paper Table I: `1e-4`).
+    pub ridge: f64,
+    /// Warm-up: no estimate until the window holds this many columns (`p + m <= min_columns
+    /// <= M`). Default `M`.
+    pub min_columns: usize,
+    /// Input integral rule. Default [`InputIntegral::Trapezoidal`] (the paper).
+    pub input_integral: InputIntegral,
+    /// Estimator. Default [`Estimator::Ordinary`] (the paper).
+    pub estimator: Estimator,
+    /// Exact recompute of the statistics every this many columns (`1 <= refresh <= M`).
+    /// Default `M`.
+    pub refresh_period: usize,
+    /// Excitation test: the estimate is refused when `λ_min(ZZᵀ) <= ratio · λ_max(ZZᵀ)`
+    /// (and, for the instrumented estimator, when the LU pivot ratio of `Z Wᵀ` is below
+    /// it). Default `1e-9`; must lie in `[0, 1)`.
+    pub min_excitation_ratio: f64,
+}
+
+impl RegressionConfig {
+    /// Required quantities; every other field gets its documented default.
+    #[must_use]
+    pub fn new(outputs: usize, inputs: usize, window: usize, horizon: usize, ridge: f64) -> Self {
+        Self {
+            outputs,
+            inputs,
+            window,
+            horizon,
+            ridge,
+            min_columns: window,
+            input_integral: InputIntegral::Trapezoidal,
+            estimator: Estimator::Ordinary,
+            refresh_period: window,
+            min_excitation_ratio: 1e-9,
+        }
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`RegressionError::InvalidConfig`] naming the field and what is accepted.
+    pub fn validate(&self) -> Result<(), RegressionError> {
+        let bad = |field: &'static str, reason: String| {
+            Err(RegressionError::InvalidConfig { field, reason })
+        };
+        let d = self.outputs + self.inputs;
+        if self.outputs == 0 {
+            return bad("outputs", "must be at least 1".into());
+        }
+        if self.inputs == 0 {
+            return bad("inputs", "must be at least 1".into());
+        }
+        if self.horizon == 0 {
+            return bad("horizon", "must be at least 1 sample".into());
+        }
+        if self.window < d {
+            return bad("window", format!("must be at least p + m = {d}, got {}", self.window));
+        }
+        if !(self.ridge >= 0.0 && self.ridge.is_finite()) {
+            return bad("ridge", format!("must be finite and >= 0, got {}", self.ridge));
+        }
+        if self.min_columns < d || self.min_columns > self.window {
+            return bad(
+                "min_columns",
+                format!(
+                    "must lie in [p + m, window] = [{d}, {}], got {}",
+                    self.window, self.min_columns
+                ),
+            );
+        }
+        if self.refresh_period == 0 || self.refresh_period > self.window {
+            return bad(
+                "refresh_period",
+                format!(
+                    "must lie in [1, window] = [1, {}], got {}",
+                    self.window, self.refresh_period
+                ),
+            );
+        }
+        if !(0.0..1.0).contains(&self.min_excitation_ratio) {
+            return bad(
+                "min_excitation_ratio",
+                format!("must lie in [0, 1), got {}", self.min_excitation_ratio),
+            );
+        }
+        Ok(())
+    }
+}

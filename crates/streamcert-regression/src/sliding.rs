@@ -1,0 +1,249 @@
+//! [`SlidingRegression`]: the ring buffers of samples, interval regressors and columns, and the
+//! sufficient statistics over the window (see the crate docs). The per-sample update lives in
+//! `update.rs`, the solve in `solve.rs`, the consistency check of a restored state in
+//! `checkpoint.rs`.
+
+mod checkpoint;
+mod solve;
+mod update;
+
+use serde::{Deserialize, Serialize};
+
+use crate::{RegressionConfig, RegressionError, linalg};
+
+/// Element-wise copy; for the short slices of the hot path a plain loop beats a `memcpy` call.
+#[inline]
+pub(crate) fn copy(dst: &mut [f64], src: &[f64]) {
+    for (d, s) in dst.iter_mut().zip(src) {
+        *d = *s;
+    }
+}
+
+/// `true` when all three values are finite: `0 · x` is `±0` for a finite `x` and NaN for an
+/// infinite or NaN one, so one comparison tests the three (the per-sample path's check).
+#[inline(always)]
+pub(crate) fn finite3(a: f64, b: f64, c: f64) -> bool {
+    0.0 * a + 0.0 * b + 0.0 * c == 0.0
+}
+
+/// `(i + 1) mod cap` without a division.
+#[inline]
+pub(crate) fn next(i: usize, cap: usize) -> usize {
+    if i + 1 == cap { 0 } else { i + 1 }
+}
+
+/// The streaming estimator. See the crate docs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SlidingRegression {
+    cfg: RegressionConfig,
+    // Sample history, ring of h + 1 samples; `hist_head` is the newest.
+    hist_t: Vec<f64>,
+    hist_y: Vec<f64>,
+    hist_u: Vec<f64>,
+    hist_len: usize,
+    hist_head: usize,
+    // Regressor history for instruments, ring of h + 1 columns.
+    zhist: Vec<f64>,
+    zhist_len: usize,
+    zhist_head: usize,
+    // Column ring of M; `col_next` is where the next column goes.
+    col_z: Vec<f64>,
+    col_dy: Vec<f64>,
+    col_w: Vec<f64>,
+    col_len: usize,
+    col_next: usize,
+    // Sufficient statistics.
+    g: Vec<f64>,
+    c: Vec<f64>,
+    s: Vec<f64>,
+    gw: Vec<f64>,
+    cw: Vec<f64>,
+    since_refresh: usize,
+    // Output and scratch.
+    theta: Vec<f64>,
+    work: Vec<f64>,
+    work2: Vec<f64>,
+    piv: Vec<usize>,
+    z: Vec<f64>,
+    dy: Vec<f64>,
+    // Per-interval regressors `[∫y; ∫u]` over `[t_{j−1}, t_j]`, ring aligned with the sample
+    // ring (slot `j` holds the interval that ends at sample slot `j`), stored twice (slots `j`
+    // and `j + h + 1`) so the `h` intervals of a column are one contiguous run.
+    hist_z1: Vec<f64>,
+    // The newest single sample interval's output increment.
+    dy1: Vec<f64>,
+    // `1 / M`, so the per-sample estimate needs no division for it (checked on restore).
+    inv_window: f64,
+    // Columns built since construction or the last reset.
+    #[serde(default)]
+    built: u64,
+}
+
+impl SlidingRegression {
+    /// Validate the configuration and reserve every buffer.
+    ///
+    /// # Errors
+    /// [`RegressionError::InvalidConfig`].
+    ///
+    /// ```
+    /// use streamcert_regression::{RegressionConfig, RegressionError, SlidingRegression};
+    /// assert!(SlidingRegression::new(RegressionConfig::new(1, 1, 150, 5, 1e-4)).is_ok());
+    /// let err = SlidingRegression::new(RegressionConfig::new(1, 1, 150, 0, 1e-4)).unwrap_err();
+    /// assert!(matches!(err, RegressionError::InvalidConfig { field: "horizon", .. }));
+    /// ```
+    pub fn new(cfg: RegressionConfig) -> Result<Self, RegressionError> {
+        cfg.validate()?;
+        let (p, m, h, mm) = (cfg.outputs, cfg.inputs, cfg.horizon, cfg.window);
+        let d = p + m;
+        Ok(Self {
+            cfg,
+            hist_t: vec![0.0; h + 1],
+            hist_y: vec![0.0; (h + 1) * p],
+            hist_u: vec![0.0; (h + 1) * m],
+            hist_len: 0,
+            hist_head: 0,
+            zhist: vec![0.0; (h + 1) * d],
+            zhist_len: 0,
+            zhist_head: 0,
+            col_z: vec![0.0; mm * d],
+            col_dy: vec![0.0; mm * p],
+            col_w: vec![0.0; mm * d],
+            col_len: 0,
+            col_next: 0,
+            g: vec![0.0; d * d],
+            c: vec![0.0; p * d],
+            s: vec![0.0; p * p],
+            gw: vec![0.0; d * d],
+            cw: vec![0.0; p * d],
+            since_refresh: 0,
+            theta: vec![0.0; p * d],
+            work: vec![0.0; linalg::eig_work_len(d)],
+            work2: vec![0.0; d * d],
+            piv: vec![0; d],
+            z: vec![0.0; d],
+            dy: vec![0.0; p],
+            hist_z1: vec![0.0; 2 * (h + 1) * d],
+            dy1: vec![0.0; p],
+            inv_window: 1.0 / mm as f64,
+            built: 0,
+        })
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &RegressionConfig {
+        &self.cfg
+    }
+
+    /// Number of columns in the window.
+    #[must_use]
+    pub fn columns(&self) -> usize {
+        self.col_len
+    }
+
+    /// Time of the newest accepted sample, if any.
+    #[must_use]
+    pub fn last_time(&self) -> Option<f64> {
+        (self.hist_len > 0).then(|| self.hist_t[self.hist_head])
+    }
+
+    /// The newest column `(Z_q, ΔY_q)`, if any.
+    #[must_use]
+    pub fn newest_column(&self) -> Option<(&[f64], &[f64])> {
+        if self.col_len == 0 {
+            return None;
+        }
+        let (d, p, mm) = (self.d(), self.cfg.outputs, self.cfg.window);
+        let q = (self.col_next + mm - 1) % mm;
+        Some((&self.col_z[q * d..(q + 1) * d], &self.col_dy[q * p..(q + 1) * p]))
+    }
+
+    /// Columns built since construction or the last [`reset`](Self::reset) (the window
+    /// clears itself on [`RegressionError::Overflow`]): a consumer of
+    /// [`newest_column`](Self::newest_column) compares it with the count it last saw.
+    #[must_use]
+    pub fn columns_built(&self) -> u64 {
+        self.built
+    }
+
+    fn d(&self) -> usize {
+        self.cfg.outputs + self.cfg.inputs
+    }
+
+    /// Forget every sample and column (the configuration is kept).
+    pub fn reset(&mut self) {
+        self.built = 0;
+        self.hist_len = 0;
+        self.zhist_len = 0;
+        self.col_len = 0;
+        self.col_next = 0;
+        self.since_refresh = 0;
+        for v in [&mut self.g, &mut self.c, &mut self.s, &mut self.gw, &mut self.cw] {
+            v.fill(0.0);
+        }
+    }
+
+    /// Check a sample without absorbing it.
+    ///
+    /// # Errors
+    /// [`RegressionError::DimensionMismatch`], [`RegressionError::NonFinite`],
+    /// [`RegressionError::NonIncreasingTime`].
+    #[inline]
+    pub fn check_sample(&self, t: f64, y: &[f64], u: &[f64]) -> Result<(), RegressionError> {
+        let (p, m) = (self.cfg.outputs, self.cfg.inputs);
+        if y.len() != p {
+            return Err(RegressionError::DimensionMismatch {
+                field: "y",
+                expected: p,
+                got: y.len(),
+            });
+        }
+        if u.len() != m {
+            return Err(RegressionError::DimensionMismatch {
+                field: "u",
+                expected: m,
+                got: u.len(),
+            });
+        }
+        if !t.is_finite() {
+            return Err(RegressionError::NonFinite { field: "t", index: 0, value: t });
+        }
+        // One branch for the common all-finite case; the search for the culprit only runs on
+        // a bad sample.
+        let mut finite = true;
+        for x in y.iter().chain(u) {
+            finite &= x.is_finite();
+        }
+        if !finite {
+            for (field, v) in [("y", y), ("u", u)] {
+                if let Some((index, &value)) = v.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                    return Err(RegressionError::NonFinite { field, index, value });
+                }
+            }
+        }
+        if let Some(previous) = self.last_time() {
+            if t <= previous {
+                return Err(RegressionError::NonIncreasingTime { previous, got: t });
+            }
+        }
+        Ok(())
+    }
+
+    /// The newest single sample interval `(Z, ΔY)` (one-step regressor and output increment),
+    /// once two samples are in. Its residual `ΔY − Θ̂ Z` keeps the tails of the per-step
+    /// noise that the `h`-step columns average away.
+    #[must_use]
+    #[inline]
+    pub fn newest_interval(&self) -> Option<(&[f64], &[f64])> {
+        let d = self.d();
+        let b = self.hist_head;
+        (self.hist_len >= 2).then_some((&self.hist_z1[b * d..(b + 1) * d], &self.dy1[..]))
+    }
+
+    /// The sufficient statistics `(G = ZZᵀ, C = ΔY Zᵀ, S = ΔY ΔYᵀ)`, row-major; only the
+    /// upper triangles of `G` and `S` are maintained.
+    #[must_use]
+    pub fn statistics(&self) -> (&[f64], &[f64], &[f64]) {
+        (&self.g, &self.c, &self.s)
+    }
+}

@@ -1,0 +1,153 @@
+//! Solving the window: `Θ̂` by Cholesky (ridge) or LU (instrumented), the excitation test,
+//! `RMS(R)` from the sufficient statistics, and residuals over the newest interval or column.
+
+use super::SlidingRegression;
+use crate::{Estimate, EstimateStatus, Estimator, ResidualSource, linalg};
+
+impl SlidingRegression {
+    /// Residual `out ← ΔY − Θ̂ Z` (length `p`) over the chosen interval, with the `Θ̂` of the
+    /// latest [`estimate`](Self::estimate) call. Call it only after an estimate whose status
+    /// was [`EstimateStatus::Ready`]; returns `false` (leaving `out` alone) when the interval
+    /// does not exist yet.
+    #[inline(always)]
+    pub fn residual(&self, source: ResidualSource, out: &mut [f64]) -> bool {
+        // Literal dimensions for the paper's p = m = 1 let the compiler unroll the products.
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+            self.residual_dims(source, out, 1, 2)
+        } else {
+            self.residual_dims(source, out, self.cfg.outputs, self.d())
+        }
+    }
+
+    /// [`residual`](Self::residual) with the configured dimensions passed in.
+    #[inline(always)]
+    fn residual_dims(&self, source: ResidualSource, out: &mut [f64], p: usize, d: usize) -> bool {
+        let pair = match source {
+            ResidualSource::OneStep => self.newest_interval(),
+            ResidualSource::Horizon => self.newest_column(),
+        };
+        let Some((z, dy)) = pair else { return false };
+        let (z, dy, theta) = (&z[..d], &dy[..p], &self.theta[..p * d]);
+        for ((o, &dyi), th) in out[..p].iter_mut().zip(dy).zip(theta.chunks_exact(d)) {
+            *o = dyi - th.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
+        }
+        true
+    }
+
+    /// Solve the window: `O(d³ + p d²)`, no allocation.
+    #[inline]
+    pub fn estimate(&mut self) -> Estimate<'_> {
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+            self.estimate_dims(1, 1)
+        } else {
+            self.estimate_dims(self.cfg.outputs, self.cfg.inputs)
+        }
+    }
+
+    /// [`estimate`](Self::estimate) with the dimensions passed in (literals at the call site
+    /// for the paper's `p = m = 1` unroll the small kernels).
+    #[inline(always)]
+    fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
+        let d = p + m;
+        let n = self.col_len;
+        let mut out = Estimate {
+            status: EstimateStatus::Ready,
+            theta: &[],
+            outputs: p,
+            inputs: m,
+            rms_residual: f64::NAN,
+            gram_lambda_min: f64::NAN,
+            gram_lambda_max: f64::NAN,
+            columns: n,
+        };
+        if n < self.cfg.min_columns {
+            out.status = EstimateStatus::WarmingUp { columns: n, needed: self.cfg.min_columns };
+            return out;
+        }
+        let (lo, hi) = linalg::sym_eig_extremes(&self.g, d, &mut self.work);
+        // Full window (every sample after warm-up): the reciprocal computed at construction.
+        let inv_n = if n == self.cfg.window { self.inv_window } else { 1.0 / n as f64 };
+        out.gram_lambda_min = lo * inv_n;
+        out.gram_lambda_max = hi * inv_n;
+        if !(hi > 0.0 && lo > self.cfg.min_excitation_ratio * hi) {
+            out.status = EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
+            return out;
+        }
+        let ridge = self.cfg.ridge;
+        match self.cfg.estimator {
+            Estimator::Ordinary if d == 2 => {
+                // p = m = 1: the 2 × 2 system by its closed-form inverse.
+                let g = &self.g[..4];
+                let (a, b, c) = (g[0] + ridge, g[1], g[3] + ridge);
+                let det = a * c - b * b;
+                if !(a > 0.0 && det > 0.0 && det.is_finite()) {
+                    out.status =
+                        EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
+                    return out;
+                }
+                let inv = 1.0 / det;
+                let (c0, c1) = (self.c[0], self.c[1]);
+                let theta = &mut self.theta[..2];
+                theta[0] = (c * c0 - b * c1) * inv;
+                theta[1] = (a * c1 - b * c0) * inv;
+            }
+            Estimator::Ordinary => {
+                for i in 0..d {
+                    for j in 0..d {
+                        let v = if j >= i { self.g[i * d + j] } else { self.g[j * d + i] };
+                        self.work[i * d + j] = v + if i == j { ridge } else { 0.0 };
+                    }
+                }
+                if !linalg::cholesky_in_place(&mut self.work, d) {
+                    out.status =
+                        EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
+                    return out;
+                }
+                for i in 0..p {
+                    let row = &mut self.theta[i * d..(i + 1) * d];
+                    row.copy_from_slice(&self.c[i * d..(i + 1) * d]);
+                    linalg::cholesky_solve_in_place(&self.work, d, row);
+                }
+            }
+            Estimator::Instrumented => {
+                // Row i of Θ solves (Z Wᵀ + λI)ᵀ x = (ΔY Wᵀ)[i, :].
+                for i in 0..d {
+                    for j in 0..d {
+                        self.work2[i * d + j] =
+                            self.gw[j * d + i] + if i == j { ridge } else { 0.0 };
+                    }
+                }
+                let ratio = linalg::lu_in_place(&mut self.work2, d, &mut self.piv);
+                if !(ratio > self.cfg.min_excitation_ratio) {
+                    out.status = EstimateStatus::WeakInstruments { pivot_ratio: ratio };
+                    return out;
+                }
+                for i in 0..p {
+                    let row = &mut self.theta[i * d..(i + 1) * d];
+                    row.copy_from_slice(&self.cw[i * d..(i + 1) * d]);
+                    linalg::lu_solve_in_place(&self.work2, d, &self.piv, row);
+                }
+            }
+        }
+        // RSS = tr S − 2 tr(Θ Cᵀ) + tr(Θ G Θᵀ).
+        // Views of exactly the configured lengths (no bounds checks with literal p, d).
+        let (g, c, s) = (&self.g[..d * d], &self.c[..p * d], &self.s[..p * p]);
+        let mut rss = 0.0;
+        for i in 0..p {
+            rss += s[i * p + i];
+            let th = &self.theta[i * d..(i + 1) * d];
+            let mut quad = 0.0;
+            for a in 0..d {
+                rss -= 2.0 * th[a] * c[i * d + a];
+                quad += th[a] * th[a] * g[a * d + a];
+                for b in a + 1..d {
+                    quad += 2.0 * th[a] * th[b] * g[a * d + b];
+                }
+            }
+            rss += quad;
+        }
+        out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
+        out.theta = &self.theta;
+        out
+    }
+}

@@ -11,7 +11,8 @@
 //!
 //! Modes: `update` (`SlidingRegression::push`), `estimate` (push + estimate), `ambiguity`
 //! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein),
-//! `calibrated` (`Certifier::push`, Gaussian + calibrated with its default four windows);
+//! `gaussian` (`Certifier::push`, the paper's Gaussian certificate only), `calibrated`
+//! (`Certifier::push`, Gaussian + calibrated with its default four windows);
 //! all for `p = m = 1`, `M = 150`, `h = 5`, on the stream of `benches/regression.rs`.
 
 use std::hint::black_box;
@@ -44,6 +45,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cal_cfg.calibration = Some(Calibration::new(0.01));
     let mut cal = Certifier::new(cal_cfg)?;
+    let mut gauss = Certifier::new(CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10))?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
     let mut t = 0.0;
@@ -66,6 +68,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "step" => {
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.cert_gauss, ev.cert_wass, ev.wass_gate.open));
+            }
+            "gaussian" => {
+                let ev = gauss.push(black_box(t), y, u)?;
+                black_box((ev.cert_gauss, ev.gauss_gate.open));
             }
             "calibrated" => {
                 let ev = cal.push(black_box(t), y, u)?;

@@ -154,7 +154,7 @@ impl SlidingRegression {
             return None;
         }
         let (d, p, mm) = (self.d(), self.cfg.outputs, self.cfg.window);
-        let q = (self.col_next + mm - 1) % mm;
+        let q = if self.col_next == 0 { mm - 1 } else { self.col_next - 1 };
         Some((&self.col_z[q * d..(q + 1) * d], &self.col_dy[q * p..(q + 1) * p]))
     }
 

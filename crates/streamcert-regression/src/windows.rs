@@ -94,6 +94,17 @@ pub struct InstrumentedWindows {
     w: Vec<f64>,
 }
 
+/// `out = Σ` of the `S`-value blocks in `older` then `newer`.
+fn sum_runs<const S: usize>(older: &[f64], newer: &[f64], out: &mut [f64]) {
+    let mut acc = [0.0f64; S];
+    for blk in older.chunks_exact(S).chain(newer.chunks_exact(S)) {
+        for (a, v) in acc.iter_mut().zip(blk) {
+            *a += v;
+        }
+    }
+    out.copy_from_slice(&acc);
+}
+
 impl InstrumentedWindows {
     /// Windows `windows` in columns (strictly ascending after rounding down to whole blocks of
     /// `h` columns, each at least `h (p + m + 1)` columns) over columns of horizon
@@ -213,12 +224,17 @@ impl InstrumentedWindows {
     /// of `d k`, `p k` and `k²` values, concatenated). `O(B_w (d k + k²))`.
     pub fn window_sums(&self, w: usize, out: &mut [f64]) {
         let stride = self.layout().stride();
-        let out = &mut out[..stride];
-        out.fill(0.0);
         let (older, newer) = self.window_blocks(w);
-        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
-            for (o, v) in out.iter_mut().zip(blk) {
-                *o += v;
+        if stride == 10 {
+            // p = m = 1, J = 1: a fixed-size accumulator the compiler keeps in registers.
+            sum_runs::<10>(older, newer, &mut out[..10]);
+        } else {
+            let out = &mut out[..stride];
+            out.fill(0.0);
+            for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
+                for (o, v) in out.iter_mut().zip(blk) {
+                    *o += v;
+                }
             }
         }
     }
@@ -249,20 +265,7 @@ impl InstrumentedWindows {
     }
 
     /// Add the outer products of the column `(z, dy)` in ring slot `q`, paired with its
-    /// instrument, to the open block.
-    #[inline]
-    fn accumulate(&mut self, q: usize, z: &[f64], dy: &[f64]) {
-        // Literal dimensions for p = m = 1 with one instrument interval let the compiler
-        // unroll the outer products.
-        if self.p == 1 && self.m == 1 && self.intervals == 1 {
-            self.accumulate_dims(q, z, dy, 1, 2, 2);
-        } else {
-            let lay = self.layout();
-            self.accumulate_dims(q, z, dy, lay.p, lay.d, lay.k);
-        }
-    }
-
-    /// [`accumulate`](Self::accumulate) with the dimensions passed in.
+    /// instrument, to the open block (dimensions passed in, literal for `p = m = 1`).
     #[inline(always)]
     fn accumulate_dims(&mut self, q: usize, z: &[f64], dy: &[f64], p: usize, d: usize, k: usize) {
         let cap = self.cap();
@@ -299,28 +302,48 @@ impl InstrumentedWindows {
     /// If `z` or `dy` has the wrong length (the caller builds them from a validated
     /// configuration).
     pub fn push_column(&mut self, z: &[f64], dy: &[f64]) -> bool {
-        let lay = self.layout();
-        let (p, d, stride) = (lay.p, lay.d, lay.stride());
+        // Literal dimensions for p = m = 1 with one instrument interval.
+        if self.p == 1 && self.m == 1 && self.intervals == 1 {
+            self.push_column_dims(z, dy, 1, 2, 2)
+        } else {
+            let lay = self.layout();
+            self.push_column_dims(z, dy, lay.p, lay.d, lay.k)
+        }
+    }
+
+    /// [`push_column`](Self::push_column) with the dimensions passed in.
+    #[inline(always)]
+    fn push_column_dims(&mut self, z: &[f64], dy: &[f64], p: usize, d: usize, k: usize) -> bool {
+        let stride = Layout { p, d, k }.stride();
         let cap = self.cap();
-        let k = self.head;
-        self.ring_z[k * d..(k + 1) * d].copy_from_slice(z);
-        self.ring_dy[k * p..(k + 1) * p].copy_from_slice(dy);
+        let k_slot = self.head;
+        for (o, v) in self.ring_z[k_slot * d..(k_slot + 1) * d].iter_mut().zip(&z[..d]) {
+            *o = *v;
+        }
+        for (o, v) in self.ring_dy[k_slot * p..(k_slot + 1) * p].iter_mut().zip(&dy[..p]) {
+            *o = *v;
+        }
+        let k = k_slot;
         self.head = if k + 1 == cap { 0 } else { k + 1 };
         self.len = (self.len + 1).min(cap);
         if self.len < cap {
             return false;
         }
         self.usable += 1;
-        self.accumulate(k, z, dy);
+        self.accumulate_dims(k, z, dy, p, d, Layout { p, d, k: self.intervals * d }.k);
         self.in_open += 1;
         if self.in_open < self.horizon {
             return false;
         }
         let b = self.block_head;
-        self.blocks[b * stride..(b + 1) * stride].copy_from_slice(&self.open);
+        let (open, blocks) =
+            (&mut self.open[..stride], &mut self.blocks[b * stride..(b + 1) * stride]);
+        for (o, v) in blocks.iter_mut().zip(open.iter_mut()) {
+            *o = *v;
+            *v = 0.0;
+        }
         self.block_head = if b + 1 == self.block_cap() { 0 } else { b + 1 };
         self.block_len = (self.block_len + 1).min(self.block_cap());
-        self.open.fill(0.0);
         self.in_open = 0;
         true
     }

@@ -1,6 +1,6 @@
 //! `streamcert certify`: one output row per sample, flushed, and a summary.
 
-use std::io::{BufRead, Write};
+use std::io::{Read, Write};
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
@@ -174,7 +174,7 @@ fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> 
 ///
 /// # Errors
 /// The first malformed row under [`BadRows::Stop`], input/output errors, checkpoint errors.
-pub fn run<R: BufRead, W: Write>(
+pub fn run<R: Read, W: Write>(
     cfg: &Config,
     input: R,
     input_name: &str,

@@ -16,6 +16,7 @@ time = "t"
 # Measured outputs y (p columns) and applied inputs u (m columns), by header name.
 outputs = ["y_b"]
 inputs = ["u_b"]
+# delimiter = ","       # or ";" or "tab"; quoted fields and a byte-order mark are accepted
 
 [controller]
 # Candidate gain K (m rows of p values): the controller u = K y to be certified.
@@ -128,7 +129,7 @@ impl CalibrationSection {
     }
 }
 
-/// Input column names.
+/// Input column names and the field delimiter.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Columns {
@@ -138,6 +139,30 @@ pub struct Columns {
     pub outputs: Vec<String>,
     /// Input columns.
     pub inputs: Vec<String>,
+    /// Field delimiter: `","` (default), `";"`, or `"\t"` / `"tab"`.
+    #[serde(default = "default_delimiter")]
+    pub delimiter: String,
+}
+
+fn default_delimiter() -> String {
+    ",".into()
+}
+
+impl Columns {
+    /// The delimiter as one byte.
+    ///
+    /// # Errors
+    /// A message naming the accepted delimiters.
+    pub fn delimiter_byte(&self) -> Result<u8, String> {
+        match self.delimiter.as_str() {
+            "," => Ok(b','),
+            ";" => Ok(b';'),
+            "\t" | "\\t" | "tab" => Ok(b'\t'),
+            other => Err(format!(
+                "`delimiter` must be \",\", \";\" or \"tab\" (or \"\\t\"), got {other:?}"
+            )),
+        }
+    }
 }
 
 #[derive(Debug, Deserialize)]
@@ -154,8 +179,9 @@ struct Certificate {
     consecutive: usize,
 }
 
+/// Every key may be omitted: the defaults are the ones `--print-config` shows.
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 struct Regression {
     window: usize,
     horizon: usize,
@@ -178,8 +204,9 @@ impl Default for Regression {
     }
 }
 
+/// Every key may be omitted: the defaults are the ones `--print-config` shows (the paper's).
 #[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 struct Ambiguity {
     enabled: bool,
     tail_window: usize,
@@ -275,6 +302,7 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     if f.calibration.enabled {
         certifier.calibration = Some(f.calibration.calibration());
     }
+    f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
     Ok(Config { columns: f.columns, certifier })
@@ -302,6 +330,21 @@ mod tests {
         let risk =
             DEFAULT_CONFIG.replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 1.5");
         assert!(parse(&risk, "x").unwrap_err().to_string().contains("delta"));
+    }
+
+    #[test]
+    fn keys_with_documented_defaults_may_be_omitted() {
+        let full = parse(DEFAULT_CONFIG, "default").unwrap();
+        let start = DEFAULT_CONFIG.find("[ambiguity]").unwrap();
+        let end = DEFAULT_CONFIG.find("[calibration]").unwrap();
+        let short = format!(
+            "{}[ambiguity]\nenabled = true\n\n{}",
+            &DEFAULT_CONFIG[..start],
+            &DEFAULT_CONFIG[end..]
+        );
+        let short = short.replace("window = 150 ", "# window = 150 ");
+        let parsed = parse(&short, "short").unwrap();
+        assert_eq!(parsed.certifier, full.certifier);
     }
 
     #[test]

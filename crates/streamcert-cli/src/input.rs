@@ -1,7 +1,7 @@
 //! Streaming CSV input with a header, read line by line so a live feed works, and an error for
 //! every malformed row that names the file, the line and the column.
 
-use std::io::BufRead;
+use std::io::Read;
 
 use crate::config::Columns;
 use crate::{CliError, RowError};
@@ -20,9 +20,13 @@ pub struct Sample {
 }
 
 /// Reads samples from a CSV stream whose header names the configured columns (other columns
-/// are ignored).
+/// are ignored), with the csv crate: a configurable delimiter, quoted fields, a UTF-8
+/// byte-order mark before the header (as spreadsheets write it), surrounding spaces trimmed,
+/// blank lines skipped. One [`csv::ByteRecord`] is reused for every row, and a row is parsed
+/// as soon as its line is complete, so a live feed works.
 pub struct SampleReader<R> {
-    reader: R,
+    reader: csv::Reader<R>,
+    record: csv::ByteRecord,
     file: String,
     line: u64,
     header: Vec<String>,
@@ -30,43 +34,53 @@ pub struct SampleReader<R> {
     outputs: Vec<usize>,
     inputs: Vec<usize>,
     last_time: Option<f64>,
-    buf: String,
 }
 
-fn split(line: &str) -> Vec<&str> {
-    line.trim_end_matches(['\n', '\r']).split(',').map(str::trim).collect()
+/// A read error of the csv crate as the CLI's error: I/O as [`CliError::Io`], anything else
+/// as [`CliError::Input`].
+fn read_error(file: &str, e: csv::Error) -> CliError {
+    let message = e.to_string();
+    match e.into_kind() {
+        csv::ErrorKind::Io(io) => CliError::io(format!("reading {file}"), io),
+        _ => CliError::Input { file: file.into(), message },
+    }
 }
 
-impl<R: BufRead> SampleReader<R> {
+impl<R: Read> SampleReader<R> {
     /// Read the header and map the configured columns.
     ///
     /// # Errors
-    /// [`CliError::Input`] for an empty input or a header that lacks a configured column;
-    /// [`CliError::Io`] for a read error.
-    pub fn new(mut reader: R, file: &str, columns: &Columns) -> Result<Self, CliError> {
-        let mut buf = String::new();
-        let mut line = 0;
-        loop {
-            buf.clear();
-            let n = reader
-                .read_line(&mut buf)
-                .map_err(|e| CliError::io(format!("reading {file}"), e))?;
-            line += 1;
-            if n == 0 {
-                return Err(CliError::Input {
-                    file: file.into(),
-                    message: "empty input: expected a header line naming the columns".into(),
-                });
-            }
-            if !buf.trim().is_empty() {
-                break;
-            }
+    /// [`CliError::Input`] for an empty input, an unreadable header, a header that lacks a
+    /// configured column or an invalid delimiter; [`CliError::Io`] for a read error.
+    pub fn new(reader: R, file: &str, columns: &Columns) -> Result<Self, CliError> {
+        let input = |message: String| CliError::Input { file: file.into(), message };
+        let delimiter = columns.delimiter_byte().map_err(input)?;
+        let mut reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .delimiter(delimiter)
+            .trim(csv::Trim::All)
+            .from_reader(reader);
+        let mut record = csv::ByteRecord::new();
+        let read = reader.read_byte_record(&mut record).map_err(|e| read_error(file, e))?;
+        if !read {
+            return Err(input("empty input: expected a header line naming the columns".into()));
         }
-        let header: Vec<String> = split(&buf).into_iter().map(String::from).collect();
+        let line = record.position().map_or(1, csv::Position::line);
+        let mut header = Vec::with_capacity(record.len());
+        for field in &record {
+            let name = std::str::from_utf8(field)
+                .map_err(|_| input(format!("line {line}: the header is not valid UTF-8")))?;
+            header.push(name.trim_start_matches('\u{feff}').trim().to_string());
+        }
         let find = |name: &str| {
             header.iter().position(|h| h == name).ok_or_else(|| CliError::Input {
                 file: file.into(),
-                message: format!("line {line}: the header has no column `{name}` (configured in [columns]); found {header:?}"),
+                message: format!(
+                    "line {line}: the header has no column `{name}` (configured in [columns]); \
+                     found {header:?} (delimiter {:?})",
+                    columns.delimiter
+                ),
             })
         };
         let time = find(&columns.time)?;
@@ -74,6 +88,7 @@ impl<R: BufRead> SampleReader<R> {
         let inputs = columns.inputs.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         Ok(Self {
             reader,
+            record,
             file: file.into(),
             line,
             header,
@@ -81,7 +96,6 @@ impl<R: BufRead> SampleReader<R> {
             outputs,
             inputs,
             last_time: None,
-            buf,
         })
     }
 
@@ -94,52 +108,63 @@ impl<R: BufRead> SampleReader<R> {
     /// (which is then consumed; the reader can continue). Blank lines are ignored.
     ///
     /// # Errors
-    /// I/O errors are reported as [`CliError::Io`] inside `Some(Err)`.
+    /// I/O errors are reported as [`CliError::Io`] inside `Some(Err)`, unreadable CSV (an
+    /// unterminated quote) as a row error.
     pub fn next_into(&mut self, s: &mut Sample) -> Option<Result<(), CliError>> {
-        loop {
-            self.buf.clear();
-            match self.reader.read_line(&mut self.buf) {
-                Ok(0) => return None,
-                Ok(_) => {}
-                Err(e) => return Some(Err(CliError::io(format!("reading {}", self.file), e))),
+        match self.reader.read_byte_record(&mut self.record) {
+            Ok(false) => None,
+            Ok(true) => {
+                self.line = self.record.position().map_or(self.line + 1, csv::Position::line);
+                Some(self.parse(s).map_err(CliError::Row))
             }
-            self.line += 1;
-            if !self.buf.trim().is_empty() {
-                break;
+            Err(e) => {
+                if let Some(p) = e.position() {
+                    self.line = p.line();
+                }
+                Some(Err(match e.kind() {
+                    csv::ErrorKind::Io(_) => read_error(&self.file, e),
+                    _ => CliError::Row(RowError {
+                        file: self.file.clone(),
+                        line: self.line,
+                        column: None,
+                        message: format!("unreadable CSV: {e}"),
+                    }),
+                }))
             }
         }
-        Some(self.parse(s).map_err(CliError::Row))
     }
 
     fn parse(&mut self, s: &mut Sample) -> Result<(), RowError> {
-        let fields = split(&self.buf);
+        let record = &self.record;
         let err = |column: Option<&str>, message: String| RowError {
             file: self.file.clone(),
             line: self.line,
             column: column.map(String::from),
             message,
         };
-        if fields.len() != self.header.len() {
+        if record.len() != self.header.len() {
             return Err(err(
                 None,
                 format!(
-                    "expected {} comma-separated fields as in the header, found {} (missing column or truncated row?)",
+                    "expected {} fields as in the header, found {} (missing column or truncated row?)",
                     self.header.len(),
-                    fields.len()
+                    record.len()
                 ),
             ));
         }
         let number = |i: usize| -> Result<f64, RowError> {
             let name = self.header[i].as_str();
-            let v: f64 = fields[i].parse().map_err(|_| {
-                err(Some(name), format!("expected a number, found `{}`", fields[i]))
-            })?;
+            let raw = record.get(i).unwrap_or_default();
+            let text = String::from_utf8_lossy(raw);
+            let v: f64 = std::str::from_utf8(raw)
+                .ok()
+                .and_then(|f| f.parse().ok())
+                .ok_or_else(|| err(Some(name), format!("expected a number, found `{text}`")))?;
             if !v.is_finite() {
                 return Err(err(
                     Some(name),
                     format!(
-                        "expected a finite number, found `{}` (NaN and infinity are not accepted)",
-                        fields[i]
+                        "expected a finite number, found `{text}` (NaN and infinity are not accepted)"
                     ),
                 ));
             }

@@ -159,6 +159,49 @@ fn certify_rows(body: &str, extra: &[&str]) -> (Option<i32>, String) {
     (out.status.code(), text(&out.stderr))
 }
 
+/// The rows of `body` under `header`, certified with the `[columns]` delimiter set to
+/// `delimiter`; returns (exit code, stdout, stderr).
+fn certify_foreign(header: &str, body: &str, delimiter: &str) -> (Option<i32>, String, String) {
+    let cfg = config(&format!("foreign-{}", delimiter.len()));
+    let text_cfg = std::fs::read_to_string(&cfg).expect("cfg");
+    let with_delimiter =
+        text_cfg.replacen("time = \"t\"", &format!("time = \"t\"\ndelimiter = \"{delimiter}\""), 1);
+    std::fs::write(&cfg, with_delimiter).expect("write");
+    let out = run(
+        &["certify", "--config", cfg.to_str().expect("utf8")],
+        format!("{header}{body}").as_bytes(),
+    );
+    (out.status.code(), text(&out.stdout), text(&out.stderr))
+}
+
+#[test]
+fn csv_from_spreadsheets_and_other_programs_is_read() {
+    // The same three rows written five ways give the same certificate rows.
+    let plain = certify_foreign("t,y_b,u_b\n", "0,0,0\n0.02,0.1,0.5\n0.04,0.2,0.4\n", ",");
+    assert_eq!(plain.0, Some(0), "{}", plain.2);
+    let variants = [
+        ("\u{feff}t,y_b,u_b\n", "0,0,0\n0.02,0.1,0.5\n0.04,0.2,0.4\n", ","),
+        ("t;y_b;u_b\n", "0;0;0\n0.02;0.1;0.5\n0.04;0.2;0.4\n", ";"),
+        ("t\ty_b\tu_b\n", "0\t0\t0\n0.02\t0.1\t0.5\n0.04\t0.2\t0.4\n", "tab"),
+        (
+            "\"t\",\"y_b\",\"u_b\"\r\n",
+            "\"0\",\"0\",\"0\"\r\n\"0.02\", 0.1 ,\"0.5\"\r\n\r\n0.04,0.2,0.4\r\n",
+            ",",
+        ),
+    ];
+    for (header, body, delimiter) in variants {
+        let out = certify_foreign(header, body, delimiter);
+        assert_eq!(out.0, Some(0), "{header:?}: {}", out.2);
+        assert_eq!(out.1, plain.1, "{header:?}");
+    }
+    // An unterminated quote or an unknown delimiter is an error with a message, not a panic.
+    let (code, _, stderr) = certify_foreign("t,y_b,u_b\n", "0,0,0\n0.02,\"0.1,0.5\n", ",");
+    assert_eq!(code, Some(3), "{stderr}");
+    let (code, _, stderr) = certify_foreign("t|y_b|u_b\n", "0|0|0\n", "|");
+    assert_eq!(code, Some(2), "{stderr}");
+    assert!(stderr.contains("delimiter"), "{stderr}");
+}
+
 #[test]
 fn each_bad_input_has_its_message_and_exit_code() {
     let good = "0,0,0,0,0\n0.02,0,0,0.1,0.5\n";
@@ -171,7 +214,7 @@ fn each_bad_input_has_its_message_and_exit_code() {
             "-:4: column `t`: time 0.01 is before the previous time 0.02",
         ),
         (format!("{good}0.02,0,0,0.1,0.5\n"), "-:4: column `t`: duplicated time 0.02"),
-        (format!("{good}0.04,0,0\n"), "-:4: expected 5 comma-separated fields"),
+        (format!("{good}0.04,0,0\n"), "-:4: expected 5 fields as in the header, found 3"),
     ];
     for (body, message) in &cases {
         let (code, stderr) = certify_rows(body, &[]);

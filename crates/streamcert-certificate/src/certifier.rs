@@ -2,7 +2,7 @@
 //! feeds the ambiguity estimators and the calibrated windows, and updates the gates. The
 //! checkpoint (serialise and restore with checks) is in `checkpoint.rs`.
 
-mod checkpoint;
+pub(crate) mod checkpoint;
 
 use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;

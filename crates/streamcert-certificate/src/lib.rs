@@ -61,6 +61,9 @@ pub use calibrated::{
     Calibration, WindowLook, calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
 };
 pub use certifier::Certifier;
+pub use certifier::checkpoint::{
+    CHECKPOINT_MAGIC, CHECKPOINT_VERSION, config_fingerprint, fnv1a64, seal, unseal,
+};
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{Evidence, NotCertified};

@@ -145,25 +145,46 @@ fn row_json(e: &Evidence) -> String {
 }
 
 fn save(path: &PathBuf, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
-    let text = serde_json::to_string(&cp).map_err(|e| CliError::Checkpoint {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    })?;
-    // Write then rename, so an interrupted write never leaves a truncated checkpoint.
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text)
-        .map_err(|e| CliError::io(format!("writing {}", tmp.display()), e))?;
-    std::fs::rename(&tmp, path)
-        .map_err(|e| CliError::io(format!("renaming to {}", path.display()), e))
+    let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
+    let text =
+        streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))?;
+    // Atomically: a unique temporary file beside the target, flushed to disk, then renamed
+    // over it, so a crash leaves either the old checkpoint or the new one, never a torn one.
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let name = path.file_name().map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy());
+    let tmp = path.with_file_name(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(text.as_bytes())?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        // Make the rename itself durable where the platform allows opening a directory.
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if let Ok(d) = std::fs::File::open(dir) {
+                let _ = d.sync_all();
+            }
+        }
+        Ok(())
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        CliError::io(format!("writing the checkpoint {}", path.display()), e)
+    })
 }
 
 fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
-    let text = std::fs::read_to_string(path).map_err(|e| bad(e.to_string()))?;
-    let cp: Checkpoint = serde_json::from_str(&text).map_err(|e| bad(e.to_string()))?;
-    let json = serde_json::to_string(&cp.certifier).map_err(|e| bad(e.to_string()))?;
-    let cert = Certifier::restore(&json).map_err(|e| bad(e.to_string()))?;
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
+    let json = streamcert_certificate::unseal(text, Some(&cfg.certifier))
+        .map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let cert = cp.certifier.verify().map_err(|e| bad(e.to_string()))?;
     if cert.config() != &cfg.certifier {
         return Err(bad("the checkpoint was written with a different configuration".into()));
     }

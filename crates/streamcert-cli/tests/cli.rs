@@ -147,6 +147,31 @@ fn split_and_resume_equals_one_run() {
         second.as_bytes(),
     );
     assert_eq!(bad.status.code(), Some(5), "{}", text(&bad.stderr));
+    // A damaged checkpoint (one flipped bit in the payload or the header, truncated, empty,
+    // or another file altogether) is refused with exit 5 and a message, never a panic.
+    let good = std::fs::read(&cp).expect("checkpoint");
+    let mut flipped = good.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0x04;
+    let mut header = good.clone();
+    header[30] ^= 0x01;
+    let damaged: [(&str, Vec<u8>); 5] = [
+        ("corrupted", flipped),
+        ("corrupted", header),
+        ("checkpoint", good[..good.len() - 7].to_vec()),
+        ("not a streamcert checkpoint", Vec::new()),
+        ("not a streamcert checkpoint", b"{\"certifier\": 1}\n".to_vec()),
+    ];
+    for (message, bytes) in damaged {
+        let path = tmp("damaged.json");
+        std::fs::write(&path, &bytes).expect("write");
+        let out = run(
+            &["certify", "--config", c, "--resume", path.to_str().expect("utf8")],
+            second.as_bytes(),
+        );
+        assert_eq!(out.status.code(), Some(5), "{}", text(&out.stderr));
+        assert!(text(&out.stderr).contains(message), "{message}: {}", text(&out.stderr));
+    }
 }
 
 /// Run certify on `body` (after a valid header) and return (exit code, stderr).

@@ -60,4 +60,42 @@ impl SlidingRegression {
         }
         Ok(())
     }
+
+    /// Recompute the running sums exactly from the window (as [`refresh`](Self::refresh)
+    /// does) and compare: every entry must agree within `tol` times the Cauchy–Schwarz scale
+    /// of its row and column (`√(G_ii G_jj)` for `G`, `√(S_ii G_jj)` for `C`, `√(S_ii S_jj)`
+    /// for `S`, likewise for the instrumented sums). `O(M d²)`.
+    ///
+    /// # Errors
+    /// [`RegressionError::CorruptState`] naming the first sum that disagrees.
+    pub fn check_statistics(&self, tol: f64) -> Result<(), RegressionError> {
+        let mut exact = self.clone();
+        exact.refresh();
+        let (p, d) = (self.cfg.outputs, self.d());
+        let sg: Vec<f64> = (0..d).map(|i| exact.g[i * d + i].abs().sqrt()).collect();
+        let ss: Vec<f64> = (0..p).map(|i| exact.s[i * p + i].abs().sqrt()).collect();
+        let check = |name: &str, got: &[f64], want: &[f64], rows: &[f64], cols: &[f64]| {
+            for (i, &ri) in rows.iter().enumerate() {
+                for (j, &cj) in cols.iter().enumerate() {
+                    let k = i * cols.len() + j;
+                    let (a, b) = (got[k], want[k]);
+                    if !(a.is_finite() && (a - b).abs() <= tol * (ri * cj + f64::MIN_POSITIVE)) {
+                        return Err(RegressionError::CorruptState(format!(
+                            "running sum {name}[{i}][{j}] = {a} disagrees with its exact \
+                             recompute {b} from the window"
+                        )));
+                    }
+                }
+            }
+            Ok(())
+        };
+        check("G", &self.g, &exact.g, &sg, &sg)?;
+        check("C", &self.c, &exact.c, &ss, &sg)?;
+        check("S", &self.s, &exact.s, &ss, &ss)?;
+        if self.cfg.estimator == crate::Estimator::Instrumented {
+            check("ZWᵀ", &self.gw, &exact.gw, &sg, &sg)?;
+            check("ΔY Wᵀ", &self.cw, &exact.cw, &ss, &sg)?;
+        }
+        Ok(())
+    }
 }

@@ -9,6 +9,7 @@ use streamcert_ambiguity::AmbiguityRadius;
 use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, linalg};
 
 use crate::calibrated::{CalibratedState, CalibratedVerdict};
+use crate::gap::GapDetector;
 use crate::{
     BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Gate, GateState, NotCertified,
     WindowLook, certificate_value,
@@ -27,6 +28,7 @@ pub struct Certifier {
     wass: Gate,
     calibrated_gate: Gate,
     calibrated: Option<CalibratedState>,
+    gap: GapDetector,
     ambiguity: Vec<AmbiguityRadius>,
     resid: Vec<f64>,
     jcl: Vec<f64>,
@@ -69,6 +71,7 @@ impl Certifier {
                 .calibration
                 .map(|c| CalibratedState::new(c, &cfg.regression, &cfg.gain))
                 .transpose()?,
+            gap: GapDetector::new(cfg.gap_factor),
             ambiguity: match &cfg.ambiguity {
                 Some(a) => (0..p).map(|_| AmbiguityRadius::new(*a)).collect::<Result<_, _>>()?,
                 None => Vec::new(),
@@ -123,43 +126,34 @@ impl Certifier {
 
     /// Absorb one sample and return the evidence. No allocation.
     ///
+    /// A step larger than `gap_factor` times the reference step resets the window first (the
+    /// sample then starts a new one) and the evidence gives [`NotCertified::Gap`].
+    ///
     /// # Errors
     /// Under [`BadSamplePolicy::Reject`], the regression's sample error (the state is
-    /// untouched, except after [`RegressionError::Overflow`], which clears the window).
+    /// untouched, except after [`RegressionError::Overflow`], which clears the window). Under
+    /// [`BadSamplePolicy::Skip`] a bad sample is not an error: it is [`skip`](Self::skip)ped.
+    ///
+    /// [`RegressionError::Overflow`]: streamcert_regression::RegressionError::Overflow
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
+        let previous = self.regression.last_time();
         if let Err(e) = self.regression.push(t, y, u) {
             return match self.cfg.bad_samples {
                 BadSamplePolicy::Reject => Err(e.into()),
-                BadSamplePolicy::Skip => {
-                    self.skipped += 1;
-                    let amb = self.ambiguity_snapshot();
-                    Ok(Evidence {
-                        t,
-                        beta_hat: None,
-                        rho: None,
-                        cert_gauss: None,
-                        gauss_gate: self.gauss.update(t, None),
-                        reason: Some(NotCertified::SkippedSample),
-                        eps: amb.map(|a| a.0),
-                        kurtosis: amb.and_then(|a| a.1),
-                        spike_fraction: amb.map(|a| a.2),
-                        cert_wass: None,
-                        wass_gate: self.wass.update(t, None),
-                        wass_reason: Some(NotCertified::SkippedSample),
-                        rho_calibrated: None,
-                        cert_calibrated: None,
-                        calibrated_window: None,
-                        calibrated_gate: self.calibrated_gate.update(t, None),
-                        calibrated_reason: Some(NotCertified::SkippedSample),
-                        rms_residual: None,
-                        gram_lambda_min: None,
-                        columns: self.regression.columns(),
-                    })
-                }
+                BadSamplePolicy::Skip => Ok(self.skip(t)),
             };
         }
+        let dt = previous.map_or(f64::NAN, |p| t - p);
+        let gap = if dt > 0.0 { self.gap.observe(dt) } else { None };
+        if gap.is_some() {
+            // Start a new window at this sample; the calibrated windows follow the
+            // regression's reset through its column count.
+            self.regression.reset();
+            self.regression.push(t, y, u)?;
+        }
         self.samples += 1;
-        let (ready, columns, blocked) = self.evaluate();
+        let scale = self.gap.residual_scale(dt);
+        let (ready, columns, blocked) = self.evaluate(scale);
         let amb = self.ambiguity_snapshot();
         let cert_gauss = ready.map(|r| certificate_value(r.beta_hat, r.rho, 0.0));
         let cert_wass = match (ready, amb) {
@@ -169,12 +163,23 @@ impl Certifier {
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
         let (calibrated_gate, calibrated_reason, best) = self.calibrated_step(t);
-        let reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
-        let wass_reason = if amb.is_none() {
+        let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
+        let mut wass_reason = if amb.is_none() {
             Some(NotCertified::NoAmbiguityModel)
         } else {
             closed_reason(blocked, cert_wass, &wass_gate, &self.wass)
         };
+        let mut calibrated_reason = calibrated_reason;
+        if let Some(g) = gap {
+            let why = Some(NotCertified::Gap { dt: g.dt, reference: g.reference });
+            reason = why;
+            if amb.is_some() {
+                wass_reason = why;
+            }
+            if self.calibrated.is_some() {
+                calibrated_reason = why;
+            }
+        }
         Ok(Evidence {
             t,
             beta_hat: ready.map(|r| r.beta_hat),
@@ -197,6 +202,53 @@ impl Certifier {
             gram_lambda_min: ready.map(|r| r.lambda_min),
             columns,
         })
+    }
+
+    /// A sample that cannot be used (a NaN or infinite value, a time not after the previous
+    /// one, the wrong number of values, or a row the caller could not parse): it is not
+    /// absorbed, it is counted, and every gate closes (a stream that delivers bad samples is
+    /// not evidence for deployment). This is what [`BadSamplePolicy::Skip`] does inside
+    /// [`push`](Self::push), and what the command line's `--on-bad-row skip` calls. `t` is
+    /// only echoed in the evidence (NaN when the caller has none).
+    pub fn skip(&mut self, t: f64) -> Evidence {
+        self.skipped += 1;
+        let amb = self.ambiguity_snapshot();
+        let why = Some(NotCertified::SkippedSample);
+        Evidence {
+            t,
+            beta_hat: None,
+            rho: None,
+            cert_gauss: None,
+            gauss_gate: self.gauss.update(t, None),
+            reason: why,
+            eps: amb.map(|a| a.0),
+            kurtosis: amb.and_then(|a| a.1),
+            spike_fraction: amb.map(|a| a.2),
+            cert_wass: None,
+            wass_gate: self.wass.update(t, None),
+            wass_reason: why,
+            rho_calibrated: None,
+            cert_calibrated: None,
+            calibrated_window: None,
+            calibrated_gate: self.calibrated_gate.update(t, None),
+            calibrated_reason: why,
+            rms_residual: None,
+            gram_lambda_min: None,
+            columns: self.regression.columns(),
+        }
+    }
+
+    /// Gaps detected so far (see [`NotCertified::Gap`]).
+    #[must_use]
+    pub fn gaps(&self) -> u64 {
+        self.gap.gaps()
+    }
+
+    /// The reference sampling step: the median of the last 32 accepted steps (NaN before
+    /// the second sample).
+    #[must_use]
+    pub fn reference_step(&self) -> f64 {
+        self.gap.reference()
     }
 
     /// Feed the newest column to the calibrated certificate, update its gate, say why closed.
@@ -234,12 +286,13 @@ impl Certifier {
 
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity
     /// estimators; when not ready, say why.
-    fn evaluate(&mut self) -> (Option<Ready>, usize, Option<NotCertified>) {
+    /// `scale` multiplies the one-step residual (see the gap module: `√(Δt_ref/Δt)`).
+    fn evaluate(&mut self, scale: f64) -> (Option<Ready>, usize, Option<NotCertified>) {
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
         if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {
-            self.evaluate_dims(1, 1)
+            self.evaluate_dims(1, 1, scale)
         } else {
-            self.evaluate_dims(self.cfg.regression.outputs, self.cfg.regression.inputs)
+            self.evaluate_dims(self.cfg.regression.outputs, self.cfg.regression.inputs, scale)
         }
     }
 
@@ -249,6 +302,7 @@ impl Certifier {
         &mut self,
         p: usize,
         m: usize,
+        scale: f64,
     ) -> (Option<Ready>, usize, Option<NotCertified>) {
         let d = p + m;
         let residual_source = self.cfg.residuals;
@@ -292,11 +346,14 @@ impl Certifier {
             // p = m = 1 with the default residual, written out: going through `residual` and
             // the `resid` buffer costs about 10 % of the whole step (measured A/B with
             // criterion), and this is the paper's case.
-            let _ = amb.push(dy1[0] - (th[0] * z1[0] + th[1] * z1[1]));
+            let _ = amb.push((dy1[0] - (th[0] * z1[0] + th[1] * z1[1])) * scale);
         } else if !self.ambiguity.is_empty()
             && self.regression.residual(residual_source, &mut self.resid)
         {
+            // The interval normalisation applies to the one-step residual only.
+            let scale = if residual_source == ResidualSource::OneStep { scale } else { 1.0 };
             for (amb, &r) in self.ambiguity.iter_mut().zip(&self.resid[..p]) {
+                let r = r * scale;
                 // A non-finite residual is not absorbed (AmbiguityError::NonFinite).
                 let _ = amb.push(r);
             }

@@ -43,9 +43,18 @@ pub struct CertifierConfig {
     /// Residuals that feed `ε` (default [`ResidualSource::OneStep`]).
     #[serde(default)]
     pub residuals: ResidualSource,
+    /// Gap detection (see [`NotCertified::Gap`](crate::NotCertified::Gap)): a step larger
+    /// than this multiple of the reference step (the median of the last 32) resets the window
+    /// and closes the gates. Default 5; must exceed 1.
+    #[serde(default = "default_gap_factor")]
+    pub gap_factor: f64,
     /// Calibrated certificate beside the paper's (`None`: not computed).
     #[serde(default)]
     pub calibration: Option<Calibration>,
+}
+
+fn default_gap_factor() -> f64 {
+    5.0
 }
 
 impl CertifierConfig {
@@ -69,6 +78,7 @@ impl CertifierConfig {
             bad_samples: BadSamplePolicy::Reject,
             ambiguity: None,
             residuals: ResidualSource::OneStep,
+            gap_factor: default_gap_factor(),
             calibration: None,
         }
     }
@@ -103,6 +113,9 @@ impl CertifierConfig {
         }
         if self.consecutive == 0 {
             return bad("consecutive", "n_s must be at least 1".into());
+        }
+        if !(self.gap_factor > 1.0 && self.gap_factor.is_finite()) {
+            return bad("gap_factor", format!("must be finite and > 1, got {}", self.gap_factor));
         }
         if let Some(a) = &self.ambiguity {
             a.validate()?;

@@ -40,6 +40,14 @@ pub enum NotCertified {
     NoAmbiguityModel,
     /// No calibration is configured, so there is no calibrated certificate.
     NoCalibration,
+    /// The step before this sample is a gap (larger than `gap_factor` times the reference
+    /// step): the window was reset, so it is warming up again.
+    Gap {
+        /// The step.
+        dt: f64,
+        /// The reference step (median of the last 32).
+        reference: f64,
+    },
     /// Calibrated certificate: a window whose latest look is at least as recent as every
     /// standing certificate bounds the rate from above below the margin (the loop stopped
     /// contracting enough, for example after a plant change).
@@ -68,6 +76,9 @@ impl std::fmt::Display for NotCertified {
             Self::SkippedSample => f.write_str("bad sample skipped"),
             Self::NoAmbiguityModel => f.write_str("no ambiguity model configured"),
             Self::NoCalibration => f.write_str("no calibration configured"),
+            Self::Gap { dt, reference } => {
+                write!(f, "gap of {dt} s (reference step {reference} s): window reset")
+            }
             Self::RateDropped { window, upper } => write!(
                 f,
                 "window {window}: the rate is at most {upper:.4}, below the margin (dynamics changed?)"

@@ -54,6 +54,7 @@ mod certifier;
 mod config;
 mod error;
 mod evidence;
+mod gap;
 mod gate;
 mod radius;
 

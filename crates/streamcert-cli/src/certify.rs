@@ -4,7 +4,7 @@ use std::io::{Read, Write};
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Evidence};
+use streamcert_certificate::{Certifier, Evidence, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
@@ -50,8 +50,13 @@ pub struct Options {
 pub struct Summary {
     /// Rows certified or not (accepted rows).
     pub rows: u64,
-    /// Malformed rows skipped.
+    /// Malformed rows skipped (each closes every gate, as the library's
+    /// `Certifier::skip`).
     pub skipped: u64,
+    /// Gaps in the time column (a step above `gap_factor` times the reference step): the
+    /// window restarts there and the row's reason says so.
+    #[serde(default)]
+    pub gaps: u64,
     /// Rows with the Gaussian gate open.
     pub gauss_open: u64,
     /// Rows with the Wasserstein gate open.
@@ -223,8 +228,10 @@ pub fn run<R: Read, W: Write>(
         match next {
             Ok(()) => {}
             Err(CliError::Row(e)) if opts.bad_rows == BadRows::Skip => {
+                // One skip semantics, the library's: not absorbed, counted, every gate closes.
                 eprintln!("skipped: {e}");
                 summary.skipped += 1;
+                cert.skip(f64::NAN);
                 continue;
             }
             Err(e) => return Err(e),
@@ -241,12 +248,14 @@ pub fn run<R: Read, W: Write>(
                 if opts.bad_rows == BadRows::Skip {
                     eprintln!("skipped: {err}");
                     summary.skipped += 1;
+                    cert.skip(s.t);
                     continue;
                 }
                 return Err(CliError::Row(err));
             }
         };
         summary.rows += 1;
+        summary.gaps += u64::from(matches!(ev.reason, Some(NotCertified::Gap { .. })));
         summary.gauss_open += u64::from(ev.gauss_gate.open);
         summary.wass_open += u64::from(ev.wass_gate.open);
         summary.first_deploy_gauss = summary.first_deploy_gauss.or(ev.gauss_gate.first_opened_at);

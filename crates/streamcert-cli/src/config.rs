@@ -29,6 +29,9 @@ conservatism = 0.1
 # Deploy once the certificate is >= margin for `consecutive` samples.
 margin = 0.05
 consecutive = 10
+# A step above gap_factor times the median of the last 32 steps is a gap: the window
+# restarts there and the gates close (the row's reason says so).
+# gap_factor = 5.0
 
 [regression]
 window = 150            # M: columns in the sliding window
@@ -177,6 +180,8 @@ struct Certificate {
     conservatism: f64,
     margin: f64,
     consecutive: usize,
+    #[serde(default)]
+    gap_factor: Option<f64>,
 }
 
 /// Every key may be omitted: the defaults are the ones `--print-config` shows.
@@ -284,6 +289,9 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
         f.certificate.margin,
         f.certificate.consecutive,
     );
+    if let Some(g) = f.certificate.gap_factor {
+        certifier.gap_factor = g;
+    }
     let a = &f.ambiguity;
     if a.enabled {
         certifier.ambiguity = Some(AmbiguityConfig {

@@ -177,7 +177,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             match summary {
                 Some(file) => {
                     let v = serde_json::json!({
-                        "rows": s.rows, "skipped": s.skipped,
+                        "rows": s.rows, "skipped": s.skipped, "gaps": s.gaps,
                         "share_gauss_gate_open": s.share_gauss(), "share_wass_gate_open": s.share_wass(),
                         "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
                         "share_calibrated_gate_open": s.share_calibrated(),
@@ -189,9 +189,10 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 }
                 None => {
                     eprintln!(
-                        "summary: {} rows, {} skipped; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
+                        "summary: {} rows, {} skipped, {} gaps; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
                         s.rows,
                         s.skipped,
+                        s.gaps,
                         100.0 * s.share_gauss(),
                         s.first_deploy_gauss.map_or("never".into(), |t| format!("t = {t}")),
                         100.0 * s.share_wass(),

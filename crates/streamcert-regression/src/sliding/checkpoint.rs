@@ -33,6 +33,7 @@ impl SlidingRegression {
             ("dy", self.dy.len(), fresh.dy.len()),
             ("hist_z1", self.hist_z1.len(), fresh.hist_z1.len()),
             ("dy1", self.dy1.len(), fresh.dy1.len()),
+            ("peaks", self.peaks.len(), fresh.peaks.len()),
         ];
         if let Some((name, got, want)) = sizes.iter().find(|(_, g, w)| g != w) {
             return Err(RegressionError::CorruptState(format!(

@@ -282,10 +282,30 @@ impl SlidingRegression {
         self.col_next = next(q, mm);
         self.col_len = (self.col_len + 1).min(mm);
         self.since_refresh += 1;
-        if self.since_refresh >= self.cfg.refresh_period {
+        if self.since_refresh >= self.cfg.refresh_period || self.magnitude_dropped() {
             self.refresh();
         }
         Ok(())
+    }
+
+    /// Track the peak of each diagonal running sum since the last recompute; `true` when one
+    /// has fallen below `10⁻⁶` of its peak. A burst that left the window was removed by a
+    /// subtraction whose rounding error is of order `ε · peak`: past a `10⁶` drop that error is
+    /// no longer small against what remains, so the sums are recomputed at once.
+    #[inline(always)]
+    fn magnitude_dropped(&mut self) -> bool {
+        const DROP: f64 = 1e-6;
+        let (p, d) = (self.cfg.outputs, self.d());
+        let mut dropped = false;
+        let diagonals = (0..d).map(|i| self.g[i * d + i]).chain((0..p).map(|i| self.s[i * p + i]));
+        for (peak, v) in self.peaks.iter_mut().zip(diagonals) {
+            if v > *peak {
+                *peak = v;
+            } else if v < *peak * DROP {
+                dropped = true;
+            }
+        }
+        dropped
     }
 
     /// One pass that adds the new column (`self.z`, `self.dy`) and removes the one in slot
@@ -348,6 +368,13 @@ impl SlidingRegression {
             }
         }
         self.since_refresh = 0;
+        let (p, d) = (self.cfg.outputs, self.d());
+        for i in 0..d {
+            self.peaks[i] = self.g[i * d + i];
+        }
+        for i in 0..p {
+            self.peaks[d + i] = self.s[i * p + i];
+        }
     }
 
     /// Add the outer products of the contiguous slots `[from, from + count)` (ordinary

@@ -14,6 +14,7 @@ mod common;
 mod exp1;
 mod exp2;
 mod plot;
+mod reliability;
 mod report;
 mod validity;
 
@@ -34,6 +35,11 @@ commands:
                  gate-opening rates of the calibrated and the paper's certificates on
                  linear systems with known rates (VALIDITY.md, default 200 runs,
                  default DIR target/validity)
+
+  reliability [--out DIR]
+                 every bad input (damaged checkpoints, gaps, jitter, foreign CSV, bad rows
+                 and values, configuration) through the streamcert binary: exit code and
+                 message per case (RELIABILITY.md, default DIR target/reliability)
 
 options (defaults in brackets; see REPORT.md for why):
   --out DIR                     output folder [target/reproduce]
@@ -136,6 +142,14 @@ fn main() -> Result<()> {
                 }
             }
             validity::run(runs, &out)
+        }
+        "reliability" => {
+            let out = match args.get(1).map(String::as_str) {
+                Some("--out") => PathBuf::from(args.get(2).context("--out needs a value")?),
+                Some(other) => bail!("unknown option `{other}`\n{USAGE}"),
+                None => PathBuf::from("target/reliability"),
+            };
+            reliability::run_all(&out)
         }
         "help" | "--help" | "-h" => {
             print!("{USAGE}");

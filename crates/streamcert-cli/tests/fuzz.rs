@@ -1,0 +1,170 @@
+//! Structure-aware fuzzing on the stable toolchain: proptest mutates the committed seed corpus
+//! (`tests/fuzz-corpus/<target>/`) with bit flips, byte insertions (including the bytes CSV,
+//! TOML and JSON give meaning to), deletions, duplications, truncations and splices, and feeds
+//! the result to each parser. Every input must give a value or a typed error: a panic fails
+//! the test, and proptest shrinks it to a minimal input and records it in
+//! `proptest-regressions/`.
+//!
+//! Targets: the CSV reader, the TOML configuration, checkpoint resume (the damaged file
+//! itself, and its payload re-sealed with a valid checksum so that the JSON parser and the
+//! state checks behind it are reached), and the `compose` rate and gain files.
+//!
+//! `cargo test` runs a short pass (`STREAMCERT_FUZZ_CASES`, default 64 per target, a few
+//! seconds). A long local run, for example ten minutes per target:
+//!
+//! ```sh
+//! STREAMCERT_FUZZ_CASES=400000 cargo test --release -p streamcert-cli --test fuzz -- --nocapture
+//! ```
+
+use std::io::Cursor;
+use std::path::{Path, PathBuf};
+
+use proptest::prelude::*;
+use streamcert_cli::certify::{BadRows, Format, Options, run};
+use streamcert_cli::compose::{self, GainsFormat, Method};
+use streamcert_cli::config::{Columns, parse};
+use streamcert_cli::input::{Sample, SampleReader};
+
+fn corpus(target: &str) -> Vec<Vec<u8>> {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz-corpus").join(target);
+    let mut files: Vec<PathBuf> =
+        std::fs::read_dir(&dir).expect("corpus").map(|e| e.expect("entry").path()).collect();
+    files.sort();
+    files.iter().map(|f| std::fs::read(f).expect("corpus file")).collect()
+}
+
+fn cases() -> u32 {
+    std::env::var("STREAMCERT_FUZZ_CASES").ok().and_then(|s| s.parse().ok()).unwrap_or(64)
+}
+
+/// One mutation: `(kind, position, byte)`.
+type Mutation = (u8, u32, u8);
+
+/// Bytes with a meaning to the parsers under test.
+const SPECIAL: &[u8] = b",;\t\"\n\r#=[]{}:-+.eE0123456789nNaAiIfF \\\xef\xbb\xbf\x00\xff";
+
+fn mutate(seed: &[u8], other: &[u8], mutations: &[Mutation]) -> Vec<u8> {
+    let mut v = seed.to_vec();
+    for &(kind, pos, byte) in mutations {
+        let at = if v.is_empty() { 0 } else { pos as usize % (v.len() + 1) };
+        match kind % 7 {
+            0 if at < v.len() => v[at] ^= 1 << (byte % 8),
+            1 => v.insert(at, SPECIAL[byte as usize % SPECIAL.len()]),
+            2 => v.insert(at, byte),
+            3 if at < v.len() => {
+                let end = (at + 1 + byte as usize % 16).min(v.len());
+                v.drain(at..end);
+            }
+            4 if at < v.len() => {
+                let end = (at + 1 + byte as usize % 32).min(v.len());
+                let copy = v[at..end].to_vec();
+                v.splice(at..at, copy);
+            }
+            5 => v.truncate(at),
+            6 if !other.is_empty() => {
+                let from = pos as usize % other.len();
+                let end = (from + 1 + byte as usize % 64).min(other.len());
+                v.splice(at..at, other[from..end].iter().copied());
+            }
+            _ => {}
+        }
+    }
+    v
+}
+
+fn mutations() -> impl Strategy<Value = Vec<Mutation>> {
+    proptest::collection::vec((any::<u8>(), any::<u32>(), any::<u8>()), 0..12)
+}
+
+fn columns() -> Columns {
+    Columns {
+        time: "t".into(),
+        outputs: vec!["y_b".into()],
+        inputs: vec!["u_b".into()],
+        delimiter: ",".into(),
+    }
+}
+
+fn options(resume: Option<PathBuf>) -> Options {
+    Options {
+        format: Format::Csv,
+        bad_rows: BadRows::Skip,
+        checkpoint: None,
+        checkpoint_every: None,
+        resume,
+    }
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz");
+    std::fs::create_dir_all(&dir).expect("scratch dir");
+    dir.join(format!("{name}-{}", std::process::id()))
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: cases(), ..ProptestConfig::default() })]
+
+    #[test]
+    fn csv_reader_never_panics(pick in any::<usize>(), other in any::<usize>(), m in mutations(), semicolon in any::<bool>()) {
+        let seeds = corpus("csv");
+        let input = mutate(&seeds[pick % seeds.len()], &seeds[other % seeds.len()], &m);
+        let mut cols = columns();
+        if semicolon {
+            cols.delimiter = ";".into();
+        }
+        if let Ok(mut reader) = SampleReader::new(Cursor::new(input.clone()), "fuzz", &cols) {
+            let mut s = Sample::default();
+            // A malformed row is consumed, so the reader ends within the input's length.
+            let mut rows = 0;
+            while reader.next_into(&mut s).is_some() {
+                rows += 1;
+                prop_assert!(rows <= input.len() + 1);
+            }
+        }
+    }
+
+    #[test]
+    fn toml_configuration_never_panics(pick in any::<usize>(), other in any::<usize>(), m in mutations()) {
+        let seeds = corpus("toml");
+        let input = mutate(&seeds[pick % seeds.len()], &seeds[other % seeds.len()], &m);
+        let _ = parse(&String::from_utf8_lossy(&input), "fuzz.toml");
+    }
+
+    #[test]
+    fn checkpoint_resume_never_panics(m in mutations(), reseal in any::<bool>()) {
+        let seeds = corpus("checkpoint");
+        let text = String::from_utf8_lossy(&seeds[0]).into_owned();
+        let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
+        let cfg = parse(&cfg_text.replace("enabled = false\ndelta", "enabled = true\ndelta")
+            .replace("window = 150 ", "window = 20 ").replace("tail_window = 150", "tail_window = 20"), "c").expect("corpus config");
+        let damaged = if reseal {
+            // Past the checksum: mutate the payload and seal it again.
+            let (_, payload) = text.split_once('\n').expect("header");
+            let mutated = String::from_utf8_lossy(&mutate(payload.as_bytes(), &[], &m)).into_owned();
+            streamcert_certificate::seal(&mutated, &cfg.certifier).expect("seal").into_bytes()
+        } else {
+            mutate(text.as_bytes(), &[], &m)
+        };
+        let path = scratch("checkpoint");
+        std::fs::write(&path, &damaged).expect("write");
+        let data = "t,y_b,u_b\n100,0.1,0.2\n100.02,0.1,0.3\n";
+        let mut out = Vec::new();
+        let result = run(&cfg, Cursor::new(data), "fuzz", &mut out, &options(Some(path)));
+        if !reseal && !m.is_empty() && damaged != text.as_bytes() {
+            // Any change of the sealed file is refused.
+            prop_assert!(result.is_err());
+        }
+    }
+
+    #[test]
+    fn compose_files_never_panic(pick in any::<usize>(), m in mutations(), triplets in any::<bool>()) {
+        let seeds = corpus("compose");
+        let seed = &seeds[pick % seeds.len()];
+        let input = String::from_utf8_lossy(&mutate(seed, &[], &m)).into_owned();
+        let (rates, gains) = input.split_once("---").unwrap_or((&input, ""));
+        let format = if triplets { GainsFormat::Triplets } else { GainsFormat::Dense };
+        if rates.len() < 4096 && gains.len() < 4096 {
+            let _ = compose::run(rates, "rates", gains, "gains", format, Method::Auto, false);
+        }
+    }
+}

@@ -1,0 +1,283 @@
+//! `cargo xtask reliability`: every bad input the reliability work covers, run through the
+//! `streamcert` binary as a user would, with the exit code and the first line the user reads,
+//! written to RELIABILITY.md. Nothing in the table is typed by hand.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+
+use anyhow::{Context, Result, bail};
+
+use crate::common::{markdown, write};
+
+/// The binary, built in release mode by this command.
+fn binary() -> Result<PathBuf> {
+    let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
+        .args(["build", "--release", "-q", "-p", "streamcert-cli"])
+        .status()
+        .context("building streamcert-cli")?;
+    if !status.success() {
+        bail!("building streamcert-cli failed");
+    }
+    Ok(PathBuf::from("target/release/streamcert"))
+}
+
+/// Run the binary with `args` and `stdin`; (exit code, first stderr line, stdout).
+fn run(bin: &Path, args: &[&str], stdin: &[u8]) -> Result<(i32, String, String)> {
+    use std::io::Write;
+    let mut child = Command::new(bin)
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("running {}", bin.display()))?;
+    child.stdin.take().context("stdin")?.write_all(stdin).ok();
+    let out = child.wait_with_output()?;
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let first = stderr
+        .lines()
+        .find(|l| !l.starts_with("summary:") && !l.is_empty())
+        .or_else(|| stderr.lines().next())
+        .unwrap_or("")
+        .to_string();
+    Ok((out.status.code().unwrap_or(-1), first, String::from_utf8_lossy(&out.stdout).into()))
+}
+
+/// One row of the table: the case, the exit code, the message.
+fn record(rows: &mut Vec<Vec<String>>, case: &str, (code, message, _): (i32, String, String)) {
+    rows.push(vec![case.into(), code.to_string(), format!("`{}`", message.replace('|', "\\|"))]);
+}
+
+/// Flip one bit of `bytes` at `at`.
+fn flip(mut bytes: Vec<u8>, at: usize) -> Vec<u8> {
+    bytes[at] ^= 0x02;
+    bytes
+}
+
+/// Write the table to `out/RELIABILITY.md`.
+pub(crate) fn run_all(out: &Path) -> Result<()> {
+    let bin = binary()?;
+    std::fs::create_dir_all(out)?;
+    let path = |name: &str| out.join(name);
+    let s = |p: &Path| p.to_str().map(str::to_string).context("utf-8 path");
+    // The configuration and data every case starts from.
+    let (_, _, config) = run(&bin, &["certify", "--print-config"], b"")?;
+    let cfg_path = path("config.toml");
+    std::fs::write(&cfg_path, &config)?;
+    let cfg = s(&cfg_path)?;
+    let (_, _, data) = run(&bin, &["simulate", "g5", "--experiment", "1", "--seed", "1"], b"")?;
+    let lines: Vec<&str> = data.lines().collect();
+    let header = lines[0];
+    let first = format!("{}\n", lines[..600].join("\n"));
+    let rest = format!("{header}\n{}\n", lines[600..900].join("\n"));
+    let certify = |extra: &[&str], stdin: &[u8]| -> Result<(i32, String, String)> {
+        let mut args = vec!["certify", "--config", cfg.as_str()];
+        args.extend_from_slice(extra);
+        run(&bin, &args, stdin)
+    };
+    let mut rows: Vec<Vec<String>> = Vec::new();
+
+    // Checkpoints.
+    let ckpt = path("state.ckpt");
+    let ck = s(&ckpt)?;
+    certify(&["--checkpoint", &ck], first.as_bytes())?;
+    let good = std::fs::read(&ckpt)?;
+    let resume = |bytes: &[u8]| -> Result<(i32, String, String)> {
+        let damaged = path("damaged.ckpt");
+        std::fs::write(&damaged, bytes)?;
+        certify(&["--resume", &s(&damaged)?], rest.as_bytes())
+    };
+    record(&mut rows, "checkpoint: intact (resume)", resume(&good)?);
+    record(
+        &mut rows,
+        "checkpoint: one bit flipped in the payload",
+        resume(&flip(good.clone(), good.len() / 2))?,
+    );
+    record(
+        &mut rows,
+        "checkpoint: one bit flipped in the checksum",
+        resume(&flip(good.clone(), 30))?,
+    );
+    record(&mut rows, "checkpoint: truncated", resume(&good[..good.len() - 100])?);
+    record(&mut rows, "checkpoint: empty file", resume(b"")?);
+    record(
+        &mut rows,
+        "checkpoint: a JSON file that is not a checkpoint",
+        resume(b"{\"certifier\": 1}\n")?,
+    );
+    let text = String::from_utf8(good.clone())?;
+    let (_, payload) = text.split_once('\n').context("checkpoint header")?;
+    let certifier: serde_json::Value = serde_json::from_str(payload)?;
+    let cert_config: streamcert_certificate::CertifierConfig =
+        serde_json::from_value(certifier["certifier"]["cfg"].clone())?;
+    let reseal = |edit: &dyn Fn(&mut serde_json::Value)| -> Result<Vec<u8>> {
+        let mut v = certifier.clone();
+        edit(&mut v);
+        Ok(streamcert_certificate::seal(&v.to_string(), &cert_config)?.into_bytes())
+    };
+    record(
+        &mut rows,
+        "checkpoint: Gram entry set to −5, checksum recomputed",
+        resume(&reseal(&|v| v["certifier"]["regression"]["g"][0] = (-5.0).into())?)?,
+    );
+    record(
+        &mut rows,
+        "checkpoint: spike count off by one, checksum recomputed",
+        resume(&reseal(&|v| {
+            let spikes = &mut v["certifier"]["ambiguity"][0]["spikes"];
+            *spikes = (spikes.as_u64().unwrap_or(0) + 1).into();
+        })?)?,
+    );
+    record(
+        &mut rows,
+        "checkpoint: ‖K‖ changed, checksum recomputed",
+        resume(&reseal(&|v| v["certifier"]["gain_norm"] = 9.0.into())?)?,
+    );
+    record(
+        &mut rows,
+        "checkpoint: a ring buffer one entry short, checksum recomputed",
+        resume(&reseal(&|v| {
+            if let Some(a) = v["certifier"]["regression"]["col_z"].as_array_mut() {
+                a.pop();
+            }
+        })?)?,
+    );
+    let other_cfg = path("other.toml");
+    std::fs::write(&other_cfg, config.replace("margin = 0.05", "margin = 0.06"))?;
+    record(
+        &mut rows,
+        "checkpoint: written under another configuration",
+        run(&bin, &["certify", "--config", &s(&other_cfg)?, "--resume", &ck], rest.as_bytes())?,
+    );
+
+    // Time column.
+    let body: Vec<&str> = lines[1..900].to_vec();
+    let with_gap: String = std::iter::once(header)
+        .chain(body.iter().copied().filter(|l| {
+            let t: f64 = l.split(',').next().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+            !(8.0..10.0).contains(&t)
+        }))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let (code, _, out_rows) = certify(&["--summary", &s(&path("gap.json"))?], with_gap.as_bytes())?;
+    let gap_row = out_rows.lines().find(|l| l.contains("gap of")).unwrap_or("").to_string();
+    let summary = std::fs::read_to_string(path("gap.json")).unwrap_or_default();
+    rows.push(vec![
+        "a 2 s gap in the time column".into(),
+        code.to_string(),
+        format!(
+            "row: `…{}`; summary gaps: {}",
+            gap_row.split(',').nth(10).unwrap_or(""),
+            serde_json::from_str::<serde_json::Value>(&summary)
+                .map_or(0, |v| v["gaps"].as_u64().unwrap_or(0))
+        ),
+    ]);
+    let jitter: String = std::iter::once(header)
+        .chain(
+            body.iter()
+                .enumerate()
+                .filter(|(i, _)| (i * 7919) % 10 < 7 || i % 4 == 0)
+                .map(|(_, l)| *l),
+        )
+        .collect::<Vec<_>>()
+        .join("\n");
+    record(
+        &mut rows,
+        "irregular sampling (a fixed 70 % of the rows kept)",
+        certify(&[], jitter.as_bytes())?,
+    );
+    let dup = format!("{header}\n{}\n{}\n", body[0], body[0]);
+    record(&mut rows, "a duplicated time", certify(&[], dup.as_bytes())?);
+    let back = format!("{header}\n{}\n{}\n", body[1], body[0]);
+    record(&mut rows, "a time before the previous one", certify(&[], back.as_bytes())?);
+
+    // Values and rows.
+    let row = |edit: &dyn Fn(&str) -> String| format!("{header}\n{}\n{}\n", body[0], edit(body[1]));
+    record(&mut rows, "NaN in y", certify(&[], row(&|l| replace_field(l, 3, "NaN")).as_bytes())?);
+    record(
+        &mut rows,
+        "infinity in u",
+        certify(&[], row(&|l| replace_field(l, 4, "inf")).as_bytes())?,
+    );
+    record(
+        &mut rows,
+        "a non-number",
+        certify(&[], row(&|l| replace_field(l, 3, "abc")).as_bytes())?,
+    );
+    record(
+        &mut rows,
+        "a truncated row",
+        certify(&[], row(&|l| l.split(',').take(3).collect::<Vec<_>>().join(",")).as_bytes())?,
+    );
+    record(
+        &mut rows,
+        "an unterminated quote",
+        certify(&[], row(&|l| replace_field(l, 3, "\"0.1")).as_bytes())?,
+    );
+    record(&mut rows, "an empty file", certify(&[], b"")?);
+    record(
+        &mut rows,
+        "a header without the configured columns",
+        certify(&[], b"time,a,b\n0,0,0\n")?,
+    );
+
+    // CSV from other programs.
+    let bom = format!("\u{feff}{}", lines[..50].join("\n"));
+    record(&mut rows, "a UTF-8 byte-order mark", certify(&[], bom.as_bytes())?);
+    let semicolons = lines[..50].join("\n").replace(',', ";");
+    record(&mut rows, "semicolons, default delimiter", certify(&[], semicolons.as_bytes())?);
+    let semi_cfg = path("semicolon.toml");
+    std::fs::write(
+        &semi_cfg,
+        config.replacen("time = \"t\"", "time = \"t\"\ndelimiter = \";\"", 1),
+    )?;
+    record(
+        &mut rows,
+        "semicolons, `delimiter = \";\"`",
+        run(&bin, &["certify", "--config", &s(&semi_cfg)?], semicolons.as_bytes())?,
+    );
+    let quoted = lines[..50]
+        .iter()
+        .map(|l| l.split(',').map(|f| format!("\"{f}\"")).collect::<Vec<_>>().join(","))
+        .collect::<Vec<_>>()
+        .join("\r\n");
+    record(&mut rows, "quoted fields and CRLF line ends", certify(&[], quoted.as_bytes())?);
+
+    // Configuration.
+    let bad_cfg = path("bad.toml");
+    std::fs::write(&bad_cfg, config.replace("margin = 0.05", "margin = 0.05\nmargn = 1"))?;
+    record(
+        &mut rows,
+        "an unknown configuration key",
+        run(&bin, &["certify", "--config", &s(&bad_cfg)?], b"")?,
+    );
+    let start = config.find("[ambiguity]").context("ambiguity section")?;
+    let end = config.find("[calibration]").context("calibration section")?;
+    let short = format!("{}[ambiguity]\nenabled = true\n\n{}", &config[..start], &config[end..]);
+    let short_cfg = path("short.toml");
+    std::fs::write(&short_cfg, short)?;
+    record(
+        &mut rows,
+        "`[ambiguity]` with only `enabled` (documented defaults omitted)",
+        run(&bin, &["certify", "--config", &s(&short_cfg)?], lines[..50].join("\n").as_bytes())?,
+    );
+
+    let mut text = String::new();
+    let _ = writeln!(
+        text,
+        "# Reliability: bad inputs and what the user sees\n\nProduced by `cargo xtask reliability` (target/reliability/RELIABILITY.md; a copy is committed at the top level). Each case runs the release `streamcert` binary on data from `streamcert simulate g5 --experiment 1 --seed 1` and the default configuration (`certify --print-config`), edited as the case says. Exit codes: 0 success, 2 configuration, 3 input data, 4 I/O, 5 checkpoint. The message is the first line on standard error (for runs that succeed, the summary line)."
+    );
+    let _ = writeln!(text, "\n{}", markdown(&["case", "exit", "message"], &rows));
+    write(&out.join("RELIABILITY.md"), &text)?;
+    println!("wrote {}", out.join("RELIABILITY.md").display());
+    Ok(())
+}
+
+fn replace_field(line: &str, i: usize, value: &str) -> String {
+    line.split(',')
+        .enumerate()
+        .map(|(k, f)| if k == i { value.to_string() } else { f.to_string() })
+        .collect::<Vec<_>>()
+        .join(",")
+}

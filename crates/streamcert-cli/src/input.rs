@@ -99,11 +99,6 @@ impl<R: Read> SampleReader<R> {
         })
     }
 
-    /// Require the next accepted time to be after `t` (used when resuming).
-    pub fn set_last_time(&mut self, t: Option<f64>) {
-        self.last_time = t;
-    }
-
     /// The next row into `s`: `None` at the end of the input, `Some(Err)` for a malformed row
     /// (which is then consumed; the reader can continue). Blank lines are ignored.
     ///

@@ -174,6 +174,78 @@ fn split_and_resume_equals_one_run() {
     }
 }
 
+/// A live feed under faults: the input arrives through a pipe in bursts cut in the middle of
+/// lines, with pauses; the process is killed mid-stream; a new process resumes from the last
+/// checkpoint with the same input replayed from the start. The output kept up to the
+/// checkpoint's last time, followed by the resumed output, equals the unsplit run.
+#[test]
+fn killed_live_run_resumes_to_the_unsplit_output() {
+    use std::io::{Read, Write};
+    let cfg = config("live");
+    let c = cfg.to_str().expect("utf8");
+    let data = simulate("9");
+    let whole = run(&["certify", "--config", c], &data);
+    assert!(whole.status.success());
+    let cp = tmp("live.ckpt");
+    let _ = std::fs::remove_file(&cp);
+    let cps = cp.to_str().expect("utf8");
+    let mut child = bin()
+        .args(["certify", "--config", c, "--checkpoint", cps, "--checkpoint-every", "50"])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("spawn");
+    let mut stdout = child.stdout.take().expect("stdout");
+    let collector = std::thread::spawn(move || {
+        let mut out = Vec::new();
+        let _ = stdout.read_to_end(&mut out);
+        out
+    });
+    // 60 % of the input in 37 bursts of uneven length (cut inside lines), 2 ms apart.
+    let mut pipe = child.stdin.take().expect("stdin");
+    let part = data.len() * 3 / 5;
+    let mut at = 0;
+    for k in 0..37 {
+        let end = if k == 36 { part } else { (at + part / 37 + (k * 7919) % 97).min(part) };
+        pipe.write_all(&data[at..end]).expect("feed");
+        pipe.flush().expect("flush");
+        at = end;
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    // Wait (bounded) for a checkpoint, then kill without closing the input.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    while !cp.exists() && std::time::Instant::now() < deadline {
+        std::thread::sleep(std::time::Duration::from_millis(10));
+    }
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    child.kill().expect("kill");
+    let _ = child.wait();
+    drop(pipe);
+    let partial = text(&collector.join().expect("collector"));
+    // The checkpoint's last time: the header line, then the JSON with the summary.
+    let saved = std::fs::read_to_string(&cp).expect("a checkpoint was written before the kill");
+    let (_, payload) = saved.split_once('\n').expect("header");
+    let last: f64 =
+        serde_json::from_str::<serde_json::Value>(payload).expect("json")["summary"]["last_time"]
+            .as_f64()
+            .expect("last time");
+    let kept: Vec<&str> = partial
+        .lines()
+        .take_while(|l| {
+            l.starts_with('t')
+                || l.split(',')
+                    .next()
+                    .and_then(|v| v.parse::<f64>().ok())
+                    .is_some_and(|t| t <= last)
+        })
+        .collect();
+    assert!(kept.len() > 50, "only {} rows before the checkpoint", kept.len());
+    let resumed = run(&["certify", "--config", c, "--resume", cps], &data);
+    assert!(resumed.status.success(), "{}", text(&resumed.stderr));
+    assert_eq!(format!("{}\n{}", kept.join("\n"), text(&resumed.stdout)), text(&whole.stdout));
+}
+
 /// Run certify on `body` (after a valid header) and return (exit code, stderr).
 fn certify_rows(body: &str, extra: &[&str]) -> (Option<i32>, String) {
     let cfg = config("rows");

@@ -203,3 +203,28 @@ proptest! {
         prop_assert_eq!(cfg.radius(None, 0.0), floor);
     }
 }
+
+/// A restored sliding-moments state whose ring index is out of range (found by the
+/// checkpoint fuzz target) is refused, not read.
+#[test]
+fn a_restored_window_with_indices_out_of_range_is_refused() {
+    let mut k = streamcert::ambiguity::SlidingKurtosis::new(20).expect("valid");
+    for i in 0..30 {
+        k.push(f64::from(i).sin()).expect("finite");
+    }
+    assert!(k.is_consistent());
+    let json = serde_json::to_string(&k).expect("serialises");
+    for (from, to) in [("\"head\":10", "\"head\":37"), ("\"len\":20", "\"len\":21")] {
+        assert!(json.contains(from), "{json}");
+        let bad: streamcert::ambiguity::SlidingKurtosis =
+            serde_json::from_str(&json.replace(from, to)).expect("parses");
+        assert!(!bad.is_consistent());
+    }
+    // Running sums that disagree with the window are refused too.
+    let v: serde_json::Value = serde_json::from_str(&json).expect("json");
+    let mut edited = v.clone();
+    edited["s"][1] = serde_json::json!(v["s"][1].as_f64().expect("sum") * 2.0);
+    let bad: streamcert::ambiguity::SlidingKurtosis =
+        serde_json::from_value(edited).expect("parses");
+    assert!(!bad.is_consistent());
+}

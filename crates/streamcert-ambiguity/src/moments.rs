@@ -167,6 +167,34 @@ impl SlidingKurtosis {
         Ok(())
     }
 
+    /// `true` when a deserialised state is one `push` could have produced: the ring's indices
+    /// in range, every stored value finite, and the running sums within rounding of an exact
+    /// recompute from the window (mean, variance and excess kurtosis to `1e-9` of their scale).
+    #[must_use]
+    pub fn is_consistent(&self) -> bool {
+        let n = self.buf.len();
+        let structure = n >= Self::MIN_WINDOW
+            && self.head < n
+            && self.len <= n
+            && (self.len == n || self.head == self.len)
+            && self.buf.iter().chain(&self.s).chain(&self.mag).all(|v| v.is_finite())
+            && self.shift.is_finite();
+        if !structure {
+            return false;
+        }
+        let mut exact = self.clone();
+        exact.recompute();
+        let close = |a: Option<f64>, b: Option<f64>, scale: f64| match (a, b) {
+            (Some(a), Some(b)) => (a - b).abs() <= 1e-9 * (scale + a.abs().max(b.abs())),
+            (None, None) => true,
+            _ => false,
+        };
+        let sd = exact.variance().unwrap_or(0.0).sqrt();
+        close(self.mean(), exact.mean(), sd)
+            && close(self.variance(), exact.variance(), 0.0)
+            && close(self.excess_kurtosis(), exact.excess_kurtosis(), 3.0)
+    }
+
     /// Exact two-pass recompute of the sums about the window mean.
     pub fn recompute(&mut self) {
         let lenf = self.len as f64;

@@ -208,6 +208,12 @@ impl AmbiguityRadius {
     /// checkpoint restore, not for the per-sample path.
     #[must_use]
     pub fn is_consistent(&self) -> bool {
+        // The structure first: the recount below walks the window.
+        if !self.moments.is_consistent()
+            || !self.calibration.as_ref().is_none_or(RobustScale::is_consistent)
+        {
+            return false;
+        }
         let window_ok = self.moments.window() == self.cfg.tail_window
             && self.inv_window == 1.0 / self.cfg.tail_window as f64;
         let recount = self

@@ -64,6 +64,17 @@ impl RobustScale {
         self.value
     }
 
+    /// `true` when a deserialised state is one `push` could have produced.
+    #[must_use]
+    pub fn is_consistent(&self) -> bool {
+        let n = self.buf.len();
+        n >= 4
+            && self.len <= n
+            && (self.value.is_some() || self.len < n)
+            && self.buf.iter().all(|v| v.is_finite())
+            && self.value.is_none_or(|v| v.is_finite() && v >= 0.0)
+    }
+
     /// The frozen scale, if calibration is complete.
     #[must_use]
     pub fn value(&self) -> Option<f64> {

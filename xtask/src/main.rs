@@ -6,9 +6,12 @@
 //!   validity table and a sensitivity study, written with `REPORT.md` and `meta.json` to
 //!   `target/reproduce` (or `--out DIR`).
 //! * `exp1`, `exp2`: one experiment.
+//! * `validity`: the calibrated certificate at the boundary (VALIDITY.md).
+//! * `reliability`: bad inputs through the binary (RELIABILITY.md).
 //!
-//! Every choice the paper leaves open is a flag (see `USAGE`). Without a command it prints
-//! the command list.
+//! The command line is clap's: `cargo xtask --help`, `cargo xtask reproduce --help`. Every
+//! choice the paper leaves open is a flag whose default is `Params::default()`, the one
+//! place it is set. Without a command it prints the help.
 
 mod common;
 mod exp1;
@@ -21,45 +24,108 @@ mod validity;
 use std::path::PathBuf;
 
 use anyhow::{Context, Result, bail};
+use clap::{Args, Parser, Subcommand};
 
 use crate::common::Params;
 
-const USAGE: &str = "\
-usage: cargo xtask <command> [options]
+/// `cargo xtask`: reproduce the paper's experiments, measure the calibrated certificate's
+/// validity, and tabulate the command line's answers to bad input.
+#[derive(Parser)]
+#[command(name = "cargo xtask", bin_name = "cargo xtask", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
+}
 
-commands:
-  reproduce      both experiments, sensitivity study, REPORT.md, meta.json
-  exp1           Experiment 1 only (Table II, validity, Figs. 3-5)
-  exp2           Experiment 2 only (Table III, coupled simulations, Figs. 6-8)
-  validity [--runs N] [--out DIR]
-                 gate-opening rates of the calibrated and the paper's certificates on
-                 linear systems with known rates (VALIDITY.md, default 200 runs,
-                 default DIR target/validity)
+#[derive(Subcommand)]
+enum Command {
+    /// Both experiments, the sensitivity study, REPORT.md and meta.json.
+    Reproduce(Run),
+    /// Experiment 1 only (Table II, validity, Figs. 3-5).
+    Exp1(Run),
+    /// Experiment 2 only (Table III, coupled simulations, Figs. 6-8).
+    Exp2(Run),
+    /// The calibrated certificate's false-opening rate at the boundary, its power and its
+    /// reaction to a plant change, with the paper's certificate on the same runs
+    /// (VALIDITY.md).
+    Validity {
+        /// Runs per near-margin cell (a fifth of them, at least 50, per power cell).
+        #[arg(long, default_value_t = 200)]
+        runs: usize,
+        /// Output folder.
+        #[arg(long, default_value = "target/validity")]
+        out: PathBuf,
+    },
+    /// Every bad input through the streamcert binary: exit code and message per case
+    /// (RELIABILITY.md).
+    Reliability {
+        /// Output folder.
+        #[arg(long, default_value = "target/reliability")]
+        out: PathBuf,
+    },
+}
 
-  reliability [--out DIR]
-                 every bad input (damaged checkpoints, gaps, jitter, foreign CSV, bad rows
-                 and values, configuration) through the streamcert binary: exit code and
-                 message per case (RELIABILITY.md, default DIR target/reliability)
+/// The serde name of a unit enum variant (`sde`, `cascade`, …), the spelling of its flag.
+fn name<T: serde::Serialize>(v: &T) -> String {
+    serde_json::to_value(v).ok().and_then(|v| v.as_str().map(str::to_string)).unwrap_or_default()
+}
 
-options (defaults in brackets; see REPORT.md for why):
-  --out DIR                     output folder [target/reproduce]
-  --seeds N                     seeds [20]
-  --c X                         conservatism c of eq. rho [0.1]
-  --window M                    regression window in columns [150]
-  --horizon H                   integration horizon in samples [5]
-  --consecutive N               gate length n_s [10]
-  --alpha-kurtosis X            alpha_kappa of eq. eps_est [0.03]
-  --alpha-spike X               alpha_s of eq. eps_est [2.0]
-  --dither X                    PRBS dither amplitude [0.5]
-  --dither-hold S               PRBS hold time in seconds [0.1]
-  --noise-scaling S             sde | held_input | state_increment [sde]
-  --coupling S                  Experiment 1 G5 coupling: cascade | bidirectional [cascade]
-  --residuals S                 residuals for eps: one_step | horizon [one_step]
-  --estimator S                 ordinary | instrumented [ordinary]
-  --input-integral S            trapezoidal | zero_order_hold [trapezoidal]
-  --exp2-noise-on-a B           Experiment 2 noise also into x1: true | false [true]
-  --no-sensitivity              skip the sensitivity study
-";
+/// Every choice the paper leaves open; the defaults are `Params::default()` (see REPORT.md
+/// for why).
+#[derive(Args)]
+struct Run {
+    /// Output folder.
+    #[arg(long, default_value = "target/reproduce")]
+    out: PathBuf,
+    /// Seeds.
+    #[arg(long, default_value_t = Params::default().seeds)]
+    seeds: usize,
+    /// Conservatism c of eq. rho.
+    #[arg(long, default_value_t = Params::default().c)]
+    c: f64,
+    /// Regression window M in columns.
+    #[arg(long, default_value_t = Params::default().window)]
+    window: usize,
+    /// Integration horizon h in samples.
+    #[arg(long, default_value_t = Params::default().horizon)]
+    horizon: usize,
+    /// Gate length n_s.
+    #[arg(long, default_value_t = Params::default().consecutive)]
+    consecutive: usize,
+    /// alpha_kappa of eq. eps_est.
+    #[arg(long, default_value_t = Params::default().alpha_kurtosis)]
+    alpha_kurtosis: f64,
+    /// alpha_s of eq. eps_est.
+    #[arg(long, default_value_t = Params::default().alpha_spike)]
+    alpha_spike: f64,
+    /// PRBS dither amplitude.
+    #[arg(long, default_value_t = Params::default().dither)]
+    dither: f64,
+    /// PRBS hold time in seconds.
+    #[arg(long, default_value_t = Params::default().dither_hold)]
+    dither_hold: f64,
+    /// Noise scaling with dt: sde | held_input | state_increment.
+    #[arg(long, default_value_t = name(&Params::default().noise_scaling))]
+    noise_scaling: String,
+    /// Experiment 1 G5 coupling: cascade | bidirectional.
+    #[arg(long, default_value_t = name(&Params::default().coupling))]
+    coupling: String,
+    /// Residuals for eps: one_step | horizon.
+    #[arg(long, default_value_t = name(&Params::default().residuals))]
+    residuals: String,
+    /// Estimator: ordinary | instrumented.
+    #[arg(long, default_value_t = name(&Params::default().estimator))]
+    estimator: String,
+    /// Input integral: trapezoidal | zero_order_hold.
+    #[arg(long, default_value_t = name(&Params::default().input_integral))]
+    input_integral: String,
+    /// Experiment 2: noise also into x1.
+    #[arg(long, default_value_t = Params::default().exp2_noise_on_a, action = clap::ArgAction::Set)]
+    exp2_noise_on_a: bool,
+    /// Skip the sensitivity study.
+    #[arg(long)]
+    no_sensitivity: bool,
+}
 
 struct Options {
     out: PathBuf,
@@ -69,92 +135,49 @@ struct Options {
 
 fn enum_arg<T: serde::de::DeserializeOwned>(flag: &str, v: &str) -> Result<T> {
     serde_json::from_value(serde_json::Value::String(v.to_string()))
-        .with_context(|| format!("{flag}: unknown value `{v}`\n{USAGE}"))
+        .with_context(|| format!("--{flag}: unknown value `{v}` (see --help)"))
 }
 
-fn parse(args: &[String]) -> Result<Options> {
-    let mut o = Options {
-        out: PathBuf::from("target/reproduce"),
-        params: Params::default(),
-        sensitivity: true,
-    };
-    let mut it = args.iter();
-    while let Some(flag) = it.next() {
-        if flag == "--no-sensitivity" {
-            o.sensitivity = false;
-            continue;
+impl Run {
+    fn options(self) -> Result<Options> {
+        if self.seeds == 0 {
+            bail!("--seeds must be at least 1");
         }
-        let v = it.next().with_context(|| format!("{flag} needs a value\n{USAGE}"))?;
-        let num =
-            |v: &str| v.parse::<f64>().with_context(|| format!("{flag}: not a number: `{v}`"));
-        let int =
-            |v: &str| v.parse::<usize>().with_context(|| format!("{flag}: not a count: `{v}`"));
-        let p = &mut o.params;
-        match flag.as_str() {
-            "--out" => o.out = PathBuf::from(v),
-            "--seeds" => p.seeds = int(v)?,
-            "--c" => p.c = num(v)?,
-            "--window" => p.window = int(v)?,
-            "--horizon" => p.horizon = int(v)?,
-            "--consecutive" => p.consecutive = int(v)?,
-            "--alpha-kurtosis" => p.alpha_kurtosis = num(v)?,
-            "--alpha-spike" => p.alpha_spike = num(v)?,
-            "--dither" => p.dither = num(v)?,
-            "--dither-hold" => p.dither_hold = num(v)?,
-            "--noise-scaling" => p.noise_scaling = enum_arg(flag, v)?,
-            "--coupling" => p.coupling = enum_arg(flag, v)?,
-            "--residuals" => p.residuals = enum_arg(flag, v)?,
-            "--estimator" => p.estimator = enum_arg(flag, v)?,
-            "--input-integral" => p.input_integral = enum_arg(flag, v)?,
-            "--exp2-noise-on-a" => {
-                p.exp2_noise_on_a = v.parse().with_context(|| format!("{flag}: true or false"))?
-            }
-            other => bail!("unknown option `{other}`\n{USAGE}"),
-        }
+        let params = Params {
+            seeds: self.seeds,
+            c: self.c,
+            window: self.window,
+            horizon: self.horizon,
+            consecutive: self.consecutive,
+            alpha_kurtosis: self.alpha_kurtosis,
+            alpha_spike: self.alpha_spike,
+            dither: self.dither,
+            dither_hold: self.dither_hold,
+            noise_scaling: enum_arg("noise-scaling", &self.noise_scaling)?,
+            coupling: enum_arg("coupling", &self.coupling)?,
+            residuals: enum_arg("residuals", &self.residuals)?,
+            estimator: enum_arg("estimator", &self.estimator)?,
+            input_integral: enum_arg("input-integral", &self.input_integral)?,
+            exp2_noise_on_a: self.exp2_noise_on_a,
+            ..Params::default()
+        };
+        Ok(Options { out: self.out, params, sensitivity: !self.no_sensitivity })
     }
-    if o.params.seeds == 0 {
-        bail!("--seeds must be at least 1");
-    }
-    Ok(o)
 }
 
 fn main() -> Result<()> {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    let Some(cmd) = args.first() else {
-        print!("{USAGE}");
+    let cli = Cli::parse();
+    let Some(command) = cli.command else {
+        use clap::CommandFactory;
+        Cli::command().print_help()?;
         return Ok(());
     };
     plot::init_fonts()?;
-    match cmd.as_str() {
-        "reproduce" => report::reproduce(&parse(&args[1..])?, true, true),
-        "exp1" => report::reproduce(&parse(&args[1..])?, true, false),
-        "exp2" => report::reproduce(&parse(&args[1..])?, false, true),
-        "validity" => {
-            let mut runs = 200;
-            let mut out = PathBuf::from("target/validity");
-            let mut it = args[1..].iter();
-            while let Some(flag) = it.next() {
-                let v = it.next().with_context(|| format!("{flag} needs a value"))?;
-                match flag.as_str() {
-                    "--runs" => runs = v.parse().context("--runs")?,
-                    "--out" => out = PathBuf::from(v),
-                    other => bail!("unknown option `{other}`\n{USAGE}"),
-                }
-            }
-            validity::run(runs, &out)
-        }
-        "reliability" => {
-            let out = match args.get(1).map(String::as_str) {
-                Some("--out") => PathBuf::from(args.get(2).context("--out needs a value")?),
-                Some(other) => bail!("unknown option `{other}`\n{USAGE}"),
-                None => PathBuf::from("target/reliability"),
-            };
-            reliability::run_all(&out)
-        }
-        "help" | "--help" | "-h" => {
-            print!("{USAGE}");
-            Ok(())
-        }
-        other => bail!("unknown command `{other}`\n{USAGE}"),
+    match command {
+        Command::Reproduce(run) => report::reproduce(&run.options()?, true, true),
+        Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
+        Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
+        Command::Validity { runs, out } => validity::run(runs, &out),
+        Command::Reliability { out } => reliability::run_all(&out),
     }
 }

@@ -52,10 +52,26 @@ impl SlidingRegression {
         if !ok {
             return Err(RegressionError::CorruptState("ring counters out of range".into()));
         }
-        let all_finite =
-            [&self.hist_t, &self.hist_y, &self.hist_u, &self.col_z, &self.col_dy, &self.g]
-                .iter()
-                .all(|v| v.iter().all(|x| x.is_finite()));
+        // Every buffer that carries state from one sample to the next (the scratch buffers
+        // `theta`, `work`, `work2`, `z`, `dy` are overwritten before they are read).
+        let state = [
+            &self.hist_t,
+            &self.hist_y,
+            &self.hist_u,
+            &self.hist_z1,
+            &self.dy1,
+            &self.zhist,
+            &self.col_z,
+            &self.col_dy,
+            &self.col_w,
+            &self.g,
+            &self.c,
+            &self.s,
+            &self.gw,
+            &self.cw,
+            &self.peaks,
+        ];
+        let all_finite = state.iter().all(|v| v.iter().all(|x| x.is_finite()));
         if !all_finite {
             return Err(RegressionError::CorruptState("non-finite value in the window".into()));
         }

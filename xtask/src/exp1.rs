@@ -31,7 +31,7 @@ fn g5(p: &Params) -> Result<G5> {
 
 /// The data run (see `G5Dataset`): candidate gains plus PRBS dither, Experiment 1's schedule.
 fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
-    Ok(p.dataset(Experiment::One).run([seed(run, 1), seed(run, 2), seed(run, 3), seed(run, 4)])?)
+    Ok(p.dataset(Experiment::One).run_seeded(run as u64)?)
 }
 
 /// Certify one measured channel (`0` = A: `x1`, `u1`; `1` = B: `x4`, `u4`).

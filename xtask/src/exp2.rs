@@ -38,12 +38,7 @@ fn noise(on: bool) -> DisturbanceConfig {
 }
 
 fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
-    Ok(p.dataset(Experiment::Two).run([
-        seed(run, 11),
-        seed(run, 12),
-        seed(run, 13),
-        seed(run, 14),
-    ])?)
+    Ok(p.dataset(Experiment::Two).run_seeded(run as u64)?)
 }
 
 /// Closed-loop coupled response: `u = K y`, impulse into x4 at 3 s.

@@ -94,7 +94,7 @@ enum SimSystem {
         /// Which experiment's data set (1: three disturbance regimes, 30 s; 2: disconnected, 16 s).
         #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=2))]
         experiment: u8,
-        /// Seed.
+        /// Run number: the data of `cargo xtask reproduce` run SEED (0-based).
         #[arg(long, default_value_t = 0)]
         seed: u64,
         /// Coupling structure.

@@ -6,8 +6,9 @@ use streamcert_dynamics::{Coupling, Experiment, G5Dataset};
 
 use crate::CliError;
 
-/// Write `t,y_a,u_a,y_b,u_b` (and the states and the true local rates) for one seed,
-/// optionally with another number of steps.
+/// Write `t,y_a,u_a,y_b,u_b` (and the states and the true local rates) for run `seed` of the
+/// experiment, exactly the data of `cargo xtask reproduce` run `seed` (the seed rule is
+/// `G5Dataset::seeds`), optionally with another number of steps.
 ///
 /// # Errors
 /// [`CliError::Io`] on a write error.
@@ -19,9 +20,8 @@ pub fn run<W: Write>(
     out: &mut W,
 ) -> Result<(), CliError> {
     let ds = G5Dataset { coupling, steps, ..G5Dataset::defaults(experiment) };
-    let base = seed.wrapping_mul(1_000_003);
     let traj = ds
-        .run([base + 1, base + 2, base + 3, base + 4])
+        .run_seeded(seed)
         .map_err(|e| CliError::Input { file: "simulate".into(), message: e.to_string() })?;
     let sys = ds
         .system()

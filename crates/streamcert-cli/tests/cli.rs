@@ -401,3 +401,24 @@ fn compose_two_subsystems_equals_lemma_1() {
     assert_eq!(out.status.code(), Some(3));
     assert!(text(&out.stderr).contains(">= 0"));
 }
+
+/// `simulate g5 --experiment E --seed s` writes the data of `cargo xtask reproduce` run `s`:
+/// the same `G5Dataset::run_seeded(s)` with the reproduction's defaults.
+#[test]
+fn simulate_seed_is_the_reproduction_run() {
+    use streamcert_dynamics::{Experiment, G5Dataset};
+    for (experiment, flag) in [(Experiment::One, "1"), (Experiment::Two, "2")] {
+        let out = run(&["simulate", "g5", "--experiment", flag, "--seed", "3"], b"");
+        assert!(out.status.success());
+        let traj = G5Dataset::defaults(experiment).run_seeded(3).expect("valid");
+        let csv = text(&out.stdout);
+        let rows: Vec<&str> = csv.lines().skip(1).collect();
+        assert_eq!(rows.len(), traj.len());
+        for k in [0, 1, traj.len() / 2, traj.len() - 1] {
+            let fields: Vec<f64> =
+                rows[k].split(',').take(5).map(|v| v.parse().expect("number")).collect();
+            let (y, u) = (traj.output(k), traj.input(k));
+            assert_eq!(fields, vec![traj.t[k], y[0], u[0], y[1], u[1]], "row {k}");
+        }
+    }
+}

@@ -87,6 +87,32 @@ impl G5Dataset {
     /// # Errors
     /// Invalid `dt`, dither or noise parameters.
     pub fn run(&self, seeds: [u64; 4]) -> Result<Trajectory, DynamicsError> {
+        self.run_inner(seeds)
+    }
+
+    /// The four seeds of run `run` (0-based) of this experiment, the one rule the
+    /// reproduction (`cargo xtask reproduce`, run `run`) and `streamcert simulate g5 --seed
+    /// run` share: `(run + 1) · 1 000 003 + stream`, streams 1 to 4 for Experiment 1 and 11 to
+    /// 14 for Experiment 2.
+    #[must_use]
+    pub fn seeds(&self, run: u64) -> [u64; 4] {
+        let first = match self.experiment {
+            Experiment::One => 1,
+            Experiment::Two => 11,
+        };
+        let base = (run + 1).wrapping_mul(1_000_003);
+        [base + first, base + first + 1, base + first + 2, base + first + 3]
+    }
+
+    /// [`run`](Self::run) with the seeds of run `run` ([`seeds`](Self::seeds)).
+    ///
+    /// # Errors
+    /// As [`run`](Self::run).
+    pub fn run_seeded(&self, run: u64) -> Result<Trajectory, DynamicsError> {
+        self.run_inner(self.seeds(run))
+    }
+
+    fn run_inner(&self, seeds: [u64; 4]) -> Result<Trajectory, DynamicsError> {
         let sys = self.system()?;
         let (_, k1, k4, default_steps) = self.settings();
         let steps = self.steps.unwrap_or(default_steps);

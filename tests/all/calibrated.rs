@@ -379,8 +379,10 @@ proptest::proptest! {
         let want = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
         let dist = StudentsT::new(0.0, 1.0, nu).expect("valid");
         let got = streamcert::certificate::t_quantile(nu, risk);
-        // statrs' own inverse is accurate to about 1e-9; the defining property is S(t) = risk.
+        // statrs' own inverse is accurate to about 1e-9; the defining property is S(t) = risk
+        // (to 1e-6: where the continued fraction does not apply, t_quantile falls back on
+        // statrs' inverse, whose round trip through statrs' survival function is looser).
         proptest::prop_assert!((got - want).abs() <= 1e-8 * want.abs(), "{got} vs {want}");
-        proptest::prop_assert!((dist.sf(got) / risk - 1.0).abs() <= 1e-8, "S({got}) vs {risk}");
+        proptest::prop_assert!((dist.sf(got) / risk - 1.0).abs() <= 1e-6, "S({got}) vs {risk}");
     }
 }

@@ -50,7 +50,8 @@
 //!   `cargo xtask validity`); with the effective number it does not.
 //!
 //! **Looks and risk.** Window `w` *looks* (computes its certificate) once it is full and then
-//! every `⌈look_spacing · M_w⌉` columns; between looks its latest certificate is held. Its
+//! every `⌈look_spacing · B_w⌉` blocks of `h` columns (`B_w = ⌊M_w/h⌋`), at a block
+//! boundary; between looks its latest certificate is held. Its
 //! `k`-th look spends
 //!
 //! ```text
@@ -61,7 +62,7 @@
 //! the margin is at most `δ` for a run of any length and any stopping rule. Longer windows get
 //! more risk because they look less often and certify the marginal loops. The price of the
 //! schedule is decision time: a window certifies at its looks only, up to
-//! `⌈look_spacing · M_w⌉` samples after the data would allow it.
+//! `⌈look_spacing · B_w⌉ · h` samples after the data would allow it.
 //!
 //! **Combining windows, and stale certificates.** The gate is fed the largest *standing*
 //! window certificate. A window's certificate stops standing when a window whose latest look is
@@ -116,7 +117,8 @@ pub struct Calibration {
     /// Cap on the window length in columns: windows above it are dropped (default none).
     #[serde(default)]
     pub max_window: Option<usize>,
-    /// A window looks every `⌈look_spacing · M_w⌉` columns once full (default 0.5; `(0, 1]`).
+    /// A window looks every `⌈look_spacing · B_w⌉` blocks of `h` columns once full
+    /// (`B_w = ⌊M_w/h⌋`; default 0.5; `(0, 1]`).
     #[serde(default = "default_look_spacing")]
     pub look_spacing: f64,
     /// Instrument lag `L` in samples (default 1: valid under white sensor noise).

@@ -131,7 +131,7 @@ fn every_look_matches_its_formula_for_two_outputs() {
     };
     let mut cfg = calibrated(2, gain.clone(), 150, 1);
     cfg.calibration =
-        Some(Calibration { windows: 2, instrument_intervals: 3, ..Calibration::new(0.01) });
+        Some(Calibration { windows: Some(2), instrument_intervals: 3, ..Calibration::new(0.01) });
     let traj = run_scenario(&scenario, 8);
     let mut cert = Certifier::new(cfg).expect("valid");
     let mut cols: Vec<(nalgebra::DVector<f64>, nalgebra::DVector<f64>)> = Vec::new();
@@ -222,6 +222,18 @@ fn every_look_matches_its_formula_for_two_outputs() {
     }
     // Window 150 looks at columns 150, 225, …; window 300 at 300, 450, ….
     assert!(checked >= 25, "checked {checked} looks");
+}
+
+#[test]
+fn default_windows_double_until_the_longest_holds_200_blocks() {
+    let cal = Calibration::new(0.01);
+    assert_eq!(cal.window_lengths(150, 5), vec![150, 300, 600, 1200]);
+    assert_eq!(cal.window_lengths(20, 5), vec![20, 40, 80, 160, 320, 640, 1280]);
+    assert_eq!(cal.window_lengths(2000, 5), vec![2000, 4000, 8000, 16000]);
+    let capped = Calibration { max_window: Some(600), ..cal };
+    assert_eq!(capped.window_lengths(20, 5), vec![20, 40, 80, 160, 320]);
+    let fixed = Calibration { windows: Some(2), ..cal };
+    assert_eq!(fixed.window_lengths(20, 5), vec![20, 40]);
 }
 
 #[test]
@@ -322,7 +334,7 @@ fn the_instrumented_window_is_unbiased_under_sensor_noise() {
         ..scalar(0.5, -1.5, Process::Gaussian { sigma: 0.1 }, 1.0)
     };
     let cfg = CertifierConfig {
-        calibration: Some(Calibration { windows: 1, ..Calibration::new(0.01) }),
+        calibration: Some(Calibration { windows: Some(1), ..Calibration::new(0.01) }),
         ..calibrated(1, vec![-1.5], 1200, 1)
     };
     let (mut ordinary, mut instrumented) = (Vec::new(), Vec::new());

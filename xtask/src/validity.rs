@@ -314,7 +314,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (windows M, 2M, 4M, 8M, looks every M_w/2 columns, instrument lag 1). The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.\n"
+        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (windows doubling from M until the longest holds 200 blocks of h columns, at least four; looks every half window; instrument lag 1). The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.\n"
     );
     // Near-margin cells.
     let mut rows = Vec::new();

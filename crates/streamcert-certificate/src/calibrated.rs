@@ -111,9 +111,12 @@ use crate::{CertifyError, NotCertified};
 pub struct Calibration {
     /// Risk `δ ∈ (0, 1)` over the whole run.
     pub delta: f64,
-    /// Number of windows `M, 2M, 4M, …` (default 4; `1..=16`).
-    #[serde(default = "default_windows")]
-    pub windows: usize,
+    /// Number of windows `M, 2M, 4M, …`. `None` (default): double from `M` until there are at
+    /// least four and the longest holds at least 200 blocks of `h` columns (about 200 degrees
+    /// of freedom, where the Student-t quantile at the risks a look spends is within 2 % of the
+    /// normal one), at most 16. `Some(n)`: exactly `n` (`1..=16`).
+    #[serde(default)]
+    pub windows: Option<usize>,
     /// Cap on the window length in columns: windows above it are dropped (default none).
     #[serde(default)]
     pub max_window: Option<usize>,
@@ -134,9 +137,6 @@ pub struct Calibration {
     pub instrument_intervals: usize,
 }
 
-fn default_windows() -> usize {
-    4
-}
 fn default_look_spacing() -> f64 {
     0.5
 }
@@ -153,7 +153,7 @@ impl Calibration {
     pub fn new(delta: f64) -> Self {
         Self {
             delta,
-            windows: default_windows(),
+            windows: None,
             max_window: None,
             look_spacing: default_look_spacing(),
             instrument_lag: default_lag(),
@@ -169,14 +169,20 @@ impl Calibration {
         horizon * (unknowns + 2)
     }
 
-    /// The window lengths for base window `base`: `base · 2^i` for `i < windows`, those above
+    /// The window lengths for base window `base` and horizon `h`: `base · 2^i` for
+    /// `i < windows` (see [`windows`](Self::windows) for the default count), those above
     /// `max_window` dropped.
     #[must_use]
-    pub fn window_lengths(&self, base: usize) -> Vec<usize> {
-        (0..self.windows as u32)
-            .map(|i| base.saturating_mul(1usize << i.min(30)))
-            .filter(|&w| self.max_window.is_none_or(|cap| w <= cap))
-            .collect()
+    pub fn window_lengths(&self, base: usize, horizon: usize) -> Vec<usize> {
+        let length = |i: usize| base.saturating_mul(1usize << i.min(30));
+        let count = self.windows.unwrap_or_else(|| {
+            let mut n = 4;
+            while n < 16 && length(n - 1) < 200 * horizon {
+                n += 1;
+            }
+            n
+        });
+        (0..count).map(length).filter(|&w| self.max_window.is_none_or(|cap| w <= cap)).collect()
     }
 
     /// Check the settings against the regression and the margin.
@@ -200,8 +206,10 @@ impl Calibration {
                 ),
             );
         }
-        if !(1..=16).contains(&self.windows) {
-            return bad("calibration.windows", format!("must lie in 1..=16, got {}", self.windows));
+        if let Some(n) = self.windows {
+            if !(1..=16).contains(&n) {
+                return bad("calibration.windows", format!("must lie in 1..=16, got {n}"));
+            }
         }
         if !(self.look_spacing > 0.0 && self.look_spacing <= 1.0) {
             return bad(
@@ -314,7 +322,7 @@ impl CalibratedState {
         gain: &[f64],
     ) -> Result<Self, CertifyError> {
         let (p, m) = (reg.outputs, reg.inputs);
-        let lengths = cal.window_lengths(reg.window);
+        let lengths = cal.window_lengths(reg.window, reg.horizon);
         let windows = InstrumentedWindows::new(
             p,
             m,

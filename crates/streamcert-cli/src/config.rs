@@ -60,7 +60,7 @@ residuals = "one_step"  # or "horizon"
 # run (see the README for the assumptions). Needs margin > 0 and window >= h (p + m + 2).
 enabled = false
 delta = 0.01
-# windows = 4            # M, 2M, 4M, 8M
+# windows = 4            # M, 2M, 4M, 8M (default: doubling until the longest holds 200 h)
 # max_window = 1200      # drop windows longer than this (default: none)
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
@@ -122,7 +122,7 @@ impl CalibrationSection {
     fn calibration(&self) -> Calibration {
         let d = Calibration::new(self.delta);
         Calibration {
-            windows: self.windows.unwrap_or(d.windows),
+            windows: self.windows.or(d.windows),
             max_window: self.max_window.or(d.max_window),
             look_spacing: self.look_spacing.unwrap_or(d.look_spacing),
             instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
@@ -364,7 +364,7 @@ mod tests {
         assert_eq!(c.certifier.calibration, Some(Calibration::new(0.05)));
         let tuned = on.replace("# windows = 4 ", "windows = 2 ");
         let c = parse(&tuned, "x").unwrap();
-        assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(2));
+        assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(Some(2)));
         // A window below h (p + m + 2) has no calibrated bound: refused, naming the smallest.
         let short = on.replace("window = 150 ", "window = 10 ");
         assert!(

@@ -95,10 +95,14 @@ fn options(resume: Option<PathBuf>) -> Options {
     }
 }
 
+/// A scratch file private to this call: tests run in parallel threads of one process, so the
+/// process id alone is not enough.
 fn scratch(name: &str) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz");
     std::fs::create_dir_all(&dir).expect("scratch dir");
-    dir.join(format!("{name}-{}", std::process::id()))
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    dir.join(format!("{name}-{}-{n}", std::process::id()))
 }
 
 /// Resume from the corpus checkpoint damaged by `m` (re-sealed with a valid checksum when
@@ -124,7 +128,8 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
     std::fs::write(&path, &damaged).expect("write");
     let data = "t,y_b,u_b\n100,0.1,0.2\n100.02,0.1,0.3\n";
     let mut out = Vec::new();
-    let result = run(&cfg, Cursor::new(data), "fuzz", &mut out, &options(Some(path)));
+    let result = run(&cfg, Cursor::new(data), "fuzz", &mut out, &options(Some(path.clone())));
+    let _ = std::fs::remove_file(&path);
     (damaged != text.as_bytes(), result.is_err())
 }
 

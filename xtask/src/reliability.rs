@@ -32,8 +32,15 @@ fn run(bin: &Path, args: &[&str], stdin: &[u8]) -> Result<(i32, String, String)>
         .stderr(Stdio::piped())
         .spawn()
         .with_context(|| format!("running {}", bin.display()))?;
-    child.stdin.take().context("stdin")?.write_all(stdin).ok();
+    // Feed stdin from another thread: the child writes its output while it reads, so writing
+    // all the input first could fill the output pipe and deadlock.
+    let mut pipe = child.stdin.take().context("stdin")?;
+    let data = stdin.to_vec();
+    let feeder = std::thread::spawn(move || {
+        let _ = pipe.write_all(&data);
+    });
     let out = child.wait_with_output()?;
+    let _ = feeder.join();
     let stderr = String::from_utf8_lossy(&out.stderr);
     let first = stderr
         .lines()
@@ -142,6 +149,33 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
                 a.pop();
             }
         })?)?,
+    );
+    record(
+        &mut rows,
+        "checkpoint: eigenvalue scratch emptied, checksum recomputed",
+        resume(&reseal(&|v| v["certifier"]["eig_work"] = serde_json::json!([]))?)?,
+    );
+    // With the calibrated certificate on: its `T = [I; K]` zeroed.
+    let cal_cfg = path("calibrated.toml");
+    std::fs::write(&cal_cfg, config.replace("enabled = false\ndelta", "enabled = true\ndelta"))?;
+    let cal = s(&cal_cfg)?;
+    let cal_ckpt = path("calibrated.ckpt");
+    run(&bin, &["certify", "--config", &cal, "--checkpoint", &s(&cal_ckpt)?], first.as_bytes())?;
+    let cal_text = std::fs::read_to_string(&cal_ckpt)?;
+    let (_, cal_payload) = cal_text.split_once('\n').context("checkpoint header")?;
+    let mut cal_state: serde_json::Value = serde_json::from_str(cal_payload)?;
+    let cal_config: streamcert_certificate::CertifierConfig =
+        serde_json::from_value(cal_state["certifier"]["cfg"].clone())?;
+    if let Some(t) = cal_state["certifier"]["calibrated"]["tmat"].as_array_mut() {
+        t.iter_mut().for_each(|x| *x = 0.0.into());
+    }
+    let zeroed = streamcert_certificate::seal(&cal_state.to_string(), &cal_config)?;
+    let damaged = path("damaged-calibrated.ckpt");
+    std::fs::write(&damaged, zeroed)?;
+    record(
+        &mut rows,
+        "checkpoint: calibrated `T = [I; K]` zeroed, checksum recomputed",
+        run(&bin, &["certify", "--config", &cal, "--resume", &s(&damaged)?], rest.as_bytes())?,
     );
     let other_cfg = path("other.toml");
     std::fs::write(&other_cfg, config.replace("margin = 0.05", "margin = 0.06"))?;

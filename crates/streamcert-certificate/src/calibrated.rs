@@ -95,7 +95,10 @@
 //!   smallest accepted window ([`Calibration::min_window`]) keeps `B − (p + m) >= 2`, and
 //!   `cargo xtask validity` measures the false-opening rate down to it.
 
+mod config;
 mod quantile;
+
+pub use config::Calibration;
 
 pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quantile};
 
@@ -103,150 +106,6 @@ use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, RegressionConfig, WindowEstimate, linalg};
 
 use crate::{CertifyError, NotCertified};
-
-/// Settings of the calibrated certificate. Only `delta` is required; the rest have documented
-/// defaults.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Calibration {
-    /// Risk `δ ∈ (0, 1)` over the whole run.
-    pub delta: f64,
-    /// Number of windows `M, 2M, 4M, …`. `None` (default): double from `M` until there are at
-    /// least four and the longest holds at least 200 blocks of `h` columns (about 200 degrees
-    /// of freedom, where the Student-t quantile at the risks a look spends is within 2 % of the
-    /// normal one), at most 16. `Some(n)`: exactly `n` (`1..=16`).
-    #[serde(default)]
-    pub windows: Option<usize>,
-    /// Cap on the window length in columns: windows above it are dropped (default none).
-    #[serde(default)]
-    pub max_window: Option<usize>,
-    /// A window looks every `⌈look_spacing · B_w⌉` blocks of `h` columns once full
-    /// (`B_w = ⌊M_w/h⌋`; default 0.5; `(0, 1]`).
-    #[serde(default = "default_look_spacing")]
-    pub look_spacing: f64,
-    /// Instrument lag `L` in samples (default 1: valid under white sensor noise).
-    #[serde(default = "default_lag")]
-    pub instrument_lag: usize,
-    /// Instrument intervals `J` (default 1; `1..=8`): the instrument stacks the regressors of
-    /// the `J` intervals before the column, so for `J >= 2` the estimate is two-stage least
-    /// squares over-identified by `(J − 1)(p + m)` restrictions (finite moments up to that
-    /// order). `cargo xtask validity` measured `J = 1` and `J = 3` alike on every cell (the
-    /// studentised estimate is what the bound uses), and `J = 1` costs a ninth of the outer
-    /// products for `p = m = 1`.
-    #[serde(default = "default_intervals")]
-    pub instrument_intervals: usize,
-}
-
-fn default_look_spacing() -> f64 {
-    0.5
-}
-fn default_lag() -> usize {
-    1
-}
-fn default_intervals() -> usize {
-    1
-}
-
-impl Calibration {
-    /// Risk `delta` with every other setting at its default.
-    #[must_use]
-    pub fn new(delta: f64) -> Self {
-        Self {
-            delta,
-            windows: None,
-            max_window: None,
-            look_spacing: default_look_spacing(),
-            instrument_lag: default_lag(),
-            instrument_intervals: default_intervals(),
-        }
-    }
-
-    /// The smallest base window with a calibrated bound: `h (p + m + 2)` columns, so that the
-    /// window holds at least two non-overlapping intervals per unknown plus two
-    /// (`ν = ⌊M/h⌋ − (p + m) >= 2`).
-    #[must_use]
-    pub fn min_window(horizon: usize, unknowns: usize) -> usize {
-        horizon * (unknowns + 2)
-    }
-
-    /// The window lengths for base window `base` and horizon `h`: `base · 2^i` for
-    /// `i < windows` (see [`windows`](Self::windows) for the default count), those above
-    /// `max_window` dropped.
-    #[must_use]
-    pub fn window_lengths(&self, base: usize, horizon: usize) -> Vec<usize> {
-        let length = |i: usize| base.saturating_mul(1usize << i.min(30));
-        let count = self.windows.unwrap_or_else(|| {
-            let mut n = 4;
-            while n < 16 && length(n - 1) < 200 * horizon {
-                n += 1;
-            }
-            n
-        });
-        (0..count).map(length).filter(|&w| self.max_window.is_none_or(|cap| w <= cap)).collect()
-    }
-
-    /// Check the settings against the regression and the margin.
-    ///
-    /// # Errors
-    /// [`CertifyError::InvalidConfig`] with what would be valid.
-    pub fn validate(&self, reg: &RegressionConfig, margin: f64) -> Result<(), CertifyError> {
-        let bad = |field: &'static str, reason: String| {
-            Err(CertifyError::InvalidConfig { field, reason })
-        };
-        if !(self.delta > 0.0 && self.delta < 1.0) {
-            return bad("calibration.delta", format!("must lie in (0, 1), got {}", self.delta));
-        }
-        if !(margin > 0.0) {
-            return bad(
-                "margin",
-                format!(
-                    "must be > 0 for the calibrated certificate, got {margin}: a certified rate \
-                     at or below 0 does not mean the loop contracts (use a small positive margin, \
-                     for example 0.05)"
-                ),
-            );
-        }
-        if let Some(n) = self.windows {
-            if !(1..=16).contains(&n) {
-                return bad("calibration.windows", format!("must lie in 1..=16, got {n}"));
-            }
-        }
-        if !(self.look_spacing > 0.0 && self.look_spacing <= 1.0) {
-            return bad(
-                "calibration.look_spacing",
-                format!("must lie in (0, 1], got {}", self.look_spacing),
-            );
-        }
-        if !(1..=8).contains(&self.instrument_intervals) {
-            return bad(
-                "calibration.instrument_intervals",
-                format!("must lie in 1..=8, got {}", self.instrument_intervals),
-            );
-        }
-        let d = reg.outputs + reg.inputs;
-        let min = Self::min_window(reg.horizon, d);
-        if reg.window < min {
-            return bad(
-                "window",
-                format!(
-                    "M = {} is too short for a calibrated bound with h = {} and p + m = {d}: \
-                     the smallest valid window is {min} columns (h · (p + m + 2), at least two \
-                     independent intervals per unknown plus two)",
-                    reg.window, reg.horizon
-                ),
-            );
-        }
-        if let Some(cap) = self.max_window {
-            if cap < reg.window {
-                return bad(
-                    "calibration.max_window",
-                    format!("must be at least the window M = {}, got {cap}", reg.window),
-                );
-            }
-        }
-        Ok(())
-    }
-}
 
 /// One window's latest look.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

@@ -94,7 +94,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 };
                 let mut cert = Certifier::new(CertifierConfig::new(reg, vec![k], c, 0.05, 10))?;
                 for i in 0..traj.len() {
-                    if let Some(v) = cert.push(traj.t[i], traj.output(i), traj.input(i))?.cert_gauss
+                    if let Some(v) =
+                        cert.push(traj.t[i], traj.output(i), traj.input(i))?.gaussian.value
                     {
                         total += 1;
                         below += usize::from(v <= truth);

@@ -67,15 +67,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             "step" => {
                 let ev = cert.push(black_box(t), y, u)?;
-                black_box((ev.cert_gauss, ev.cert_wass, ev.wass_gate.open));
+                black_box((ev.gaussian.value, ev.wasserstein.value, ev.wasserstein.open));
             }
             "gaussian" => {
                 let ev = gauss.push(black_box(t), y, u)?;
-                black_box((ev.cert_gauss, ev.gauss_gate.open));
+                black_box((ev.gaussian.value, ev.gaussian.open));
             }
             "calibrated" => {
                 let ev = cal.push(black_box(t), y, u)?;
-                black_box((ev.cert_gauss, ev.cert_calibrated, ev.calibrated_gate.open));
+                black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
             }
             other => return Err(format!("unknown mode {other}").into()),
         }

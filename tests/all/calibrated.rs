@@ -43,7 +43,7 @@ fn first_opening(cfg: &CertifierConfig, scenario: &LinearScenario, seed: u64) ->
     let mut cert = Certifier::new(cfg.clone()).expect("valid");
     (0..traj.len()).find_map(|i| {
         let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
-        ev.calibrated_gate.open.then_some(traj.t[i])
+        ev.calibrated.open.then_some(traj.t[i])
     })
 }
 
@@ -306,11 +306,11 @@ fn contracting_candidates_are_certified_and_a_plant_change_closes_the_gate() {
         for i in 0..traj.len() {
             let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
             if traj.t[i] < 20.0 {
-                open_at_switch = ev.calibrated_gate.open;
-            } else if closed_at.is_none() && !ev.calibrated_gate.open {
+                open_at_switch = ev.calibrated.open;
+            } else if closed_at.is_none() && !ev.calibrated.open {
                 closed_at = Some(traj.t[i] - 20.0);
                 assert!(matches!(
-                    ev.calibrated_reason,
+                    ev.calibrated.reason,
                     Some(NotCertified::RateDropped { .. } | NotCertified::BelowMargin { .. })
                 ));
             }
@@ -345,7 +345,7 @@ fn the_instrumented_window_is_unbiased_under_sensor_noise() {
         for i in 0..traj.len() {
             last = Some(cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid"));
         }
-        ordinary.push(last.and_then(|e| e.beta_hat).expect("estimate"));
+        ordinary.push(last.and_then(|e| e.beta_hat()).expect("estimate"));
         instrumented.push(cert.calibrated_looks()[0].expect("a look").beta_hat);
     }
     let median = |v: &mut Vec<f64>| {

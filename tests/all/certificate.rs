@@ -4,8 +4,8 @@
 use proptest::prelude::*;
 use streamcert::ambiguity::AmbiguityConfig;
 use streamcert::certificate::{
-    BadSamplePolicy, Certifier, CertifierConfig, CertifyError, Evidence, NotCertified,
-    ResidualSource, certificate_surface, certificate_value,
+    BadSamplePolicy, CertificateKind, Certifier, CertifierConfig, CertifyError, Evidence,
+    NotCertified, ResidualSource, certificate_surface, certificate_value,
 };
 use streamcert::regression::{Estimator, InputIntegral, RegressionConfig, RegressionError};
 
@@ -53,7 +53,7 @@ fn beta_hat_is_minus_the_largest_eigenvalue_of_sym_j_cl() {
     let traj = run_scenario(&stream, 1);
     for i in 0..traj.len() {
         let ev = cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
-        let Some(beta_hat) = ev.beta_hat else { continue };
+        let Some(beta_hat) = ev.beta_hat() else { continue };
         // Rebuild J_cl from the regression's Θ and solve with nalgebra.
         let mut reg = cert.regression().clone();
         let est = reg.estimate();
@@ -62,9 +62,9 @@ fn beta_hat_is_minus_the_largest_eigenvalue_of_sym_j_cl() {
         let b_obs = vec![theta[2], theta[3], theta[6], theta[7]];
         let oracle = true_rate(&j_obs, &b_obs, &k, 2, 2);
         assert!((beta_hat - oracle).abs() < 1e-10 * (1.0 + oracle.abs()), "{beta_hat} vs {oracle}");
-        let rho = ev.rho.expect("ready");
+        let rho = ev.rho().expect("ready");
         assert!(rho >= 0.0);
-        assert_eq!(ev.cert_gauss, Some(beta_hat - rho));
+        assert_eq!(ev.gaussian.value, Some(beta_hat - rho));
         let expected_rho =
             0.5 * (1.0 + cert.gain_norm()) * est.rms_residual / (est.gram_lambda_min + 1e-4).sqrt();
         assert!((rho - expected_rho).abs() <= 1e-12 * expected_rho);
@@ -83,7 +83,7 @@ fn certificate_stays_below_the_true_rate_on_known_systems() {
         for seed in 0..10 {
             let mut cert = Certifier::new(config(1, 1, vec![k], 1.0)).expect("valid");
             for ev in run(&mut cert, &stream, seed) {
-                if let Some(c) = ev.cert_gauss {
+                if let Some(c) = ev.gaussian.value {
                     total += 1;
                     below += usize::from(c <= truth);
                 }
@@ -101,14 +101,14 @@ fn gate_opens_for_a_contracting_candidate_and_reports_why_it_is_closed() {
     let mut cert = Certifier::new(config(1, 1, vec![-1.0], 0.2)).expect("valid");
     let evs = run(&mut cert, &stream, 3);
     // Warm-up: no certificate until the window holds M columns (h + M samples).
-    assert!(matches!(evs[0].reason, Some(NotCertified::WarmingUp { .. })));
-    assert!(evs[..154].iter().all(|e| e.cert_gauss.is_none() && !e.gauss_gate.open));
-    assert!(evs[155].cert_gauss.is_some());
-    let opened = evs.iter().position(|e| e.gauss_gate.open).expect("gate opens");
+    assert!(matches!(evs[0].gaussian.reason, Some(NotCertified::WarmingUp { .. })));
+    assert!(evs[..154].iter().all(|e| e.gaussian.value.is_none() && !e.gaussian.open));
+    assert!(evs[155].gaussian.value.is_some());
+    let opened = evs.iter().position(|e| e.gaussian.open).expect("gate opens");
     // n_s = 10 consecutive samples at or above the margin before it.
-    assert!(evs[opened + 1 - 10..=opened].iter().all(|e| e.cert_gauss.expect("ready") >= 0.05));
-    assert!(matches!(evs[opened - 1].reason, Some(NotCertified::Accumulating { .. })));
-    assert_eq!(evs.last().expect("non-empty").gauss_gate.first_opened_at, Some(evs[opened].t));
+    assert!(evs[opened + 1 - 10..=opened].iter().all(|e| e.gaussian.value.expect("ready") >= 0.05));
+    assert!(matches!(evs[opened - 1].gaussian.reason, Some(NotCertified::Accumulating { .. })));
+    assert_eq!(cert.gate(CertificateKind::Gaussian).first_opened_at, Some(evs[opened].t));
 }
 
 #[test]
@@ -122,9 +122,9 @@ fn no_excitation_is_not_certified() {
     cfg.regression.input_integral = InputIntegral::Trapezoidal;
     let mut cert = Certifier::new(cfg).expect("valid");
     let evs = run(&mut cert, &stream, 3);
-    assert!(evs.iter().all(|e| !e.gauss_gate.open));
+    assert!(evs.iter().all(|e| !e.gaussian.open));
     assert!(matches!(
-        evs.last().expect("non-empty").reason,
+        evs.last().expect("non-empty").gaussian.reason,
         Some(NotCertified::InsufficientExcitation)
     ));
 }
@@ -146,15 +146,18 @@ fn bad_samples_are_rejected_or_skipped_and_never_certified() {
             let err = reject.push(t, &[f64::NAN], u).unwrap_err();
             assert!(matches!(err, CertifyError::Regression(RegressionError::NonFinite { .. })));
             let ev = skip.push(t, &[f64::NAN], u).expect("skip policy");
-            assert_eq!(ev.reason, Some(NotCertified::SkippedSample));
-            assert!(!ev.gauss_gate.open && ev.cert_gauss.is_none());
+            assert_eq!(ev.gaussian.reason, Some(NotCertified::SkippedSample));
+            assert!(!ev.gaussian.open && ev.gaussian.value.is_none());
             // A repeated time is bad too.
             assert!(reject.push(traj.t[k - 1], y, u).is_err());
         } else {
             let a = reject.push(t, y, u).expect("valid");
             let b = skip.push(t, y, u).expect("valid");
             // Same estimate; only the gates differ (a skip closes the skip policy's gate).
-            assert_eq!((a.beta_hat, a.rho, a.cert_gauss), (b.beta_hat, b.rho, b.cert_gauss));
+            assert_eq!(
+                (a.beta_hat(), a.rho(), a.gaussian.value),
+                (b.beta_hat(), b.rho(), b.gaussian.value)
+            );
         }
     }
     assert_eq!(skip.skipped(), (0..traj.len()).filter(|k| k % 97 == 50).count() as u64);
@@ -190,8 +193,8 @@ fn checkpoint_and_restore_continue_bit_identically() {
     for k in split..traj.len() {
         let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
         let want = &all[k];
-        assert_eq!(ev.beta_hat.map(f64::to_bits), want.beta_hat.map(f64::to_bits));
-        assert_eq!(ev.rho.map(f64::to_bits), want.rho.map(f64::to_bits));
+        assert_eq!(ev.beta_hat().map(f64::to_bits), want.beta_hat().map(f64::to_bits));
+        assert_eq!(ev.rho().map(f64::to_bits), want.rho().map(f64::to_bits));
         assert_eq!(ev, *want);
     }
     assert_eq!(second, whole);
@@ -276,24 +279,34 @@ fn both_certificates_come_from_one_certifier_and_keep_their_order() {
     let evs = run(&mut cert, &laplace_scalar(), 4);
     let mut both = 0;
     for ev in &evs {
-        if let (Some(g), Some(w), Some(eps)) = (ev.cert_gauss, ev.cert_wass, ev.eps) {
+        if let (Some(g), Some(w), Some(eps)) = (ev.gaussian.value, ev.wasserstein.value, ev.eps()) {
             both += 1;
             assert!(w <= g);
             assert!((0.015..=0.32).contains(&eps));
             assert_eq!(
                 w,
-                certificate_value(ev.beta_hat.expect("ready"), ev.rho.expect("ready"), eps)
+                certificate_value(ev.beta_hat().expect("ready"), ev.rho().expect("ready"), eps)
             );
         }
         // The Wasserstein gate can only be open when the Gaussian one is.
-        assert!(!ev.wass_gate.open || ev.gauss_gate.open);
+        assert!(!ev.wasserstein.open || ev.gaussian.open);
+        // Each verdict: a reason exactly when closed; value = estimate − radius.
+        for kind in CertificateKind::ALL {
+            let v = ev.verdict(kind);
+            assert_eq!(v.open, v.reason.is_none(), "{kind:?} at t = {}", ev.t);
+            assert_eq!(v.value.is_some(), v.radius.is_some(), "{kind:?} at t = {}", ev.t);
+        }
+        if let (Some(b), Some(r), Some(a)) = (ev.beta_hat(), ev.rho(), ev.ambiguity) {
+            assert_eq!(ev.gaussian.value, Some(b - r));
+            assert_eq!(ev.wasserstein.radius, Some(r * (1.0 + 2.0 * a.eps)));
+        }
     }
     assert!(both > 5000);
     // Without an ambiguity model there is no Wasserstein certificate, and it says so.
     let mut plain = Certifier::new(config(1, 1, vec![-1.0], 0.3)).expect("valid");
     let ev = run(&mut plain, &laplace_scalar(), 4).pop().expect("non-empty");
-    assert_eq!((ev.cert_wass, ev.eps), (None, None));
-    assert_eq!(ev.wass_reason, Some(NotCertified::NoAmbiguityModel));
+    assert_eq!((ev.wasserstein.value, ev.eps()), (None, None));
+    assert_eq!(ev.wasserstein.reason, Some(NotCertified::NoAmbiguityModel));
 }
 
 #[test]
@@ -303,7 +316,7 @@ fn one_step_residuals_keep_the_laplace_tails_that_horizon_residuals_average_away
         let ks: Vec<f64> = run(&mut cert, &laplace_scalar(), 9)
             .iter()
             .skip(600)
-            .filter_map(|e| e.kurtosis)
+            .filter_map(|e| e.ambiguity.and_then(|a| a.kurtosis))
             .collect();
         ks.iter().sum::<f64>() / ks.len() as f64
     };

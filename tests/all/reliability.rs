@@ -49,24 +49,27 @@ fn a_gap_restarts_the_window_and_closes_the_gates() {
     let hole = |_: usize, t: f64| !(30.0..32.0).contains(&t);
     let evidence = certify(&config(), hole);
     let at = evidence.iter().position(|e| e.t >= 32.0).expect("rows after the gap");
-    assert!(evidence[at - 1].gauss_gate.open, "the gate was open before the gap");
+    assert!(evidence[at - 1].gaussian.open, "the gate was open before the gap");
     let gap = &evidence[at];
     assert!(
-        matches!(gap.reason, Some(NotCertified::Gap { dt, reference }) if dt > 2.0 && (reference - 0.01).abs() < 1e-9)
+        matches!(gap.gaussian.reason, Some(NotCertified::Gap { dt, reference }) if dt > 2.0 && (reference - 0.01).abs() < 1e-9)
     );
-    assert!(matches!(gap.wass_reason, Some(NotCertified::Gap { .. })));
-    assert!(!gap.gauss_gate.open && !gap.wass_gate.open);
+    assert!(matches!(gap.wasserstein.reason, Some(NotCertified::Gap { .. })));
+    assert!(!gap.gaussian.open && !gap.wasserstein.open);
     // The window restarts: warming up for the next M + h samples, no estimate across the gap.
-    assert!(evidence[at..at + 150].iter().all(|e| e.beta_hat.is_none() && !e.gauss_gate.open));
-    assert!(evidence[at + 200..].iter().any(|e| e.gauss_gate.open));
+    assert!(evidence[at..at + 150].iter().all(|e| e.beta_hat().is_none() && !e.gaussian.open));
+    assert!(evidence[at + 200..].iter().any(|e| e.gaussian.open));
     // The residual across the gap never reaches ε: the kurtosis stays that of Gaussian noise.
-    let worst = evidence[at..].iter().filter_map(|e| e.kurtosis).fold(f64::MIN, f64::max);
+    let worst = evidence[at..]
+        .iter()
+        .filter_map(|e| e.ambiguity.and_then(|a| a.kurtosis))
+        .fold(f64::MIN, f64::max);
     assert!(worst < 2.0, "kurtosis after the gap {worst}");
     // With the detector effectively off, the window integrates across the gap and keeps
     // estimating as if nothing had happened.
     let off = CertifierConfig { gap_factor: 1e9, ..config() };
     let evidence = certify(&off, hole);
-    assert!(evidence[at].beta_hat.is_some() && evidence[at].reason.is_none());
+    assert!(evidence[at].beta_hat().is_some() && evidence[at].gaussian.reason.is_none());
 }
 
 #[test]
@@ -75,15 +78,16 @@ fn irregular_sampling_keeps_eps_where_regular_sampling_has_it() {
     let mut rng = ChaCha8Rng::seed_from_u64(11);
     let kept: Vec<bool> = (0..=6000).map(|_| rng.random::<f64>() < 0.7).collect();
     let evidence = certify(&config(), |i, _| kept[i] || i % 4 == 0);
-    let eps: Vec<f64> = evidence.iter().filter_map(|e| e.eps).collect();
+    let eps: Vec<f64> = evidence.iter().filter_map(|e| e.eps()).collect();
     let mean = eps.iter().sum::<f64>() / eps.len() as f64;
     // Regular sampling of the same data is the reference: ε stays where it has it (its spike
     // fraction depends on the MAD-calibrated σ0 of eq. eps_est), and the residuals stay
     // Gaussian (excess kurtosis near 0).
     let regular = certify(&config(), |_, _| true);
-    let reference: Vec<f64> = regular.iter().filter_map(|e| e.eps).collect();
+    let reference: Vec<f64> = regular.iter().filter_map(|e| e.eps()).collect();
     let reference = reference.iter().sum::<f64>() / reference.len() as f64;
-    let kurtosis: Vec<f64> = evidence.iter().filter_map(|e| e.kurtosis).collect();
+    let kurtosis: Vec<f64> =
+        evidence.iter().filter_map(|e| e.ambiguity.and_then(|a| a.kurtosis)).collect();
     let kurtosis = kurtosis.iter().sum::<f64>() / kurtosis.len() as f64;
     assert!(kurtosis.abs() < 0.5, "mean excess kurtosis {kurtosis} under irregular sampling");
     let at_cap = eps.iter().filter(|&&e| e >= 0.32).count() as f64 / eps.len() as f64;
@@ -91,7 +95,7 @@ fn irregular_sampling_keeps_eps_where_regular_sampling_has_it() {
         (mean - reference).abs() < 0.03 && at_cap < 0.01,
         "mean ε {mean} (regular {reference}), share at the cap {at_cap}"
     );
-    assert!(evidence.iter().all(|e| !matches!(e.reason, Some(NotCertified::Gap { .. }))));
+    assert!(evidence.iter().all(|e| !matches!(e.gaussian.reason, Some(NotCertified::Gap { .. }))));
 }
 
 #[test]
@@ -103,20 +107,20 @@ fn a_skipped_sample_closes_every_gate_and_is_not_absorbed() {
     for i in 0..3000 {
         last = Some(cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid"));
     }
-    assert!(last.expect("evidence").gauss_gate.open);
+    assert!(last.expect("evidence").gaussian.open);
     let before = cert.regression().clone();
     let ev = cert.push(traj.t[3000], &[f64::NAN], traj.input(3000)).expect("skipped");
-    assert_eq!(ev.reason, Some(NotCertified::SkippedSample));
-    assert!(!ev.gauss_gate.open && !ev.wass_gate.open && !ev.calibrated_gate.open);
+    assert_eq!(ev.gaussian.reason, Some(NotCertified::SkippedSample));
+    assert!(!ev.gaussian.open && !ev.wasserstein.open && !ev.calibrated.open);
     assert_eq!(cert.regression(), &before, "a skipped sample is not absorbed");
     assert_eq!(cert.skipped(), 1);
     // The same through the explicit call a caller (the CLI) makes for an unreadable row.
     let ev = cert.skip(f64::NAN);
-    assert!(!ev.gauss_gate.open);
+    assert!(!ev.gaussian.open);
     assert_eq!(cert.skipped(), 2);
     // The gate needs n_s fresh samples again.
     let next = cert.push(traj.t[3000], traj.output(3000), traj.input(3000)).expect("valid");
-    assert!(!next.gauss_gate.open);
+    assert!(!next.gaussian.open);
 }
 
 /// Long runs: the running sums of the regression and the sliding moments of the ambiguity

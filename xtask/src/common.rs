@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
-use streamcert_certificate::{CertifierConfig, ResidualSource};
+use streamcert_certificate::{CertifierConfig, Evidence, ResidualSource};
 use streamcert_dynamics::{Coupling, Experiment, G5Dataset, NoiseScaling};
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
@@ -186,9 +186,21 @@ pub(crate) fn write(path: &Path, text: &str) -> Result<()> {
     std::fs::write(path, text).with_context(|| format!("writing {}", path.display()))
 }
 
-/// `Option<f64>` as a CSV cell (empty when absent).
-pub(crate) fn cell(v: Option<f64>) -> String {
-    v.map_or(String::new(), |x| format!("{x}"))
+/// Write one subsystem's evidence through the command line's writer
+/// ([`EvidenceWriter`](streamcert_cli::output::EvidenceWriter)): the columns and number format
+/// of `streamcert certify`.
+pub(crate) fn write_evidence(path: &Path, evidence: &[Evidence]) -> Result<()> {
+    use streamcert_cli::output::{EvidenceWriter, Format};
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let file =
+        std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+    let mut w = EvidenceWriter::new(file, Format::Csv, true, false)?;
+    for e in evidence {
+        w.write(e)?;
+    }
+    w.flush().with_context(|| format!("writing {}", path.display()))
 }
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).

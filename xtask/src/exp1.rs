@@ -11,7 +11,9 @@ use streamcert_dynamics::{
     simulate,
 };
 
-use crate::common::{Params, cell, csv, markdown, mean_std, pct, pm, progress, seed, write};
+use crate::common::{
+    Params, csv, markdown, mean_std, pct, pm, progress, seed, write, write_evidence,
+};
 use crate::plot::{self, BLUE, Figure, GREEN, Heatmap, ORANGE, Panel, RED_};
 
 const K1: f64 = -3.5;
@@ -85,11 +87,11 @@ pub(crate) struct Decision {
 }
 
 fn cert_of(e: &Evidence, which: usize) -> Option<f64> {
-    if which == 0 { e.cert_gauss } else { e.cert_wass }
+    if which == 0 { e.gaussian.value } else { e.wasserstein.value }
 }
 
 fn open_of(e: &Evidence, which: usize) -> bool {
-    if which == 0 { e.gauss_gate.open } else { e.wass_gate.open }
+    if which == 0 { e.gaussian.open } else { e.wasserstein.open }
 }
 
 fn decide(
@@ -101,7 +103,7 @@ fn decide(
 ) -> Result<Decision> {
     let r3: Vec<usize> = (0..traj.len()).filter(|&k| regime(traj.t[k]) == Some(2)).collect();
     let disagree = r3.iter().copied().find(|&k| {
-        let (g, w) = (ev[1][k].cert_gauss, ev[1][k].cert_wass);
+        let (g, w) = (ev[1][k].gaussian.value, ev[1][k].wasserstein.value);
         matches!((g, w), (Some(g), Some(w)) if (g > MARGIN) != (w > MARGIN))
     });
     let (k0, how) = match disagree {
@@ -109,7 +111,7 @@ fn decide(
             (k, "first Regime-3 step where the two certificates of B disagree about the margin")
         }
         None => {
-            match r3.iter().copied().find(|&k| ev[1][k].gauss_gate.open || ev[1][k].wass_gate.open)
+            match r3.iter().copied().find(|&k| ev[1][k].gaussian.open || ev[1][k].wasserstein.open)
             {
                 Some(k) => {
                     (k, "no disagreement in Regime 3; first Regime-3 step with a gate of B open")
@@ -169,9 +171,9 @@ fn decide(
     Ok(Decision {
         t_decide: t0,
         how,
-        gauss_b: e.cert_gauss.unwrap_or(f64::NAN),
-        wass_b: e.cert_wass.unwrap_or(f64::NAN),
-        eps_b: e.eps.unwrap_or(f64::NAN),
+        gauss_b: e.gaussian.value.unwrap_or(f64::NAN),
+        wass_b: e.wasserstein.value.unwrap_or(f64::NAN),
+        eps_b: e.eps().unwrap_or(f64::NAN),
         deploy,
         cost,
         response,
@@ -217,9 +219,10 @@ fn run_seed(p: &Params, run: usize) -> Result<SeedRun> {
                 };
             }
         }
-        let eps: Vec<f64> = ks.iter().filter_map(|&k| ev[1][k].eps).collect();
+        let eps: Vec<f64> = ks.iter().filter_map(|&k| ev[1][k].eps()).collect();
         eps_b[r] = mean_std(&eps).0;
-        let kurt: Vec<f64> = ks.iter().filter_map(|&k| ev[1][k].kurtosis).collect();
+        let kurt: Vec<f64> =
+            ks.iter().filter_map(|&k| ev[1][k].ambiguity.and_then(|a| a.kurtosis)).collect();
         kurt_b[r] = mean_std(&kurt).0;
     }
     let decision = decide(p, &sys, &traj, &ev, run)?;
@@ -236,56 +239,25 @@ fn collect(results: &[SeedResult], f: impl Fn(&SeedResult) -> f64) -> Vec<f64> {
     results.iter().map(f).collect()
 }
 
-fn trace_csv(traj: &Trajectory, ev: &[Vec<Evidence>; 2], truth: &[[f64; 2]]) -> String {
-    let mut s = String::from("t,regime,x1,x2,x3,x4,x5");
-    for sub in ["a", "b"] {
-        for f in [
-            "beta_hat",
-            "rho",
-            "eps",
-            "kurtosis",
-            "spike_fraction",
-            "cert_gauss",
-            "cert_wass",
-            "gauss_open",
-            "wass_open",
-            "beta_true",
-        ] {
-            let _ = write!(s, ",{f}_{sub}");
-        }
-    }
-    s.push('\n');
+/// The states, the regime and the true rates per step (the evidence is in
+/// `evidence_{a,b}_seed0.csv`, written by [`write_evidence`]).
+fn trace_csv(traj: &Trajectory, truth: &[[f64; 2]]) -> String {
+    let mut s = String::from("t,regime,x1,x2,x3,x4,x5,beta_true_a,beta_true_b\n");
     for k in 0..traj.len() {
         let x = traj.state(k);
-        let _ = write!(
+        let _ = writeln!(
             s,
-            "{},{},{},{},{},{},{}",
+            "{},{},{},{},{},{},{},{},{}",
             traj.t[k],
             regime(traj.t[k]).map_or(String::new(), |r| (r + 1).to_string()),
             x[0],
             x[1],
             x[2],
             x[3],
-            x[4]
+            x[4],
+            truth[k][0],
+            truth[k][1]
         );
-        for i in 0..2 {
-            let e = &ev[i][k];
-            let _ = write!(
-                s,
-                ",{},{},{},{},{},{},{},{},{},{}",
-                cell(e.beta_hat),
-                cell(e.rho),
-                cell(e.eps),
-                cell(e.kurtosis),
-                cell(e.spike_fraction),
-                cell(e.cert_gauss),
-                cell(e.cert_wass),
-                u8::from(e.gauss_gate.open),
-                u8::from(e.wass_gate.open),
-                truth[k][i]
-            );
-        }
-        s.push('\n');
     }
     s
 }
@@ -297,15 +269,15 @@ fn figures(dir: &Path, traj: &Trajectory, ev: &[Vec<Evidence>; 2], d: &Decision)
     let mut panels = Vec::new();
     for (i, name) in [(1usize, "B (x4, where η enters)"), (0, "A (x1)")] {
         let mut panel = Panel::new(&format!("Subsystem {name}: certificates"), "t [s]", "β_cert")
-            .line("Gaussian β_hat − ρ", series(i, &|e| e.cert_gauss), RED_)
-            .line("Wasserstein β_hat − ρ(1+2ε)", series(i, &|e| e.cert_wass), GREEN);
+            .line("Gaussian β_hat − ρ", series(i, &|e| e.gaussian.value), RED_)
+            .line("Wasserstein β_hat − ρ(1+2ε)", series(i, &|e| e.wasserstein.value), GREEN);
         panel.hlines.push((MARGIN, "β_margin".into()));
         panel.vlines = vec![10.0, 20.0];
         panels.push(panel);
     }
     let mut eps_panel = Panel::new("Ambiguity radius ε(t)", "t [s]", "ε")
-        .line("ε, subsystem B", series(1, &|e| e.eps), BLUE)
-        .line("ε, subsystem A", series(0, &|e| e.eps), ORANGE);
+        .line("ε, subsystem B", series(1, &|e| e.eps()), BLUE)
+        .line("ε, subsystem A", series(0, &|e| e.eps()), ORANGE);
     eps_panel.vlines = vec![10.0, 20.0];
     panels.push(eps_panel);
     plot::save(
@@ -320,7 +292,7 @@ fn figures(dir: &Path, traj: &Trajectory, ev: &[Vec<Evidence>; 2], d: &Decision)
     let mut z = vec![f64::NAN; traj.len() * ny];
     let mut row = vec![0.0; ny];
     for k in 0..traj.len() {
-        if let (Some(b), Some(r)) = (ev[1][k].beta_hat, ev[1][k].rho) {
+        if let (Some(b), Some(r)) = (ev[1][k].beta_hat(), ev[1][k].rho()) {
             certificate_surface(b, r, &eps_grid, &mut row);
             z[k * ny..(k + 1) * ny].copy_from_slice(&row);
         }
@@ -330,14 +302,14 @@ fn figures(dir: &Path, traj: &Trajectory, ev: &[Vec<Evidence>; 2], d: &Decision)
     let y_edges: Vec<f64> = (0..=ny).map(|j| 0.01 * j as f64 - 0.005).collect();
     let scale = z.iter().filter(|v| v.is_finite()).fold(0.0f64, |a, v| a.max(v.abs())).max(1e-9);
     let mut eps_top =
-        Panel::new("Subsystem B: ε(t)", "t [s]", "ε").line("ε(t)", series(1, &|e| e.eps), BLUE);
+        Panel::new("Subsystem B: ε(t)", "t [s]", "ε").line("ε(t)", series(1, &|e| e.eps()), BLUE);
     eps_top.vlines = vec![10.0, 20.0];
     let mut surface = Panel::new(
         "β_cert(t, ε) (green > 0, red < 0); line: realised ε(t)",
         "t [s]",
         "ε",
     )
-    .line("realised ε(t)", series(1, &|e| e.eps), RGB_BLACK);
+    .line("realised ε(t)", series(1, &|e| e.eps()), RGB_BLACK);
     surface.heatmap = Some(Heatmap { x_edges, y_edges, z, scale });
     surface.y_range = Some((0.0, 0.35));
     plot::save(
@@ -376,7 +348,9 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
     for run in 0..p.seeds {
         let (res, traj, ev, truth) = run_seed(p, run)?;
         if run == 0 {
-            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj, &ev, &truth))?;
+            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj, &truth))?;
+            write_evidence(&dir.join("evidence_a_seed0.csv"), &ev[0])?;
+            write_evidence(&dir.join("evidence_b_seed0.csv"), &ev[1])?;
             figures(out, &traj, &ev, &res.decision)?;
         }
         results.push(res);

@@ -13,7 +13,7 @@ use streamcert_dynamics::{
     Process, SimConfig, Trajectory, simulate,
 };
 
-use crate::common::{Params, cell, csv, markdown, median, pm, progress, seed, write};
+use crate::common::{Params, csv, markdown, median, pm, progress, seed, write, write_evidence};
 use crate::exp1::certify;
 use crate::plot::{self, BLUE, Figure, GREEN, ORANGE, PURPLE, Panel, RED_};
 
@@ -110,9 +110,9 @@ fn run_seed(
             .collect();
         median(&v)
     };
-    let cert = [last(0, &|e| e.cert_gauss), last(1, &|e| e.cert_gauss)];
-    let nominal = [last(0, &|e| e.beta_hat), last(1, &|e| e.beta_hat)];
-    let t_star = [0, 1].map(|i| ev[i].last().and_then(|e| e.gauss_gate.first_opened_at));
+    let cert = [last(0, &|e| e.gaussian.value), last(1, &|e| e.gaussian.value)];
+    let nominal = [last(0, &|e| e.beta_hat()), last(1, &|e| e.beta_hat())];
+    let t_star = [0, 1].map(|i| ev[i].iter().find(|e| e.gaussian.open).map(|e| e.t));
     let gamma_true = (true_rates[0] * true_rates[1]).sqrt();
     let warn = if cert[0] > 0.0 && cert[1] > 0.0 { (cert[0] * cert[1]).sqrt() } else { f64::NAN };
     let gammas =
@@ -156,11 +156,11 @@ fn figures(
         "t [s]",
         "β_cert = β_hat − ρ",
     )
-    .line("Σ_A", series(0, &|e| e.cert_gauss), BLUE)
-    .line("Σ_B", series(1, &|e| e.cert_gauss), ORANGE);
+    .line("Σ_A", series(0, &|e| e.gaussian.value), BLUE)
+    .line("Σ_B", series(1, &|e| e.gaussian.value), ORANGE);
     top.hlines.push((MARGIN, "β_margin".into()));
     top.vlines = res.t_star.iter().flatten().copied().collect();
-    let inv = |i: usize| series(i, &|e| e.cert_gauss.filter(|c| *c > 0.0).map(|c| 1.0 / c));
+    let inv = |i: usize| series(i, &|e| e.gaussian.value.filter(|c| *c > 0.0).map(|c| 1.0 / c));
     let mut bottom =
         Panel::new("Incremental gain bound 1/β_cert (where β_cert > 0)", "t [s]", "1/β_cert")
             .line("Σ_A", inv(0), BLUE)
@@ -238,28 +238,13 @@ fn figures(
     Ok(())
 }
 
-fn trace_csv(traj: &Trajectory, ev: &[Vec<Evidence>; 2]) -> String {
-    let mut s = String::from(
-        "t,x1,x4,beta_hat_a,rho_a,cert_gauss_a,gate_a,beta_hat_b,rho_b,cert_gauss_b,gate_b\n",
-    );
+/// The measured states per step (the evidence is in `evidence_{a,b}_seed0.csv`, written by
+/// [`write_evidence`]).
+fn trace_csv(traj: &Trajectory) -> String {
+    let mut s = String::from("t,x1,x4\n");
     for k in 0..traj.len() {
         let x = traj.state(k);
-        let (a, b) = (&ev[0][k], &ev[1][k]);
-        let _ = writeln!(
-            s,
-            "{},{},{},{},{},{},{},{},{},{},{}",
-            traj.t[k],
-            x[0],
-            x[3],
-            cell(a.beta_hat),
-            cell(a.rho),
-            cell(a.cert_gauss),
-            u8::from(a.gauss_gate.open),
-            cell(b.beta_hat),
-            cell(b.rho),
-            cell(b.cert_gauss),
-            u8::from(b.gauss_gate.open)
-        );
+        let _ = writeln!(s, "{},{},{}", traj.t[k], x[0], x[3]);
     }
     s
 }
@@ -277,7 +262,9 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
     for run in 0..p.seeds {
         let (res, traj, ev) = run_seed(p, run, true_rates)?;
         if run == 0 {
-            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj, &ev))?;
+            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj))?;
+            write_evidence(&dir.join("evidence_a_seed0.csv"), &ev[0])?;
+            write_evidence(&dir.join("evidence_b_seed0.csv"), &ev[1])?;
             figures(p, out, &traj, &ev, &res, true_rates)?;
         }
         results.push(res);
@@ -425,7 +412,7 @@ pub(crate) fn local_rates(p: &Params) -> Result<[f64; 2]> {
             let t_end = traj.t[traj.len() - 1];
             let last: Vec<f64> = (0..traj.len())
                 .filter(|&j| traj.t[j] > t_end - 3.0 + 1e-9)
-                .filter_map(|j| ev[j].cert_gauss)
+                .filter_map(|j| ev[j].gaussian.value)
                 .collect();
             v.push(median(&last));
         }

@@ -223,7 +223,7 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
     for i in 0..traj.len() {
         let (t, y, u) = (traj.t[i], traj.output(i), traj.input(i));
         let ev = cal.push(t, y, u)?;
-        if ev.calibrated_gate.open && out.calibrated_open.is_none() {
+        if ev.calibrated.open && out.calibrated_open.is_none() {
             out.calibrated_open = Some(t);
         }
         for (w, look) in cal.calibrated_looks().iter().enumerate() {
@@ -235,7 +235,7 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
         for (k, p) in papers.iter_mut().enumerate() {
             if let Ok(p) = p {
                 if !out.paper_open[k] {
-                    out.paper_open[k] = p.push(t, y, u)?.gauss_gate.open;
+                    out.paper_open[k] = p.push(t, y, u)?.gaussian.open;
                 }
             }
         }
@@ -433,7 +433,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
         let (mut at_switch, mut closed, mut last) = (false, None, false);
         for i in 0..traj.len() {
             let ev = cert.push(traj.t[i], traj.output(i), traj.input(i))?;
-            last = ev.calibrated_gate.open;
+            last = ev.calibrated.open;
             if traj.t[i] < 20.0 {
                 at_switch = last;
             } else if closed.is_none() && !last {

@@ -11,8 +11,8 @@ use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, l
 use crate::calibrated::{CalibratedState, CalibratedVerdict};
 use crate::gap::GapDetector;
 use crate::{
-    BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Gate, GateState, NotCertified,
-    WindowLook, certificate_value,
+    AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, Evidence, Fit,
+    Gate, GateState, NotCertified, Verdict, WindowLook, certificate_value,
 };
 
 /// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
@@ -155,9 +155,13 @@ impl Certifier {
         let scale = self.gap.residual_scale(dt);
         let (ready, columns, blocked) = self.evaluate(scale);
         let amb = self.ambiguity_snapshot();
+        let rho_wass = match (ready, amb) {
+            (Some(r), Some(a)) => Some(r.rho * (1.0 + 2.0 * a.eps)),
+            _ => None,
+        };
         let cert_gauss = ready.map(|r| certificate_value(r.beta_hat, r.rho, 0.0));
         let cert_wass = match (ready, amb) {
-            (Some(r), Some((eps, ..))) => Some(certificate_value(r.beta_hat, r.rho, eps)),
+            (Some(r), Some(a)) => Some(certificate_value(r.beta_hat, r.rho, a.eps)),
             _ => None,
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
@@ -182,25 +186,32 @@ impl Certifier {
         }
         Ok(Evidence {
             t,
-            beta_hat: ready.map(|r| r.beta_hat),
-            rho: ready.map(|r| r.rho),
-            cert_gauss,
-            gauss_gate,
-            reason,
-            eps: amb.map(|a| a.0),
-            kurtosis: amb.and_then(|a| a.1),
-            spike_fraction: amb.map(|a| a.2),
-            cert_wass,
-            wass_gate,
-            wass_reason,
-            rho_calibrated: best.map(|b| b.radius),
-            cert_calibrated: best.map(|b| b.certificate()),
-            calibrated_window: best.map(|b| b.window),
-            calibrated_gate,
-            calibrated_reason,
-            rms_residual: ready.map(|r| r.rms),
-            gram_lambda_min: ready.map(|r| r.lambda_min),
             columns,
+            fit: ready.map(|r| Fit {
+                beta_hat: r.beta_hat,
+                rms_residual: r.rms,
+                gram_lambda_min: r.lambda_min,
+            }),
+            ambiguity: amb,
+            gaussian: Verdict {
+                value: cert_gauss,
+                radius: ready.map(|r| r.rho),
+                open: gauss_gate.open,
+                reason,
+            },
+            wasserstein: Verdict {
+                value: cert_wass,
+                radius: rho_wass,
+                open: wass_gate.open,
+                reason: wass_reason,
+            },
+            calibrated: Verdict {
+                value: best.map(|b| b.certificate()),
+                radius: best.map(|b| b.radius),
+                open: calibrated_gate.open,
+                reason: calibrated_reason,
+            },
+            calibrated_window: best.map(|b| b.window),
         })
     }
 
@@ -212,29 +223,29 @@ impl Certifier {
     /// only echoed in the evidence (NaN when the caller has none).
     pub fn skip(&mut self, t: f64) -> Evidence {
         self.skipped += 1;
-        let amb = self.ambiguity_snapshot();
-        let why = Some(NotCertified::SkippedSample);
+        let closed = Verdict::closed(NotCertified::SkippedSample);
+        self.gauss.update(t, None);
+        self.wass.update(t, None);
+        self.calibrated_gate.update(t, None);
         Evidence {
             t,
-            beta_hat: None,
-            rho: None,
-            cert_gauss: None,
-            gauss_gate: self.gauss.update(t, None),
-            reason: why,
-            eps: amb.map(|a| a.0),
-            kurtosis: amb.and_then(|a| a.1),
-            spike_fraction: amb.map(|a| a.2),
-            cert_wass: None,
-            wass_gate: self.wass.update(t, None),
-            wass_reason: why,
-            rho_calibrated: None,
-            cert_calibrated: None,
-            calibrated_window: None,
-            calibrated_gate: self.calibrated_gate.update(t, None),
-            calibrated_reason: why,
-            rms_residual: None,
-            gram_lambda_min: None,
             columns: self.regression.columns(),
+            fit: None,
+            ambiguity: self.ambiguity_snapshot(),
+            gaussian: closed,
+            wasserstein: closed,
+            calibrated: closed,
+            calibrated_window: None,
+        }
+    }
+
+    /// The full state of one certificate's gate (streak, current and first opening).
+    #[must_use]
+    pub fn gate(&self, kind: CertificateKind) -> GateState {
+        match kind {
+            CertificateKind::Gaussian => self.gauss.state(),
+            CertificateKind::Wasserstein => self.wass.state(),
+            CertificateKind::Calibrated => self.calibrated_gate.state(),
         }
     }
 
@@ -268,7 +279,7 @@ impl Certifier {
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.
     #[inline]
-    fn ambiguity_snapshot(&self) -> Option<(f64, Option<f64>, f64)> {
+    fn ambiguity_snapshot(&self) -> Option<AmbiguityLevel> {
         let (first, rest) = self.ambiguity.split_first()?;
         let s = first.snapshot();
         let (mut eps, mut kurtosis, mut spikes) = (s.eps, s.kurtosis, s.spike_fraction);
@@ -281,7 +292,7 @@ impl Certifier {
             };
             spikes = spikes.max(s.spike_fraction);
         }
-        Some((eps, kurtosis, spikes))
+        Some(AmbiguityLevel { eps, kurtosis, spike_fraction: spikes })
     }
 
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity

@@ -1,9 +1,7 @@
-//! What the certifier reports after each sample: [`Evidence`], and [`NotCertified`], why a gate
-//! is closed.
+//! What the certifier reports after each sample: [`Evidence`] (a numeric core and one
+//! [`Verdict`] per certificate), and [`NotCertified`], why a gate is closed.
 
 use serde::{Deserialize, Serialize};
-
-use crate::GateState;
 
 /// Why a sample is not certified.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -87,49 +85,119 @@ impl std::fmt::Display for NotCertified {
     }
 }
 
-/// Everything the certifier knows after one sample.
+/// The three certificates the certifier reports, for [`Evidence::verdict`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum CertificateKind {
+    /// The paper's Gaussian certificate `β̂ − ρ` (Section II-B).
+    Gaussian,
+    /// The paper's Wasserstein certificate `β̂ − ρ(1 + 2ε)` (eq. wass_cert).
+    Wasserstein,
+    /// The calibrated certificate `β̂_w − ρ_w` (false deployment at most `δ`).
+    Calibrated,
+}
+
+impl CertificateKind {
+    /// All three, in the order of the output columns.
+    pub const ALL: [Self; 3] = [Self::Gaussian, Self::Wasserstein, Self::Calibrated];
+}
+
+/// One certificate after one sample: its value, the radius it subtracts, its gate, and why the
+/// gate is closed.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Verdict {
+    /// The certificate: an estimate of the rate less a radius (`None` when there is none:
+    /// warming up, no excitation, not configured, skipped sample).
+    pub value: Option<f64>,
+    /// The radius subtracted from the estimate: `ρ` (Gaussian, eq. rho), `ρ(1 + 2ε)`
+    /// (Wasserstein), `ρ_w` (calibrated, [`calibrated_radius`](crate::calibrated_radius)).
+    pub radius: Option<f64>,
+    /// The gate: open once `value >= margin` for `consecutive` samples ([`Gate`](crate::Gate)).
+    pub open: bool,
+    /// Why the gate is closed (`None` exactly when it is open).
+    pub reason: Option<NotCertified>,
+}
+
+impl Verdict {
+    /// A closed verdict without a certificate.
+    #[must_use]
+    pub const fn closed(reason: NotCertified) -> Self {
+        Self { value: None, radius: None, open: false, reason: Some(reason) }
+    }
+}
+
+/// The regression's fit behind `β̂` (when the window is ready).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Fit {
+    /// `β̂ = −λ_max(sym J_cl)` (eq. betahat).
+    pub beta_hat: f64,
+    /// `RMS(R)`, the root mean square of the window's column residuals.
+    pub rms_residual: f64,
+    /// `λ_min(Z Zᵀ / M)`.
+    pub gram_lambda_min: f64,
+}
+
+/// The ambiguity estimators' state (largest over outputs), when a model is configured.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct AmbiguityLevel {
+    /// Ambiguity radius `ε(t)` (eq. eps_est).
+    pub eps: f64,
+    /// Excess kurtosis of the residual tail window (`None` until it has enough residuals).
+    pub kurtosis: Option<f64>,
+    /// Spike fraction `ŝ(t)`.
+    pub spike_fraction: f64,
+}
+
+/// Everything the certifier knows after one sample: a numeric core (the fit and the
+/// ambiguity level) and one [`Verdict`] per certificate. Reasons stay enums; they are turned
+/// into text only where they are shown (their `Display`).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Evidence {
     /// Sample time.
     pub t: f64,
-    /// `β̂` (eq. betahat), when the regression is ready.
-    pub beta_hat: Option<f64>,
-    /// `ρ` (eq. rho), when the regression is ready.
-    pub rho: Option<f64>,
-    /// Gaussian certificate `β̂ − ρ`.
-    pub cert_gauss: Option<f64>,
-    /// The Gaussian certificate's gate.
-    pub gauss_gate: GateState,
-    /// Why the Gaussian gate is closed (`None` when open).
-    pub reason: Option<NotCertified>,
-    /// Ambiguity radius `ε(t)` (eq. eps_est), when configured.
-    pub eps: Option<f64>,
-    /// Excess kurtosis of the residual tail window (largest over outputs).
-    pub kurtosis: Option<f64>,
-    /// Spike fraction `ŝ(t)` (largest over outputs).
-    pub spike_fraction: Option<f64>,
+    /// Columns in the regression window.
+    pub columns: usize,
+    /// The fit, when the regression is ready.
+    pub fit: Option<Fit>,
+    /// The ambiguity level, when a model is configured.
+    pub ambiguity: Option<AmbiguityLevel>,
+    /// Gaussian certificate `β̂ − ρ`; its radius is `ρ` (eq. rho).
+    pub gaussian: Verdict,
     /// Wasserstein certificate `β̂ − ρ(1 + 2ε)` (eq. wass_cert).
-    pub cert_wass: Option<f64>,
-    /// The Wasserstein certificate's gate.
-    pub wass_gate: GateState,
-    /// Why the Wasserstein gate is closed (`None` when open).
-    pub wass_reason: Option<NotCertified>,
-    /// Calibrated radius `ρ_w` of the window that gives the calibrated certificate
-    /// ([`calibrated_radius`]), when configured and a look stands.
-    pub rho_calibrated: Option<f64>,
-    /// Calibrated certificate `β̂_w − ρ_w` (the largest standing window look; its `β̂_w` is the
-    /// instrumented estimate of that window, not `beta_hat`).
-    pub cert_calibrated: Option<f64>,
+    pub wasserstein: Verdict,
+    /// Calibrated certificate `β̂_w − ρ_w` of the largest standing window look (its `β̂_w` is
+    /// that window's instrumented estimate, not `β̂`).
+    pub calibrated: Verdict,
     /// Window length `M_w` (columns) of that look.
     pub calibrated_window: Option<usize>,
-    /// The calibrated certificate's gate (false-deployment probability at most `δ`).
-    pub calibrated_gate: GateState,
-    /// Why the calibrated gate is closed (`None` when open).
-    pub calibrated_reason: Option<NotCertified>,
-    /// `RMS(R)`.
-    pub rms_residual: Option<f64>,
-    /// `λ_min(Z Zᵀ / M)`.
-    pub gram_lambda_min: Option<f64>,
-    /// Columns in the window.
-    pub columns: usize,
+}
+
+impl Evidence {
+    /// The verdict of one certificate.
+    #[must_use]
+    pub fn verdict(&self, kind: CertificateKind) -> &Verdict {
+        match kind {
+            CertificateKind::Gaussian => &self.gaussian,
+            CertificateKind::Wasserstein => &self.wasserstein,
+            CertificateKind::Calibrated => &self.calibrated,
+        }
+    }
+
+    /// `β̂` (eq. betahat), when the regression is ready.
+    #[must_use]
+    pub fn beta_hat(&self) -> Option<f64> {
+        self.fit.map(|f| f.beta_hat)
+    }
+
+    /// `ρ` (eq. rho): the Gaussian certificate's radius.
+    #[must_use]
+    pub fn rho(&self) -> Option<f64> {
+        self.gaussian.radius
+    }
+
+    /// `ε(t)`, when an ambiguity model is configured.
+    #[must_use]
+    pub fn eps(&self) -> Option<f64> {
+        self.ambiguity.map(|a| a.eps)
+    }
 }

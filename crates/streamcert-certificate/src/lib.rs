@@ -45,7 +45,7 @@
 //! let cfg = CertifierConfig::new(RegressionConfig::new(1, 1, 100, 5, 1e-4), vec![-1.0], 0.2, 0.05, 10);
 //! let mut cert = Certifier::new(cfg)?;
 //! let ev = cert.push(0.0, &[0.0], &[0.0])?;
-//! assert!(ev.cert_gauss.is_none() && !ev.gauss_gate.open);
+//! assert!(ev.gaussian.value.is_none() && !ev.gaussian.open);
 //! # Ok::<(), streamcert_certificate::CertifyError>(())
 //! ```
 
@@ -57,6 +57,7 @@ mod evidence;
 mod gap;
 mod gate;
 mod radius;
+mod row;
 
 pub use calibrated::{
     Calibration, WindowLook, calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
@@ -67,7 +68,8 @@ pub use certifier::checkpoint::{
 };
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
-pub use evidence::{Evidence, NotCertified};
+pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use gate::{Gate, GateState};
 pub use radius::{certificate_surface, certificate_value};
+pub use row::{EVIDENCE_COLUMNS, EvidenceRow, ReasonText};
 pub use streamcert_regression::ResidualSource;

@@ -1,23 +1,16 @@
-//! `streamcert certify`: one output row per sample, flushed, and a summary.
+//! `streamcert certify`: one output row per sample ([`EvidenceWriter`]) and a summary.
 
 use std::io::{Read, Write};
 use std::path::PathBuf;
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Evidence, NotCertified};
+use streamcert_certificate::{Certifier, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
-
-/// Output format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Format {
-    /// Comma-separated values with a header.
-    Csv,
-    /// One JSON object per line.
-    Jsonl,
-}
+use crate::output::EvidenceWriter;
+pub use crate::output::Format;
 
 /// What to do with a malformed row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -43,6 +36,9 @@ pub struct Options {
     /// Continue from this checkpoint (the header is then not written again, so the outputs
     /// of a split run concatenate to the output of the whole run).
     pub resume: Option<PathBuf>,
+    /// Flush every row as soon as it is written (for a live input: a pipe or a terminal).
+    /// Otherwise the output is buffered and flushed at the end and at each checkpoint.
+    pub flush_each_row: bool,
 }
 
 /// Counts over a run (continued across checkpoint and resume).
@@ -103,56 +99,6 @@ struct Checkpoint {
     summary: Summary,
 }
 
-/// The CSV header of the output.
-/// The calibrated columns stay empty (and `calibrated_open` 0) unless `[calibration]` is
-/// enabled; `cert_calibrated` is `β̂_w − ρ_w` of the window `calibrated_window` (its own
-/// instrumented estimate, not `beta_hat`).
-pub const HEADER: &str = "t,beta_hat,rho,eps,kurtosis,spike_fraction,cert_gauss,cert_wass,gauss_open,wass_open,reason_gauss,reason_wass,rho_calibrated,cert_calibrated,calibrated_window,calibrated_open,reason_calibrated";
-
-fn num(v: Option<f64>) -> String {
-    v.map_or(String::new(), |x| format!("{x}"))
-}
-
-fn row_csv(e: &Evidence) -> String {
-    let reason = |r: Option<streamcert_certificate::NotCertified>| {
-        r.map_or(String::new(), |r| r.to_string().replace(',', ";"))
-    };
-    format!(
-        "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
-        e.t,
-        num(e.beta_hat),
-        num(e.rho),
-        num(e.eps),
-        num(e.kurtosis),
-        num(e.spike_fraction),
-        num(e.cert_gauss),
-        num(e.cert_wass),
-        u8::from(e.gauss_gate.open),
-        u8::from(e.wass_gate.open),
-        reason(e.reason),
-        reason(e.wass_reason),
-        num(e.rho_calibrated),
-        num(e.cert_calibrated),
-        e.calibrated_window.map_or(String::new(), |w| w.to_string()),
-        u8::from(e.calibrated_gate.open),
-        reason(e.calibrated_reason)
-    )
-}
-
-fn row_json(e: &Evidence) -> String {
-    let reason = |r: Option<streamcert_certificate::NotCertified>| r.map(|r| r.to_string());
-    let v = serde_json::json!({
-        "t": e.t, "beta_hat": e.beta_hat, "rho": e.rho, "eps": e.eps, "kurtosis": e.kurtosis,
-        "spike_fraction": e.spike_fraction, "cert_gauss": e.cert_gauss, "cert_wass": e.cert_wass,
-        "gauss_open": e.gauss_gate.open, "wass_open": e.wass_gate.open,
-        "reason_gauss": reason(e.reason), "reason_wass": reason(e.wass_reason),
-        "rho_calibrated": e.rho_calibrated, "cert_calibrated": e.cert_calibrated,
-        "calibrated_window": e.calibrated_window, "calibrated_open": e.calibrated_gate.open,
-        "reason_calibrated": reason(e.calibrated_reason),
-    });
-    format!("{v}\n")
-}
-
 fn save(path: &PathBuf, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
@@ -200,7 +146,8 @@ fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> 
     Ok((cert, cp.summary))
 }
 
-/// Certify a stream: one output row per accepted input row, flushed immediately.
+/// Certify a stream: one output row per accepted input row (flushed per row with
+/// [`Options::flush_each_row`]).
 ///
 /// # Errors
 /// The first malformed row under [`BadRows::Stop`], input/output errors, checkpoint errors.
@@ -228,9 +175,9 @@ pub fn run<R: Read, W: Write>(
     // as usual, so an out-of-order row later in the input is still an error.
     let mut replay = summary.last_time;
     let io = |e| CliError::io("writing output", e);
-    if opts.resume.is_none() && opts.format == Format::Csv {
-        writeln!(out, "{HEADER}").map_err(io)?;
-    }
+    let mut writer =
+        EvidenceWriter::new(out, opts.format, opts.resume.is_none(), opts.flush_each_row)
+            .map_err(io)?;
     let mut s = Sample::default();
     while let Some(next) = reader.next_into(&mut s) {
         match next {
@@ -270,27 +217,26 @@ pub fn run<R: Read, W: Write>(
             }
         };
         summary.rows += 1;
-        summary.gaps += u64::from(matches!(ev.reason, Some(NotCertified::Gap { .. })));
-        summary.gauss_open += u64::from(ev.gauss_gate.open);
-        summary.wass_open += u64::from(ev.wass_gate.open);
-        summary.first_deploy_gauss = summary.first_deploy_gauss.or(ev.gauss_gate.first_opened_at);
-        summary.first_deploy_wass = summary.first_deploy_wass.or(ev.wass_gate.first_opened_at);
-        summary.calibrated_open += u64::from(ev.calibrated_gate.open);
+        summary.gaps += u64::from(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
+        let first = |open: bool, first: Option<f64>| first.or(open.then_some(s.t));
+        summary.gauss_open += u64::from(ev.gaussian.open);
+        summary.wass_open += u64::from(ev.wasserstein.open);
+        summary.calibrated_open += u64::from(ev.calibrated.open);
+        summary.first_deploy_gauss = first(ev.gaussian.open, summary.first_deploy_gauss);
+        summary.first_deploy_wass = first(ev.wasserstein.open, summary.first_deploy_wass);
         summary.first_deploy_calibrated =
-            summary.first_deploy_calibrated.or(ev.calibrated_gate.first_opened_at);
+            first(ev.calibrated.open, summary.first_deploy_calibrated);
         summary.last_time = Some(s.t);
-        let line = match opts.format {
-            Format::Csv => row_csv(&ev),
-            Format::Jsonl => row_json(&ev),
-        };
-        out.write_all(line.as_bytes()).map_err(io)?;
-        out.flush().map_err(io)?;
+        writer.write(&ev).map_err(io)?;
         if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
             if every > 0 && summary.rows % every == 0 {
+                // The rows a checkpoint holds are on the output before it is written.
+                writer.flush().map_err(io)?;
                 save(path, &cert, &summary)?;
             }
         }
     }
+    writer.flush().map_err(io)?;
     if let Some(path) = &opts.checkpoint {
         save(path, &cert, &summary)?;
     }

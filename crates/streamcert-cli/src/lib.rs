@@ -11,6 +11,7 @@ pub mod certify;
 pub mod compose;
 pub mod config;
 pub mod input;
+pub mod output;
 pub mod simulate;
 
 use std::fmt;

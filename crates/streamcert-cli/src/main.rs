@@ -25,10 +25,11 @@ enum Command {
     /// Certify a candidate gain K from (t, y, u) samples: one output row per sample.
     ///
     /// Reads CSV with a header (columns named in the configuration), line by line, and writes
-    /// t, beta_hat, rho, eps, kurtosis, spike_fraction, cert_gauss, cert_wass, both gate
-    /// states and the reasons when not certified, flushing every row, so
-    /// `tail -f plant.csv | streamcert certify --config c.toml` works live. A summary goes to
-    /// stderr (or to --summary FILE as JSON).
+    /// t, beta_hat, rho, eps, kurtosis, spike_fraction, cert_gauss, cert_wass, the gates
+    /// (0/1) and the reasons when not certified, then the calibrated certificate's columns.
+    /// From a live input (a pipe or a terminal on stdin) every row is flushed as it is
+    /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. A
+    /// summary goes to stderr (or to --summary FILE as JSON).
     Certify {
         /// Configuration (TOML); see --print-config.
         #[arg(long, required_unless_present = "print_config")]
@@ -61,6 +62,10 @@ enum Command {
         /// Write the summary as JSON to FILE instead of text on stderr.
         #[arg(long)]
         summary: Option<PathBuf>,
+        /// Flush every output row as soon as it is written. This is automatic when the input
+        /// is live (stdin from a pipe or a terminal); from a file, output is buffered.
+        #[arg(long)]
+        flush_each_row: bool,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
     Compose {
@@ -122,6 +127,12 @@ fn open_input(name: &str) -> Result<Box<dyn BufRead>, CliError> {
     }
 }
 
+/// Whether the input is live: stdin that is not a regular file (a pipe, a terminal, a
+/// socket). Rows are then flushed one by one.
+fn input_is_live(name: &str) -> bool {
+    name == "-" && !std::fs::metadata("/dev/stdin").is_ok_and(|m| m.is_file())
+}
+
 fn open_output(name: &str) -> Result<Box<dyn Write>, CliError> {
     if name == "-" {
         Ok(Box::new(std::io::stdout()))
@@ -150,6 +161,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             checkpoint_every,
             resume,
             summary,
+            flush_each_row,
         } => {
             if print_config {
                 print!("{}", config::DEFAULT_CONFIG);
@@ -170,6 +182,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 checkpoint,
                 checkpoint_every,
                 resume,
+                flush_each_row: flush_each_row || input_is_live(&input),
             };
             let mut out = open_output(&output)?;
             let s = certify::run(&cfg, open_input(&input)?, &input, &mut out, &opts)?;

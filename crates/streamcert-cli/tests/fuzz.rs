@@ -92,6 +92,7 @@ fn options(resume: Option<PathBuf>) -> Options {
         checkpoint: None,
         checkpoint_every: None,
         resume,
+        flush_each_row: false,
     }
 }
 

@@ -146,12 +146,36 @@ fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> 
     Ok((cert, cp.summary))
 }
 
+/// Rows a reader thread hands over at a time (when the input is not live).
+const BATCH: usize = 1024;
+
+/// Parsed rows in input order: each sample with the outcome of reading it (`None` = parsed).
+/// Batches travel back to the reader to be refilled, so their buffers are reused.
+struct Batch {
+    samples: Vec<Sample>,
+    outcomes: Vec<Option<CliError>>,
+}
+
+impl Batch {
+    fn new() -> Self {
+        Self {
+            samples: (0..BATCH).map(|_| Sample::default()).collect(),
+            outcomes: Vec::with_capacity(BATCH),
+        }
+    }
+}
+
 /// Certify a stream: one output row per accepted input row (flushed per row with
 /// [`Options::flush_each_row`]).
 ///
+/// A live input (`flush_each_row`) is read and certified row by row on the calling thread, so
+/// every row is answered as soon as its line is complete. Otherwise a second thread reads and
+/// parses the input in batches of 1024 rows while this one certifies and writes; the rows,
+/// their errors and the output are in input order either way, so the output is the same.
+///
 /// # Errors
 /// The first malformed row under [`BadRows::Stop`], input/output errors, checkpoint errors.
-pub fn run<R: Read, W: Write>(
+pub fn run<R: Read + Send, W: Write>(
     cfg: &Config,
     input: R,
     input_name: &str,
@@ -169,40 +193,112 @@ pub fn run<R: Read, W: Write>(
         ),
     };
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
+    let io = |e| CliError::io("writing output", e);
+    let writer = EvidenceWriter::new(out, opts.format, opts.resume.is_none(), opts.flush_each_row)
+        .map_err(io)?;
+    let mut run = Run { cert: &mut cert, summary: &mut summary, writer, opts, input_name };
     // Resuming: rows up to the checkpoint's last time at the start of the input are a replay
     // of what the checkpoint already holds (the same file, or a live source restarted after a
     // crash) and are passed over, counted; from the first later row on, times must increase
     // as usual, so an out-of-order row later in the input is still an error.
-    let mut replay = summary.last_time;
-    let io = |e| CliError::io("writing output", e);
-    let mut writer =
-        EvidenceWriter::new(out, opts.format, opts.resume.is_none(), opts.flush_each_row)
-            .map_err(io)?;
-    let mut s = Sample::default();
-    while let Some(next) = reader.next_into(&mut s) {
+    let mut replay = run.summary.last_time;
+    if opts.flush_each_row {
+        let mut s = Sample::default();
+        while let Some(next) = reader.next_into(&mut s) {
+            run.row(next, &s, &mut replay)?;
+        }
+    } else {
+        std::thread::scope(|scope| -> Result<(), CliError> {
+            let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
+            let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Batch>();
+            scope.spawn(move || {
+                loop {
+                    let mut batch = empty_rx.try_recv().unwrap_or_else(|_| Batch::new());
+                    batch.outcomes.clear();
+                    let mut done = false;
+                    while batch.outcomes.len() < BATCH {
+                        let i = batch.outcomes.len();
+                        match reader.next_into(&mut batch.samples[i]) {
+                            None => {
+                                done = true;
+                                break;
+                            }
+                            Some(Ok(())) => batch.outcomes.push(None),
+                            Some(Err(e)) => {
+                                // Reading stops after an error that is not one row's.
+                                done = !matches!(e, CliError::Row(_));
+                                batch.outcomes.push(Some(e));
+                                if done {
+                                    break;
+                                }
+                            }
+                        }
+                    }
+                    // A closed channel means the certifying side stopped (an error): stop too.
+                    if full_tx.send(batch).is_err() || done {
+                        return;
+                    }
+                }
+            });
+            for mut batch in full_rx {
+                for (s, outcome) in batch.samples.iter().zip(batch.outcomes.drain(..)) {
+                    run.row(outcome.map_or(Ok(()), Err), s, &mut replay)?;
+                }
+                // The reader may have finished: a failed return is harmless.
+                let _ = empty_tx.send(batch);
+            }
+            Ok(())
+        })?;
+    }
+    run.writer.flush().map_err(io)?;
+    if let Some(path) = &opts.checkpoint {
+        save(path, &cert, &summary)?;
+    }
+    Ok(summary)
+}
+
+/// The state of one `certify` run that every row updates.
+struct Run<'a, W: Write> {
+    cert: &'a mut Certifier,
+    summary: &'a mut Summary,
+    writer: EvidenceWriter<W>,
+    opts: &'a Options,
+    input_name: &'a str,
+}
+
+impl<W: Write> Run<'_, W> {
+    /// One input row: `next` is the outcome of reading it into `s`.
+    fn row(
+        &mut self,
+        next: Result<(), CliError>,
+        s: &Sample,
+        replay: &mut Option<f64>,
+    ) -> Result<(), CliError> {
+        let (opts, summary) = (self.opts, &mut *self.summary);
+        let io = |e| CliError::io("writing output", e);
         match next {
             Ok(()) => {}
             Err(CliError::Row(e)) if opts.bad_rows == BadRows::Skip => {
                 // One skip semantics, the library's: not absorbed, counted, every gate closes.
                 eprintln!("skipped: {e}");
                 summary.skipped += 1;
-                cert.skip(f64::NAN);
-                continue;
+                self.cert.skip(f64::NAN);
+                return Ok(());
             }
             Err(e) => return Err(e),
         }
-        if let Some(last) = replay {
+        if let Some(last) = *replay {
             if s.t <= last {
                 summary.replayed += 1;
-                continue;
+                return Ok(());
             }
-            replay = None;
+            *replay = None;
         }
-        let ev = match cert.push(s.t, &s.y, &s.u) {
+        let ev = match self.cert.push(s.t, &s.y, &s.u) {
             Ok(ev) => ev,
             Err(e) => {
                 let err = crate::RowError {
-                    file: input_name.into(),
+                    file: self.input_name.into(),
                     line: s.line,
                     column: None,
                     message: e.to_string(),
@@ -210,8 +306,8 @@ pub fn run<R: Read, W: Write>(
                 if opts.bad_rows == BadRows::Skip {
                     eprintln!("skipped: {err}");
                     summary.skipped += 1;
-                    cert.skip(s.t);
-                    continue;
+                    self.cert.skip(s.t);
+                    return Ok(());
                 }
                 return Err(CliError::Row(err));
             }
@@ -227,18 +323,14 @@ pub fn run<R: Read, W: Write>(
         summary.first_deploy_calibrated =
             first(ev.calibrated.open, summary.first_deploy_calibrated);
         summary.last_time = Some(s.t);
-        writer.write(&ev).map_err(io)?;
+        self.writer.write(&ev).map_err(io)?;
         if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
             if every > 0 && summary.rows % every == 0 {
                 // The rows a checkpoint holds are on the output before it is written.
-                writer.flush().map_err(io)?;
-                save(path, &cert, &summary)?;
+                self.writer.flush().map_err(io)?;
+                save(path, self.cert, summary)?;
             }
         }
+        Ok(())
     }
-    writer.flush().map_err(io)?;
-    if let Some(path) = &opts.checkpoint {
-        save(path, &cert, &summary)?;
-    }
-    Ok(summary)
 }

@@ -117,7 +117,7 @@ enum CouplingArg {
     Bidirectional,
 }
 
-fn open_input(name: &str) -> Result<Box<dyn BufRead>, CliError> {
+fn open_input(name: &str) -> Result<Box<dyn BufRead + Send>, CliError> {
     if name == "-" {
         Ok(Box::new(BufReader::new(std::io::stdin())))
     } else {

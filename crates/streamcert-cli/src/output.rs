@@ -17,7 +17,7 @@ pub enum Format {
 }
 
 enum Sink<W: Write> {
-    Csv(csv::Writer<W>),
+    Csv(Box<csv::Writer<W>>),
     Jsonl(std::io::BufWriter<W>),
 }
 
@@ -48,7 +48,7 @@ impl<W: Write> EvidenceWriter<W> {
                 if header {
                     w.write_record(EVIDENCE_COLUMNS)?;
                 }
-                Sink::Csv(w)
+                Sink::Csv(Box::new(w))
             }
             Format::Jsonl => Sink::Jsonl(std::io::BufWriter::with_capacity(1 << 16, out)),
         };

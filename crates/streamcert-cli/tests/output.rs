@@ -134,3 +134,33 @@ fn json_lines_read_back_to_the_library_evidence() {
         );
     }
 }
+
+#[test]
+fn the_reader_thread_changes_nothing_but_speed() {
+    // A file input is read by a second thread in batches of 1024 rows; a live one on the
+    // certifying thread. Bad rows spread over several batches, under both policies.
+    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let mut lines: Vec<String> = plant_csv(5000).lines().map(String::from).collect();
+    for (k, bad) in [(700, "x"), (1024, "nan"), (1025, ""), (2049, "1e999"), (4000, "-inf")] {
+        let mut f: Vec<String> = lines[k].split(',').map(String::from).collect();
+        f[1] = bad.into();
+        lines[k] = f.join(",");
+    }
+    let input = lines.join("\n") + "\n";
+    for bad_rows in [BadRows::Skip, BadRows::Stop] {
+        let outcome = |flush_each_row: bool| {
+            let opts = Options { bad_rows, flush_each_row, ..options(Format::Csv) };
+            let mut out = Vec::new();
+            let r = certify::run(&cfg, input.as_bytes(), "plant", &mut out, &opts);
+            (r.map_err(|e| e.to_string()), out)
+        };
+        let (threaded, live) = (outcome(false), outcome(true));
+        assert_eq!(threaded.0, live.0, "{bad_rows:?}");
+        assert_eq!(threaded.1, live.1, "{bad_rows:?}");
+        match (bad_rows, &threaded.0) {
+            (BadRows::Skip, Ok(summary)) => assert_eq!(summary.skipped, 5),
+            (BadRows::Stop, Err(message)) => assert!(message.contains("plant:701:"), "{message}"),
+            (_, other) => panic!("{bad_rows:?}: {other:?}"),
+        }
+    }
+}

@@ -8,6 +8,7 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius, SlidingKurtosis, SpikeScale};
 use streamcert::dynamics::{Disturbance, DisturbanceConfig, Process};
+use streamcert::experiments::regime_schedule;
 
 fn stream(process: Process, n: usize) -> Vec<f64> {
     let mut d = Disturbance::new(DisturbanceConfig::stationary(process), 5).expect("valid");
@@ -46,7 +47,7 @@ fn kurtosis_and_spikes(c: &mut Criterion) {
     let mut group = c.benchmark_group("kurtosis_spike_update");
     let window = 150;
     // Experiment 1's Regime 3: Laplace 0.3 plus 4.5 to 7.5 σ0 spikes at 5.5 % per step.
-    let spikes = DisturbanceConfig::experiment1().segments[2].process;
+    let spikes = regime_schedule().segments[2].process;
     for (name, process) in
         [("gaussian", Process::Gaussian { sigma: 0.08 }), ("laplace_spikes", spikes)]
     {

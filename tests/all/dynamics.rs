@@ -8,6 +8,7 @@ use streamcert::dynamics::{
     G5Config, Impulse, Integrator, LinearSystem, NoiseScaling, Process, Segment, SimConfig,
     simulate,
 };
+use streamcert::experiments::regime_schedule;
 
 fn g5(coupling: Coupling, gamma: f64) -> G5 {
     G5::new(G5Config { gamma, ..G5Config::paper(coupling) }).expect("valid config")
@@ -155,7 +156,7 @@ fn excess_kurtosis(x: &[f64]) -> f64 {
 fn disturbance_moments_match_theory() {
     let n = 400_000;
     // Experiment 1's Regime 3: Laplace 0.3 plus 4.5 to 7.5 σ0 spikes at 5.5 % per step.
-    let spikes = DisturbanceConfig::experiment1().segments[2].process;
+    let spikes = regime_schedule().segments[2].process;
     // (process, theoretical excess kurtosis, tolerance on it)
     let cases = [
         (Process::Gaussian { sigma: 0.08 }, Some(0.0), 0.05),
@@ -213,7 +214,7 @@ fn exp1_run(seed: u64, coupling: Coupling) -> Vec<f64> {
     };
     let mut d = [
         Disturbance::new(DisturbanceConfig::none(), seed).expect("valid"),
-        Disturbance::new(DisturbanceConfig::experiment1(), seed + 1).expect("valid"),
+        Disturbance::new(regime_schedule(), seed + 1).expect("valid"),
     ];
     let mut dither =
         Dither::new(DitherConfig::Prbs { amplitude: 0.3, hold: 0.1 }, seed + 2).expect("valid");

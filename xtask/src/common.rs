@@ -7,7 +7,8 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{CertifierConfig, Evidence, ResidualSource};
-use streamcert_dynamics::{Coupling, Experiment, G5Dataset, NoiseScaling};
+use streamcert_dynamics::{Coupling, NoiseScaling};
+use streamcert_experiments::{Experiment, G5Dataset};
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
 /// Every choice the paper leaves open, with its default; each is a command-line flag.

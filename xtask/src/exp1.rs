@@ -7,20 +7,21 @@ use std::path::Path;
 use anyhow::Result;
 use streamcert_certificate::{Certifier, Evidence, certificate_surface};
 use streamcert_dynamics::{
-    Disturbance, DisturbanceConfig, Experiment, G5, Impulse, Integrator, SimConfig, Trajectory,
-    simulate,
+    Disturbance, DisturbanceConfig, G5, Impulse, Integrator, SimConfig, Trajectory, simulate,
 };
+use streamcert_experiments::{Experiment, Setting, regime_schedule};
 
 use crate::common::{
     Params, csv, markdown, mean_std, pct, pm, progress, seed, write, write_evidence,
 };
 use crate::plot::{self, BLUE, Figure, GREEN, Heatmap, ORANGE, Panel, RED_};
 
-const K1: f64 = -3.5;
-const K4: f64 = -4.0;
-const GAMMA: f64 = 0.15;
-const MARGIN: f64 = 0.05;
-const IMPULSE: f64 = 2.5;
+const SETTING: Setting = Experiment::One.setting();
+const K1: f64 = SETTING.k1;
+const K4: f64 = SETTING.k4;
+const GAMMA: f64 = SETTING.gamma;
+const MARGIN: f64 = SETTING.margin;
+const IMPULSE: f64 = SETTING.impulse;
 
 /// Regime index of time `t` (`None` at or after 30 s).
 fn regime(t: f64) -> Option<usize> {
@@ -143,7 +144,7 @@ fn decide(
         };
         let eta = DisturbanceConfig {
             impulses: vec![Impulse { time: t0 + 0.1, magnitude: IMPULSE }],
-            ..DisturbanceConfig::experiment1()
+            ..regime_schedule()
         };
         // Same noise realisation for both policies.
         let mut dist = [

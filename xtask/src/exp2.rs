@@ -9,23 +9,32 @@ use anyhow::Result;
 use streamcert_certificate::Evidence;
 use streamcert_compose::{Network, lemma1_rate, network_rate};
 use streamcert_dynamics::{
-    Coupling, Disturbance, DisturbanceConfig, Experiment, G5, G5Config, Impulse, Integrator,
-    Process, SimConfig, Trajectory, simulate,
+    Coupling, Disturbance, DisturbanceConfig, G5, G5Config, Impulse, Integrator, Process,
+    SimConfig, Trajectory, simulate,
 };
+use streamcert_experiments::{Experiment, Setting};
 
 use crate::common::{Params, csv, markdown, median, pm, progress, seed, write, write_evidence};
 use crate::exp1::certify;
 use crate::plot::{self, BLUE, Figure, GREEN, ORANGE, PURPLE, Panel, RED_};
 
-const K1: f64 = -2.5;
-const K4: f64 = -3.0;
-const SIGMA: f64 = 0.10;
-const MARGIN: f64 = 0.10;
-const DATA_STEPS: usize = 800;
-const SIM_STEPS: usize = 700;
-const IMPULSE: f64 = 2.5;
-const IMPULSE_TIME: f64 = 3.0;
-const SWEEP_MAX: f64 = 4.2;
+const SETTING: Setting = Experiment::Two.setting();
+const K1: f64 = SETTING.k1;
+const K4: f64 = SETTING.k4;
+const SIGMA: f64 = match SETTING.sigma {
+    Some(s) => s,
+    None => 0.0,
+};
+const MARGIN: f64 = SETTING.margin;
+const DATA_STEPS: usize = SETTING.steps;
+pub(crate) const SIM_STEPS: usize = 700;
+const IMPULSE: f64 = SETTING.impulse;
+pub(crate) const IMPULSE_TIME: f64 = 3.0;
+pub(crate) const SWEEP_MAX: f64 = 4.2;
+/// The safe simulation coupling is this factor times `γ_warn`.
+pub(crate) const SAFE_FACTOR: f64 = 0.55;
+/// The unsafe simulation coupling is this factor times the true critical `γ`.
+pub(crate) const UNSAFE_FACTOR: f64 = 1.08;
 /// A run counts as diverged when ‖x‖ exceeds this or stops being finite.
 const DIVERGED: f64 = 1e3;
 
@@ -115,8 +124,11 @@ fn run_seed(
     let t_star = [0, 1].map(|i| ev[i].iter().find(|e| e.gaussian.open).map(|e| e.t));
     let gamma_true = (true_rates[0] * true_rates[1]).sqrt();
     let warn = if cert[0] > 0.0 && cert[1] > 0.0 { (cert[0] * cert[1]).sqrt() } else { f64::NAN };
-    let gammas =
-        warn.is_finite().then_some([0.55 * warn, 0.5 * (warn + gamma_true), 1.08 * gamma_true]);
+    let gammas = warn.is_finite().then_some([
+        SAFE_FACTOR * warn,
+        0.5 * (warn + gamma_true),
+        UNSAFE_FACTOR * gamma_true,
+    ]);
     // Lemma 1 against the N-subsystem machinery over the sweep.
     let mut lemma_vs_network = 0.0f64;
     if cert[0] > 0.0 && cert[1] > 0.0 {
@@ -313,7 +325,7 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
         ],
         vec![
             "Safe simulation coupling".into(),
-            "γ_safe = 0.55 γ_warn".into(),
+            format!("γ_safe = {SAFE_FACTOR} γ_warn"),
             "≈ 0.54".into(),
             pm(&level(0), 3),
         ],
@@ -325,7 +337,7 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
         ],
         vec![
             "Unsafe coupling".into(),
-            "γ_unsafe = 1.08 γ_true".into(),
+            format!("γ_unsafe = {UNSAFE_FACTOR} γ_true"),
             "1.08 γ_true".into(),
             pm(&level(2), 3),
         ],

@@ -4,7 +4,8 @@ use std::fmt::Write as _;
 
 use anyhow::Result;
 use streamcert_certificate::ResidualSource;
-use streamcert_dynamics::{DisturbanceConfig, NoiseScaling};
+use streamcert_dynamics::NoiseScaling;
+use streamcert_experiments::{Experiment, regime_schedule};
 use streamcert_regression::{Estimator, InputIntegral};
 
 use crate::common::{Params, markdown, write};
@@ -135,7 +136,7 @@ dither amplitude.\n"
 }
 
 fn exp1_variance(regime: usize) -> f64 {
-    DisturbanceConfig::experiment1().segments[regime].process.variance()
+    regime_schedule().segments[regime].process.variance()
 }
 
 /// Run the selected experiments and write the report.
@@ -175,16 +176,18 @@ pub(crate) fn reproduce(o: &Options, do1: bool, do2: bool) -> Result<()> {
         }
     }
     write(&o.out.join("REPORT.md"), &report)?;
+    let (one, two) = (Experiment::One.setting(), Experiment::Two.setting());
     let meta = serde_json::json!({
         "command": if do1 && do2 { "reproduce" } else if do1 { "exp1" } else { "exp2" },
         "params": p,
         "sensitivity": o.sensitivity && do1 && do2,
-        "exp1": { "gamma": 0.15, "k": [-3.5, -4.0], "dt": p.dt, "steps": 1500, "margin": 0.05,
-                  "eps_floor": 0.015, "eps_cap": 0.32, "ridge": p.ridge,
-                  "disturbance_x4": DisturbanceConfig::experiment1(), "decision_impulse": 2.5 },
-        "exp2": { "k": [-2.5, -3.0], "sigma": 0.10, "margin": 0.10, "data_steps": 800, "sim_steps": 700,
-                  "impulse": 2.5, "impulse_time": 3.0, "sweep": [0.0, 4.2], "safe_factor": 0.55,
-                  "unsafe_factor": 1.08 },
+        "exp1": { "gamma": one.gamma, "k": [one.k1, one.k4], "dt": p.dt, "steps": one.steps,
+                  "margin": one.margin, "eps_floor": 0.015, "eps_cap": 0.32, "ridge": p.ridge,
+                  "disturbance_x4": regime_schedule(), "decision_impulse": one.impulse },
+        "exp2": { "k": [two.k1, two.k4], "sigma": two.sigma, "margin": two.margin,
+                  "data_steps": two.steps, "sim_steps": exp2::SIM_STEPS, "impulse": two.impulse,
+                  "impulse_time": exp2::IMPULSE_TIME, "sweep": [0.0, exp2::SWEEP_MAX],
+                  "safe_factor": exp2::SAFE_FACTOR, "unsafe_factor": exp2::UNSAFE_FACTOR },
         "seed_rule": "run r, stream k: (r + 1) * 1000003 + k",
     });
     write(&o.out.join("meta.json"), &serde_json::to_string_pretty(&meta)?)?;

@@ -6,7 +6,8 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use streamcert_cli::{CliError, certify, compose, config, simulate};
-use streamcert_dynamics::{Coupling, Experiment};
+use streamcert_dynamics::Coupling;
+use streamcert_experiments::Experiment;
 
 /// Decide from streaming sensor data whether a feedback controller may be deployed, and
 /// whether a coupled network of certified subsystems stays contracting.

@@ -2,7 +2,8 @@
 
 use std::io::Write;
 
-use streamcert_dynamics::{Coupling, Experiment, G5Dataset};
+use streamcert_dynamics::Coupling;
+use streamcert_experiments::{Experiment, G5Dataset};
 
 use crate::CliError;
 

@@ -406,7 +406,7 @@ fn compose_two_subsystems_equals_lemma_1() {
 /// the same `G5Dataset::run_seeded(s)` with the reproduction's defaults.
 #[test]
 fn simulate_seed_is_the_reproduction_run() {
-    use streamcert_dynamics::{Experiment, G5Dataset};
+    use streamcert_experiments::{Experiment, G5Dataset};
     for (experiment, flag) in [(Experiment::One, "1"), (Experiment::Two, "2")] {
         let out = run(&["simulate", "g5", "--experiment", flag, "--seed", "3"], b"");
         assert!(out.status.success());

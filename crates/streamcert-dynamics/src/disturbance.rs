@@ -5,10 +5,8 @@
 //! `p(t)`. [`Impulse`]s are separate: each is a jump of the state by `magnitude · E` at its
 //! time (the integral of a Dirac pulse of that area), independent of the noise scaling.
 //!
-//! Experiment 1's schedule ([`DisturbanceConfig::experiment1`]):
-//! Gaussian `σ0 = 0.08` on `[0, 10)`, Laplace scale 0.5 on `[10, 20)`, Laplace scale 0.3 plus
-//! spikes of `4.5` to `7.5 σ0` with probability 5.5 % per step on `[20, 30)`, all on top of the
-//! periodic layer `0.10 sin(2πt/10) + 0.05 sin(2πt/5 + 0.7)`.
+//! Experiment 1's three-regime schedule is built from these pieces in the
+//! `streamcert-experiments` crate (`regime_schedule`).
 
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal, StudentT};
@@ -252,33 +250,6 @@ impl DisturbanceConfig {
         Self::stationary(Process::Zero)
     }
 
-    /// Experiment 1's three-regime schedule with the paper's periodic layer (Section II-D,
-    /// Section V-A): Gaussian `σ0 = 0.08` on `[0, 10)`, Laplace scale 0.5 on `[10, 20)`,
-    /// Laplace scale 0.3 plus spikes of 4.5 to 7.5 `σ0` at 5.5 % per step on `[20, 30)`.
-    #[must_use]
-    pub fn experiment1() -> Self {
-        let sigma0 = 0.08;
-        Self {
-            segments: vec![
-                Segment { start: 0.0, end: 10.0, process: Process::Gaussian { sigma: sigma0 } },
-                Segment { start: 10.0, end: 20.0, process: Process::Laplace { scale: 0.5 } },
-                Segment {
-                    start: 20.0,
-                    end: 30.0,
-                    process: Process::LaplaceSpikes {
-                        scale: 0.3,
-                        spike_prob: 0.055,
-                        spike_min: 4.5,
-                        spike_max: 7.5,
-                        sigma0,
-                    },
-                },
-            ],
-            periodic: Periodic::paper(),
-            impulses: Vec::new(),
-        }
-    }
-
     /// Validate: at least one segment, each non-empty with finite start, sorted and disjoint;
     /// every process parameter valid; periods positive; impulses finite.
     ///
@@ -337,7 +308,7 @@ impl Disturbance {
     ///
     /// ```
     /// use streamcert_dynamics::{Disturbance, DisturbanceConfig, DynamicsError, Process};
-    /// let mut d = Disturbance::new(DisturbanceConfig::experiment1(), 42)?;
+    /// let mut d = Disturbance::new(DisturbanceConfig::stationary(Process::Laplace { scale: 0.5 }), 42)?;
     /// let _eta = d.random(0.0);
     /// let bad = DisturbanceConfig::stationary(Process::Gaussian { sigma: -1.0 });
     /// assert!(matches!(Disturbance::new(bad, 42), Err(DynamicsError::Negative { .. })));
@@ -399,7 +370,26 @@ mod tests {
 
     #[test]
     fn schedule_switches_processes_at_the_given_times() {
-        let d = Disturbance::new(DisturbanceConfig::experiment1(), 0).unwrap();
+        let cfg = DisturbanceConfig {
+            segments: vec![
+                Segment { start: 0.0, end: 10.0, process: Process::Gaussian { sigma: 0.08 } },
+                Segment { start: 10.0, end: 20.0, process: Process::Laplace { scale: 0.5 } },
+                Segment {
+                    start: 20.0,
+                    end: 30.0,
+                    process: Process::LaplaceSpikes {
+                        scale: 0.3,
+                        spike_prob: 0.055,
+                        spike_min: 4.5,
+                        spike_max: 7.5,
+                        sigma0: 0.08,
+                    },
+                },
+            ],
+            periodic: Periodic::paper(),
+            impulses: Vec::new(),
+        };
+        let d = Disturbance::new(cfg, 0).unwrap();
         assert!(matches!(d.process_at(0.0), Process::Gaussian { .. }));
         assert!(matches!(d.process_at(9.999), Process::Gaussian { .. }));
         assert!(matches!(d.process_at(10.0), Process::Laplace { .. }));

@@ -29,7 +29,6 @@
 //! # Ok::<(), streamcert_dynamics::DynamicsError>(())
 //! ```
 
-mod dataset;
 mod disturbance;
 mod dither;
 mod error;
@@ -39,7 +38,6 @@ mod scenario;
 mod simulate;
 mod system;
 
-pub use dataset::{Experiment, G5Dataset};
 pub use disturbance::{Disturbance, DisturbanceConfig, Impulse, Periodic, Process, Segment};
 pub use dither::{Dither, DitherConfig};
 pub use error::DynamicsError;

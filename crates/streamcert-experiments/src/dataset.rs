@@ -3,9 +3,9 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::{
+use streamcert_dynamics::{
     Coupling, Disturbance, DisturbanceConfig, Dither, DitherConfig, DynamicsError, G5, G5Config,
-    Integrator, NoiseScaling, Process, SimConfig, Trajectory, simulate,
+    Integrator, NoiseScaling, Periodic, Process, Segment, SimConfig, Trajectory, simulate,
 };
 
 /// Which experiment's data.
@@ -18,6 +18,82 @@ pub enum Experiment {
     /// Experiment 2: disconnected (`γ = 0`), `K = diag(−2.5, −3.0)`, 16 s, Gaussian
     /// `σ = 0.10` into `x4` (and into `x1` when `noise_on_a`).
     Two,
+}
+
+/// Experiment 1's three-regime schedule on `η` (into `x4`) with the paper's periodic layer
+/// (Section II-D, Section V-A): Gaussian `σ0 = 0.08` on `[0, 10)`, Laplace scale 0.5 on
+/// `[10, 20)`, Laplace scale 0.3 plus spikes of 4.5 to 7.5 `σ0` at 5.5 % per step on
+/// `[20, 30)`, all on top of `0.10 sin(2πt/10) + 0.05 sin(2πt/5 + 0.7)`.
+#[must_use]
+pub fn regime_schedule() -> DisturbanceConfig {
+    let sigma0 = 0.08;
+    DisturbanceConfig {
+        segments: vec![
+            Segment { start: 0.0, end: 10.0, process: Process::Gaussian { sigma: sigma0 } },
+            Segment { start: 10.0, end: 20.0, process: Process::Laplace { scale: 0.5 } },
+            Segment {
+                start: 20.0,
+                end: 30.0,
+                process: Process::LaplaceSpikes {
+                    scale: 0.3,
+                    spike_prob: 0.055,
+                    spike_min: 4.5,
+                    spike_max: 7.5,
+                    sigma0,
+                },
+            },
+        ],
+        periodic: Periodic::paper(),
+        impulses: Vec::new(),
+    }
+}
+
+/// The constants of one experiment (Table I and Section V), the one place they are written.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Setting {
+    /// Coupling gain `γ` of the data run.
+    pub gamma: f64,
+    /// Candidate gain of subsystem A (`u1 = k1 x1`).
+    pub k1: f64,
+    /// Candidate gain of subsystem B (`u4 = k4 x4`).
+    pub k4: f64,
+    /// Steps of the data run at the paper's `dt = 0.02` s.
+    pub steps: usize,
+    /// Deployment margin `β_margin`.
+    pub margin: f64,
+    /// Standard deviation `σ` of Experiment 2's stationary Gaussian noise; `None` for
+    /// Experiment 1, whose noise is the three-regime schedule
+    /// ([`regime_schedule`]).
+    pub sigma: Option<f64>,
+    /// Impulse amplitude of the post-deployment response (Figs. 5 and 8).
+    pub impulse: f64,
+}
+
+impl Experiment {
+    /// The experiment's constants.
+    #[must_use]
+    pub const fn setting(self) -> Setting {
+        match self {
+            Self::One => Setting {
+                gamma: 0.15,
+                k1: -3.5,
+                k4: -4.0,
+                steps: 1500,
+                margin: 0.05,
+                sigma: None,
+                impulse: 2.5,
+            },
+            Self::Two => Setting {
+                gamma: 0.0,
+                k1: -2.5,
+                k4: -3.0,
+                steps: 800,
+                margin: 0.10,
+                sigma: Some(0.10),
+                impulse: 2.5,
+            },
+        }
+    }
 }
 
 /// A G5 data run under the candidate gains plus PRBS dither on both inputs
@@ -63,21 +139,12 @@ impl G5Dataset {
         }
     }
 
-    /// `(γ, k1, k4, steps)` of the experiment (Table I).
-    #[must_use]
-    pub fn settings(&self) -> (f64, f64, f64, usize) {
-        match self.experiment {
-            Experiment::One => (0.15, -3.5, -4.0, 1500),
-            Experiment::Two => (0.0, -2.5, -3.0, 800),
-        }
-    }
-
     /// The system.
     ///
     /// # Errors
     /// None for the built-in parameters; kept fallible for the validated constructor.
     pub fn system(&self) -> Result<G5, DynamicsError> {
-        let (gamma, k1, k4, _) = self.settings();
+        let Setting { gamma, k1, k4, .. } = self.experiment.setting();
         G5::new(G5Config { gamma, k1, k4, ..G5Config::paper(self.coupling) })
     }
 
@@ -114,7 +181,7 @@ impl G5Dataset {
 
     fn run_inner(&self, seeds: [u64; 4]) -> Result<Trajectory, DynamicsError> {
         let sys = self.system()?;
-        let (_, k1, k4, default_steps) = self.settings();
+        let Setting { k1, k4, steps: default_steps, sigma, .. } = self.experiment.setting();
         let steps = self.steps.unwrap_or(default_steps);
         let cfg = SimConfig {
             dt: self.dt,
@@ -124,10 +191,10 @@ impl G5Dataset {
             integrator: Integrator::EulerMaruyama,
             noise_scaling: self.noise_scaling,
         };
-        let gauss = DisturbanceConfig::stationary(Process::Gaussian { sigma: 0.10 });
-        let (into_a, into_b) = match self.experiment {
-            Experiment::One => (DisturbanceConfig::none(), DisturbanceConfig::experiment1()),
-            Experiment::Two => {
+        let (into_a, into_b) = match sigma {
+            None => (DisturbanceConfig::none(), regime_schedule()),
+            Some(sigma) => {
+                let gauss = DisturbanceConfig::stationary(Process::Gaussian { sigma });
                 (if self.noise_on_a { gauss.clone() } else { DisturbanceConfig::none() }, gauss)
             }
         };

@@ -370,22 +370,23 @@ mod tests {
 
     #[test]
     fn schedule_switches_processes_at_the_given_times() {
+        let spikes = Process::LaplaceSpikes {
+            scale: 0.3,
+            spike_prob: 0.1,
+            spike_min: 4.0,
+            spike_max: 6.0,
+            sigma0: 0.1,
+        };
         let cfg = DisturbanceConfig {
-            segments: vec![
-                Segment { start: 0.0, end: 10.0, process: Process::Gaussian { sigma: 0.08 } },
-                Segment { start: 10.0, end: 20.0, process: Process::Laplace { scale: 0.5 } },
-                Segment {
-                    start: 20.0,
-                    end: 30.0,
-                    process: Process::LaplaceSpikes {
-                        scale: 0.3,
-                        spike_prob: 0.055,
-                        spike_min: 4.5,
-                        spike_max: 7.5,
-                        sigma0: 0.08,
-                    },
-                },
-            ],
+            segments: [Process::Gaussian { sigma: 0.1 }, Process::Laplace { scale: 0.5 }, spikes]
+                .into_iter()
+                .enumerate()
+                .map(|(i, process)| Segment {
+                    start: 10.0 * i as f64,
+                    end: 10.0 * (i + 1) as f64,
+                    process,
+                })
+                .collect(),
             periodic: Periodic::paper(),
             impulses: Vec::new(),
         };

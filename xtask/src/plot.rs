@@ -36,6 +36,8 @@ pub(crate) struct Heatmap {
     pub(crate) z: Vec<f64>,
     /// Saturation magnitude.
     pub(crate) scale: f64,
+    /// Legend text for the cells without a value (drawn in [`MISSING`] grey).
+    pub(crate) missing: String,
 }
 
 /// One panel.
@@ -122,7 +124,13 @@ fn range(panel: &Panel) -> ((f64, f64), (f64, f64)) {
     ((x0, x1), (y0 - pad, y1 + pad))
 }
 
+/// The colour of a heatmap cell without a value (for example before the first estimate).
+pub(crate) const MISSING: RGBColor = RGBColor(225, 225, 225);
+
 fn diverging(z: f64, scale: f64) -> RGBColor {
+    if !z.is_finite() {
+        return MISSING;
+    }
     let v = (z / scale).clamp(-1.0, 1.0);
     let mix = |a: u8, b: u8, t: f64| (f64::from(a) + (f64::from(b) - f64::from(a)) * t) as u8;
     if v >= 0.0 {
@@ -161,7 +169,9 @@ where
                     diverging(h.z[ix * ny + iy], h.scale).filled(),
                 )
             }))
-            .map_err(|e| anyhow!("{e:?}"))?;
+            .map_err(|e| anyhow!("{e:?}"))?
+            .label(h.missing.as_str())
+            .legend(|(x, y)| Rectangle::new([(x, y - 5), (x + 18, y + 5)], MISSING.filled()));
     }
     for (y, label) in &panel.hlines {
         chart
@@ -175,26 +185,46 @@ where
             .draw_series(LineSeries::new(vec![(*x, y0), (*x, y1)], BLACK.mix(0.3).stroke_width(1)))
             .map_err(|e| anyhow!("{e:?}"))?;
     }
-    for s in &panel.series {
+    for (index, s) in panel.series.iter().enumerate() {
         let color = s.color;
-        // Break the line at non-finite values.
+        // A series identical to an earlier one is hidden under it: say so in the legend, and
+        // draw it dashed on top so both stay visible.
+        let twin = panel.series[..index].iter().find(|e| same_points(&e.points, &s.points));
+        let mut clipped = false;
+        // Clip to the requested range when there is one (the panel adds a margin around it).
+        let (lo, hi) = panel.y_range.unwrap_or((y0, y1));
+        // Break the line at non-finite values; clip to the panel and say so in the legend.
         let mut segments: Vec<Vec<(f64, f64)>> = vec![Vec::new()];
         for &(x, y) in &s.points {
             if x.is_finite() && y.is_finite() {
+                clipped |= y < lo || y > hi;
                 if let Some(seg) = segments.last_mut() {
-                    seg.push((x, y.clamp(y0, y1)));
+                    seg.push((x, y.clamp(lo, hi)));
                 }
             } else if segments.last().is_some_and(|seg| !seg.is_empty()) {
                 segments.push(Vec::new());
             }
         }
+        let mut label = s.name.clone();
+        if let Some(t) = twin {
+            label = format!("{label} (identical to {}: dashed)", t.name);
+        }
+        if clipped {
+            label = format!("{label} (clipped to [{lo}, {hi}])");
+        }
         let mut first = true;
         for seg in segments.into_iter().filter(|s| !s.is_empty()) {
-            let drawn = chart
-                .draw_series(LineSeries::new(seg, color.stroke_width(2)))
-                .map_err(|e| anyhow!("{e:?}"))?;
+            let drawn = if twin.is_some() {
+                chart
+                    .draw_series(DashedLineSeries::new(seg, 6, 6, color.stroke_width(2)))
+                    .map_err(|e| anyhow!("{e:?}"))?
+            } else {
+                chart
+                    .draw_series(LineSeries::new(seg, color.stroke_width(2)))
+                    .map_err(|e| anyhow!("{e:?}"))?
+            };
             if first {
-                drawn.label(s.name.as_str()).legend(move |(x, y)| {
+                drawn.label(label.as_str()).legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
                 });
                 first = false;
@@ -211,6 +241,12 @@ where
             .map_err(|e| anyhow!("{e:?}"))?;
     }
     Ok(())
+}
+
+/// Whether two series have the same points (NaN equal to NaN).
+fn same_points(a: &[(f64, f64)], b: &[(f64, f64)]) -> bool {
+    let eq = |x: f64, y: f64| x == y || (x.is_nan() && y.is_nan());
+    a.len() == b.len() && a.iter().zip(b).all(|(p, q)| eq(p.0, q.0) && eq(p.1, q.1))
 }
 
 fn draw<DB: DrawingBackend>(root: DrawingArea<DB, Shift>, fig: &Figure) -> Result<()>

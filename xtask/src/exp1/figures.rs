@@ -63,7 +63,13 @@ pub(super) fn figures(
         "ε",
     )
     .line("realised ε(t)", series(1, &|e| e.eps()), RGB_BLACK);
-    surface.heatmap = Some(Heatmap { x_edges, y_edges, z, scale });
+    surface.heatmap = Some(Heatmap {
+        x_edges,
+        y_edges,
+        z,
+        scale,
+        missing: "no estimate yet (window warming up)".into(),
+    });
     surface.y_range = Some((0.0, 0.35));
     plot::save(
         &Figure { panels: vec![eps_top, surface], rows: 2, cols: 1, size: (1000, 800) },

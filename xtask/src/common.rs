@@ -55,24 +55,26 @@ pub(crate) struct Params {
 
 impl Default for Params {
     fn default() -> Self {
+        // The data-set choices are `G5Dataset::defaults`, the one place `simulate g5` reads too.
+        let data = G5Dataset::defaults(Experiment::One);
         Self {
-            dt: 0.02,
+            dt: data.dt,
             window: 150,
             horizon: 5,
             ridge: 1e-4,
-            c: 0.1,
+            c: 0.3,
             consecutive: 10,
             alpha_kurtosis: 0.03,
             alpha_spike: 2.0,
             tail_window: 150,
-            dither: 0.5,
-            dither_hold: 0.1,
-            noise_scaling: NoiseScaling::Sde,
-            coupling: Coupling::Cascade,
+            dither: data.dither,
+            dither_hold: data.dither_hold,
+            noise_scaling: data.noise_scaling,
+            coupling: data.coupling,
             residuals: ResidualSource::OneStep,
             estimator: Estimator::Ordinary,
-            input_integral: InputIntegral::Trapezoidal,
-            exp2_noise_on_a: true,
+            input_integral: InputIntegral::ZeroOrderHold,
+            exp2_noise_on_a: data.noise_on_a,
             seeds: 20,
         }
     }

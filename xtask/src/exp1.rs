@@ -18,23 +18,23 @@ use crate::common::{
 };
 
 const SETTING: Setting = Experiment::One.setting();
-const K1: f64 = SETTING.k1;
-const K4: f64 = SETTING.k4;
+pub(crate) const K1: f64 = SETTING.k1;
+pub(crate) const K4: f64 = SETTING.k4;
 const GAMMA: f64 = SETTING.gamma;
-const MARGIN: f64 = SETTING.margin;
+pub(crate) const MARGIN: f64 = SETTING.margin;
 const IMPULSE: f64 = SETTING.impulse;
 
 /// Regime index of time `t` (`None` at or after 30 s).
-fn regime(t: f64) -> Option<usize> {
+pub(crate) fn regime(t: f64) -> Option<usize> {
     (t < 30.0 - 1e-9).then(|| ((t / 10.0 + 1e-9).floor() as usize).min(2))
 }
 
-fn g5(p: &Params) -> Result<G5> {
+pub(crate) fn g5(p: &Params) -> Result<G5> {
     Ok(p.dataset(Experiment::One).system()?)
 }
 
 /// The data run (see `G5Dataset`): candidate gains plus PRBS dither, Experiment 1's schedule.
-fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
+pub(crate) fn data_run(p: &Params, run: usize) -> Result<Trajectory> {
     Ok(p.dataset(Experiment::One).run_seeded(run as u64)?)
 }
 
@@ -427,16 +427,20 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
     Ok(s)
 }
 
-/// Table II shares for the sensitivity study: `(B Gauss per regime, B Wass per regime)`.
-pub(crate) fn shares(p: &Params) -> Result<([f64; 3], [f64; 3])> {
-    let mut g = vec![[0.0; 3]; 0];
-    let mut w = vec![[0.0; 3]; 0];
-    for run in 0..p.seeds {
-        let (res, ..) = run_seed(p, run)?;
-        g.push(res.share[1][0]);
-        w.push(res.share[1][1]);
-    }
-    let avg =
-        |v: &[[f64; 3]]| [0, 1, 2].map(|r| mean_std(&v.iter().map(|x| x[r]).collect::<Vec<_>>()).0);
-    Ok((avg(&g), avg(&w)))
+/// Subsystem B's Table II shares in one seed, `[certificate: 0 Gauss, 1 Wass][regime]`: over
+/// all the regime's steps, and over its steps that have an estimate.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct SharesB {
+    pub(crate) all: [[f64; 3]; 2],
+    pub(crate) with_estimate: [[f64; 3]; 2],
+}
+
+/// Subsystem B's Table II shares for every seed (the sensitivity study).
+pub(crate) fn shares_per_seed(p: &Params) -> Result<Vec<SharesB>> {
+    (0..p.seeds)
+        .map(|run| {
+            let (res, ..) = run_seed(p, run)?;
+            Ok(SharesB { all: res.share[1], with_estimate: res.share_est[1] })
+        })
+        .collect()
 }

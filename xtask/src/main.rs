@@ -14,11 +14,13 @@
 //! place it is set. Without a command it prints the help.
 
 mod common;
+mod dither;
 mod exp1;
 mod exp2;
 mod plot;
 mod reliability;
 mod report;
+mod sensitivity;
 mod validity;
 
 use std::path::PathBuf;

@@ -123,7 +123,7 @@ pub struct G5Dataset {
 }
 
 impl G5Dataset {
-    /// The reproduction's defaults for `experiment`: cascade coupling, `dt = 0.02`, PRBS ±0.5
+    /// The reproduction's defaults for `experiment`: cascade coupling, `dt = 0.02`, PRBS ±1
     /// held 0.1 s, SDE noise scaling, Experiment-2 noise on both subsystems.
     #[must_use]
     pub fn defaults(experiment: Experiment) -> Self {
@@ -131,7 +131,7 @@ impl G5Dataset {
             experiment,
             coupling: Coupling::Cascade,
             dt: 0.02,
-            dither: 0.5,
+            dither: 1.0,
             dither_hold: 0.1,
             noise_scaling: NoiseScaling::Sde,
             noise_on_a: true,

@@ -14,4 +14,5 @@ pub use streamcert_certificate as certificate;
 pub use streamcert_compose as compose;
 pub use streamcert_dynamics as dynamics;
 pub use streamcert_experiments as experiments;
+pub use streamcert_network as network;
 pub use streamcert_regression as regression;

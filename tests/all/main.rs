@@ -5,6 +5,7 @@ mod calibrated;
 mod certificate;
 mod compose;
 mod dynamics;
+mod network;
 mod regression;
 mod reliability;
 mod support;

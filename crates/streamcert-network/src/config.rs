@@ -1,0 +1,157 @@
+//! [`NetworkConfig`]: the subsystems, their coupling bounds, the epoch and the network gate.
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::{Calibration, CertificateKind, CertifierConfig};
+
+use crate::NetworkError;
+
+/// One subsystem: a name and its certifier's configuration (its outputs, inputs, gain `K_i`
+/// and every streaming choice).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SubsystemSpec {
+    /// Name, for reports.
+    pub name: String,
+    /// The local certifier.
+    pub certifier: CertifierConfig,
+}
+
+impl SubsystemSpec {
+    /// A named subsystem.
+    #[must_use]
+    pub fn new(name: &str, certifier: CertifierConfig) -> Self {
+        Self { name: name.into(), certifier }
+    }
+}
+
+/// The network's configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkConfig {
+    /// The subsystems, indexed from 0.
+    pub subsystems: Vec<SubsystemSpec>,
+    /// Coupling bounds `(i, j, γ_ij)`: how subsystem `j` drives subsystem `i` (`γ_ij >= 0`).
+    pub couplings: Vec<(usize, usize, f64)>,
+    /// Epoch period in seconds: the network is composed at `t = k · epoch`.
+    pub epoch: f64,
+    /// A subsystem whose newest sample is older than this (seconds) at an epoch is not
+    /// certified (fail safe). Default: 5 epochs.
+    pub stale_after: f64,
+    /// Which local certificate composes (default: the calibrated one when every subsystem
+    /// has a calibration, the Gaussian one otherwise).
+    pub certificate: CertificateKind,
+    /// Network margin: certified when `β_net >= margin`. Default 0.
+    pub margin: f64,
+    /// Consecutive certified epochs before the network gate opens. Default 1.
+    pub consecutive: usize,
+    /// Up to this many subsystems the dense composition (exact spectral abscissa); beyond it
+    /// the sparse Collatz–Wielandt certificate (a lower bound). Default 500.
+    pub dense_limit: usize,
+}
+
+impl NetworkConfig {
+    /// Subsystems, couplings and the epoch; every other field at its default.
+    #[must_use]
+    pub fn new(
+        subsystems: Vec<SubsystemSpec>,
+        couplings: Vec<(usize, usize, f64)>,
+        epoch: f64,
+    ) -> Self {
+        let calibrated =
+            !subsystems.is_empty() && subsystems.iter().all(|s| s.certifier.calibration.is_some());
+        Self {
+            subsystems,
+            couplings,
+            epoch,
+            stale_after: 5.0 * epoch,
+            certificate: if calibrated {
+                CertificateKind::Calibrated
+            } else {
+                CertificateKind::Gaussian
+            },
+            margin: 0.0,
+            consecutive: 1,
+            dense_limit: 500,
+        }
+    }
+
+    /// Spend the run-level risk `δ` over the network: every subsystem gets a calibration
+    /// with risk `δ/N` (other calibration settings kept, or the defaults), and the calibrated
+    /// certificate composes. By the union bound the probability that any local certificate
+    /// overstates its subsystem's rate during the run is at most `δ`.
+    #[must_use]
+    pub fn split_risk(mut self, delta: f64) -> Self {
+        let n = self.subsystems.len().max(1) as f64;
+        for s in &mut self.subsystems {
+            let mut cal = s.certifier.calibration.take().unwrap_or_else(|| Calibration::new(delta));
+            cal.delta = delta / n;
+            s.certifier.calibration = Some(cal);
+        }
+        self.certificate = CertificateKind::Calibrated;
+        self
+    }
+
+    /// Check every field (the subsystems' certifiers are checked when built).
+    ///
+    /// # Errors
+    /// [`NetworkError::InvalidConfig`].
+    pub fn validate(&self) -> Result<(), NetworkError> {
+        let bad = |field: &'static str, reason: String| {
+            Err(NetworkError::InvalidConfig { field, reason })
+        };
+        let n = self.subsystems.len();
+        if n == 0 {
+            return bad("subsystems", "at least one subsystem is needed".into());
+        }
+        if !(self.epoch > 0.0 && self.epoch.is_finite()) {
+            return bad("epoch", format!("must be finite and > 0 seconds, got {}", self.epoch));
+        }
+        if !(self.stale_after > 0.0 && self.stale_after.is_finite()) {
+            return bad(
+                "stale_after",
+                format!("must be finite and > 0 seconds, got {}", self.stale_after),
+            );
+        }
+        if !self.margin.is_finite() {
+            return bad("margin", format!("must be finite, got {}", self.margin));
+        }
+        if self.consecutive == 0 {
+            return bad("consecutive", "at least 1 epoch".into());
+        }
+        for &(i, j, g) in &self.couplings {
+            if i >= n || j >= n || i == j {
+                return bad(
+                    "couplings",
+                    format!("({i}, {j}): indices must differ and be below {n}"),
+                );
+            }
+            if !(g >= 0.0 && g.is_finite()) {
+                return bad("couplings", format!("({i}, {j}): γ must be finite and >= 0, got {g}"));
+            }
+        }
+        if self.certificate == CertificateKind::Calibrated {
+            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none()) {
+                return bad(
+                    "certificate",
+                    format!(
+                        "the calibrated certificate composes, but subsystem `{}` has no \
+                         calibration (use split_risk, or the Gaussian certificate)",
+                        s.name
+                    ),
+                );
+            }
+        }
+        if self.certificate == CertificateKind::Wasserstein {
+            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.ambiguity.is_none()) {
+                return bad(
+                    "certificate",
+                    format!(
+                        "the Wasserstein certificate composes, but subsystem `{}` has no \
+                         ambiguity model",
+                        s.name
+                    ),
+                );
+            }
+        }
+        Ok(())
+    }
+}

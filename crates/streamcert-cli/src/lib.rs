@@ -11,6 +11,7 @@ pub mod certify;
 pub mod compose;
 pub mod config;
 pub mod input;
+pub mod network;
 pub mod output;
 pub mod simulate;
 

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use streamcert_cli::{CliError, certify, compose, config, simulate};
+use streamcert_cli::{CliError, certify, compose, config, network, simulate};
 use streamcert_dynamics::Coupling;
 use streamcert_experiments::Experiment;
 
@@ -85,6 +85,31 @@ enum Command {
         /// JSON output.
         #[arg(long)]
         json: bool,
+    },
+    /// Certify a network live: every subsystem's columns of one wide CSV (as `simulate g5`
+    /// writes), one certifier per subsystem, the network composed with the coupling bounds at
+    /// every epoch. One output row per epoch: network rate, certified, gate, critical coupling
+    /// scale, the limiting subsystem and coupling, the subsystems not certified and why, and
+    /// each local certificate. A summary goes to stderr.
+    Network {
+        /// Configuration (TOML); see --print-config.
+        #[arg(long, required_unless_present = "print_config")]
+        config: Option<PathBuf>,
+        /// Print a commented example configuration and exit.
+        #[arg(long)]
+        print_config: bool,
+        /// Input CSV file, or - for stdin.
+        #[arg(long, default_value = "-")]
+        input: String,
+        /// Output file, or - for stdout.
+        #[arg(long, default_value = "-")]
+        output: String,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = certify::Format::Csv)]
+        format: certify::Format,
+        /// Flush every epoch row as it is written (automatic for a live input).
+        #[arg(long)]
+        flush_each_row: bool,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
@@ -222,6 +247,40 @@ fn run(cli: Cli) -> Result<(), CliError> {
                     }
                 }
             }
+            Ok(())
+        }
+        Command::Network { config, print_config, input, output, format, flush_each_row } => {
+            if print_config {
+                print!("{}", network::EXAMPLE_CONFIG);
+                return Ok(());
+            }
+            let path = config.ok_or_else(|| CliError::Config {
+                path: "-".into(),
+                message: "--config is required".into(),
+            })?;
+            let text = std::fs::read_to_string(&path).map_err(|e| CliError::Config {
+                path: path.display().to_string(),
+                message: e.to_string(),
+            })?;
+            let cfg = network::parse(&text, &path.display().to_string())?;
+            let mut out = open_output(&output)?;
+            let s = network::run(
+                &cfg,
+                open_input(&input)?,
+                &input,
+                &mut out,
+                format,
+                flush_each_row || input_is_live(&input),
+            )?;
+            out.flush().map_err(|e| CliError::io("writing output", e))?;
+            eprintln!(
+                "summary: {} rows, {} epochs, certified in {}, network gate open in {} (first at {})",
+                s.rows,
+                s.epochs,
+                s.certified,
+                s.open,
+                s.first_open.map_or("never".into(), |t| format!("t = {t}")),
+            );
             Ok(())
         }
         Command::Compose { rates, gains, gains_format, method, json } => {

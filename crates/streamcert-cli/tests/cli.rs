@@ -422,3 +422,77 @@ fn simulate_seed_is_the_reproduction_run() {
         }
     }
 }
+
+/// `streamcert network` on Experiment 2's data with bidirectional coupling: each epoch's local
+/// certificates are the `certify` runs' values at the last row before the epoch, and the
+/// network rate is `compose` on those rates and the configured gains, digit for digit.
+#[test]
+fn network_equals_two_certify_runs_and_compose() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"],
+        b"",
+    );
+    assert!(data.status.success());
+    let example = run(&["network", "--print-config"], b"");
+    let net_cfg = tmp("network.toml");
+    std::fs::write(&net_cfg, &example.stdout).expect("write");
+    let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);
+    assert!(net.status.success(), "{}", text(&net.stderr));
+    // The same certifier settings as the example's shared sections, one subsystem each.
+    let certify_cfg = |tag: &str, y: &str, u: &str, k: f64| {
+        let path = tmp(&format!("network-{tag}.toml"));
+        let body = format!(
+            "[columns]\ntime = \"t\"\noutputs = [\"{y}\"]\ninputs = [\"{u}\"]\n[controller]\ngain = [[{k}]]\n\
+             [certificate]\nconservatism = 0.3\nmargin = 0.1\nconsecutive = 10\n\
+             [regression]\nwindow = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\
+             [ambiguity]\nenabled = false\n"
+        );
+        std::fs::write(&path, body).expect("write");
+        path
+    };
+    let local = |cfg: PathBuf| -> Vec<(f64, String)> {
+        let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &data.stdout);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let mut r = csv::Reader::from_reader(out.stdout.as_slice());
+        let h = r.headers().expect("header").clone();
+        let (t, c) = (
+            h.iter().position(|x| x == "t").expect("t"),
+            h.iter().position(|x| x == "cert_gauss").expect("cert"),
+        );
+        r.records()
+            .map(|x| x.expect("row"))
+            .map(|x| (x[t].parse().expect("t"), x[c].to_string()))
+            .collect()
+    };
+    let a = local(certify_cfg("a", "y_a", "u_a", -2.5));
+    let b = local(certify_cfg("b", "y_b", "u_b", -3.0));
+    let mut r = csv::Reader::from_reader(net.stdout.as_slice());
+    let h = r.headers().expect("header").clone();
+    let col = |name: &str| h.iter().position(|x| x == name).expect("column");
+    let (mut epochs, mut composed) = (0, 0);
+    for row in r.records().map(|x| x.expect("row")) {
+        epochs += 1;
+        let t: f64 = row[col("t")].parse().expect("t");
+        let before =
+            |v: &[(f64, String)]| v.iter().rev().find(|(s, _)| *s < t).map(|(_, c)| c.clone());
+        let (ca, cb) = (before(&a).expect("a row before"), before(&b).expect("b row before"));
+        assert_eq!(&row[col("cert_A")], ca, "A at t = {t}");
+        assert_eq!(&row[col("cert_B")], cb, "B at t = {t}");
+        if ca.is_empty() || cb.is_empty() {
+            assert!(row[col("rate")].is_empty());
+            continue;
+        }
+        composed += 1;
+        let rates = tmp("network-rates.txt");
+        let gains = tmp("network-gains.txt");
+        std::fs::write(&rates, format!("{ca} {cb}\n")).expect("write");
+        std::fs::write(&gains, "0 0.4\n0.4 0\n").expect("write");
+        let c = compose(&rates, &gains, &["--json"]);
+        assert!(c.status.success(), "{}", text(&c.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&c.stdout).expect("json");
+        let rate: f64 = row[col("rate")].parse().expect("rate");
+        assert_eq!(v["rate"].as_f64().map(f64::to_bits), Some(rate.to_bits()), "t = {t}");
+    }
+    assert_eq!(epochs, 32);
+    assert!(composed >= 10, "{composed} epochs with a network rate");
+}

@@ -32,21 +32,8 @@ enum Command {
     /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. A
     /// summary goes to stderr (or to --summary FILE as JSON).
     Certify {
-        /// Configuration (TOML); see --print-config.
-        #[arg(long, required_unless_present = "print_config")]
-        config: Option<PathBuf>,
-        /// Print a commented default configuration and exit.
-        #[arg(long)]
-        print_config: bool,
-        /// Input CSV file, or - for stdin.
-        #[arg(long, default_value = "-")]
-        input: String,
-        /// Output file, or - for stdout.
-        #[arg(long, default_value = "-")]
-        output: String,
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = certify::Format::Csv)]
-        format: certify::Format,
+        #[command(flatten)]
+        io: Stream,
         /// Malformed rows: stop (exit 3) or skip and count them.
         #[arg(long, value_enum, default_value_t = certify::BadRows::Stop)]
         on_bad_row: certify::BadRows,
@@ -63,10 +50,6 @@ enum Command {
         /// Write the summary as JSON to FILE instead of text on stderr.
         #[arg(long)]
         summary: Option<PathBuf>,
-        /// Flush every output row as soon as it is written. This is automatic when the input
-        /// is live (stdin from a pipe or a terminal); from a file, output is buffered.
-        #[arg(long)]
-        flush_each_row: bool,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
     Compose {
@@ -92,30 +75,59 @@ enum Command {
     /// scale, the limiting subsystem and coupling, the subsystems not certified and why, and
     /// each local certificate. A summary goes to stderr.
     Network {
-        /// Configuration (TOML); see --print-config.
-        #[arg(long, required_unless_present = "print_config")]
-        config: Option<PathBuf>,
-        /// Print a commented example configuration and exit.
-        #[arg(long)]
-        print_config: bool,
-        /// Input CSV file, or - for stdin.
-        #[arg(long, default_value = "-")]
-        input: String,
-        /// Output file, or - for stdout.
-        #[arg(long, default_value = "-")]
-        output: String,
-        /// Output format.
-        #[arg(long, value_enum, default_value_t = certify::Format::Csv)]
-        format: certify::Format,
-        /// Flush every epoch row as it is written (automatic for a live input).
-        #[arg(long)]
-        flush_each_row: bool,
+        #[command(flatten)]
+        io: Stream,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
         #[command(subcommand)]
         system: SimSystem,
     },
+}
+
+/// Configuration, input and output of the streaming commands (`certify`, `network`).
+#[derive(clap::Args)]
+struct Stream {
+    /// Configuration (TOML); see --print-config.
+    #[arg(long, required_unless_present = "print_config")]
+    config: Option<PathBuf>,
+    /// Print a commented configuration and exit.
+    #[arg(long)]
+    print_config: bool,
+    /// Input CSV file, or - for stdin.
+    #[arg(long, default_value = "-")]
+    input: String,
+    /// Output file, or - for stdout.
+    #[arg(long, default_value = "-")]
+    output: String,
+    /// Output format.
+    #[arg(long, value_enum, default_value_t = certify::Format::Csv)]
+    format: certify::Format,
+    /// Flush every output row as soon as it is written. This is automatic when the input is
+    /// live (stdin from a pipe or a terminal); from a file, output is buffered.
+    #[arg(long)]
+    flush_each_row: bool,
+}
+
+impl Stream {
+    /// The configuration file's path and text (`--config` is required unless
+    /// `--print-config`).
+    fn config_text(&self) -> Result<(String, String), CliError> {
+        let path = self.config.as_ref().ok_or_else(|| CliError::Config {
+            path: "-".into(),
+            message: "--config is required".into(),
+        })?;
+        let text = std::fs::read_to_string(path).map_err(|e| CliError::Config {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Ok((path.display().to_string(), text))
+    }
+
+    /// Flush per row: asked for, or a live input.
+    fn flush(&self) -> bool {
+        self.flush_each_row || input_is_live(&self.input)
+    }
 }
 
 #[derive(Subcommand)]
@@ -176,42 +188,23 @@ fn read(path: &PathBuf) -> Result<String, CliError> {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Certify {
-            config,
-            print_config,
-            input,
-            output,
-            format,
-            on_bad_row,
-            checkpoint,
-            checkpoint_every,
-            resume,
-            summary,
-            flush_each_row,
-        } => {
-            if print_config {
+        Command::Certify { io, on_bad_row, checkpoint, checkpoint_every, resume, summary } => {
+            if io.print_config {
                 print!("{}", config::DEFAULT_CONFIG);
                 return Ok(());
             }
-            let path = config.ok_or_else(|| CliError::Config {
-                path: "-".into(),
-                message: "--config is required".into(),
-            })?;
-            let text = std::fs::read_to_string(&path).map_err(|e| CliError::Config {
-                path: path.display().to_string(),
-                message: e.to_string(),
-            })?;
-            let cfg = config::parse(&text, &path.display().to_string())?;
+            let (path, text) = io.config_text()?;
+            let cfg = config::parse(&text, &path)?;
             let opts = certify::Options {
-                format,
+                format: io.format,
                 bad_rows: on_bad_row,
                 checkpoint,
                 checkpoint_every,
                 resume,
-                flush_each_row: flush_each_row || input_is_live(&input),
+                flush_each_row: io.flush(),
             };
-            let mut out = open_output(&output)?;
-            let s = certify::run(&cfg, open_input(&input)?, &input, &mut out, &opts)?;
+            let mut out = open_output(&io.output)?;
+            let s = certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             match summary {
                 Some(file) => {
@@ -249,28 +242,21 @@ fn run(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Network { config, print_config, input, output, format, flush_each_row } => {
-            if print_config {
+        Command::Network { io } => {
+            if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
                 return Ok(());
             }
-            let path = config.ok_or_else(|| CliError::Config {
-                path: "-".into(),
-                message: "--config is required".into(),
-            })?;
-            let text = std::fs::read_to_string(&path).map_err(|e| CliError::Config {
-                path: path.display().to_string(),
-                message: e.to_string(),
-            })?;
-            let cfg = network::parse(&text, &path.display().to_string())?;
-            let mut out = open_output(&output)?;
+            let (path, text) = io.config_text()?;
+            let cfg = network::parse(&text, &path)?;
+            let mut out = open_output(&io.output)?;
             let s = network::run(
                 &cfg,
-                open_input(&input)?,
-                &input,
+                open_input(&io.input)?,
+                &io.input,
                 &mut out,
-                format,
-                flush_each_row || input_is_live(&input),
+                io.format,
+                io.flush(),
             )?;
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(

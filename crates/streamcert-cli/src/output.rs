@@ -9,7 +9,7 @@ use streamcert_certificate::{EVIDENCE_COLUMNS, Evidence, EvidenceRow};
 /// Output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
-    /// Comma-separated values with a header ([`EVIDENCE_COLUMNS`]); an absent number is an
+    /// Comma-separated values with a header (the evidence columns); an absent number is an
     /// empty field, a reason is quoted when it contains a comma.
     Csv,
     /// One JSON object per line, the same names; an absent number is `null`.

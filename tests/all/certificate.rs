@@ -211,7 +211,7 @@ fn checkpoint_and_restore_continue_bit_identically() {
     assert!(Certifier::restore("{").is_err());
     assert!(Certifier::restore(&json[..json.len() / 2]).is_err());
     // Past the checksum (re-sealed after an edit), the state is checked against itself.
-    let payload = streamcert::certificate::unseal(&json, None).expect("sealed");
+    let payload = streamcert::certificate::unseal::<CertifierConfig>(&json, None).expect("sealed");
     let config = second.config().clone();
     let reseal = |edited: String| streamcert::certificate::seal(&edited, &config).expect("seals");
     assert!(

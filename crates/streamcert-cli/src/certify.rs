@@ -1,7 +1,7 @@
 //! `streamcert certify`: one output row per sample ([`EvidenceWriter`]) and a summary.
 
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use streamcert_certificate::{Certifier, NotCertified};
@@ -99,14 +99,22 @@ struct Checkpoint {
     summary: Summary,
 }
 
-fn save(path: &PathBuf, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
+fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
     let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
     let text =
         streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))?;
-    // Atomically: a unique temporary file beside the target, flushed to disk, then renamed
-    // over it, so a crash leaves either the old checkpoint or the new one, never a torn one.
+    write_atomic(path, &text)
+}
+
+/// Write `text` to `path` atomically: a unique temporary file beside the target, flushed to
+/// disk, then renamed over it, so a crash leaves either the old file or the new one, never a
+/// torn one.
+///
+/// # Errors
+/// [`CliError::Io`] naming the checkpoint.
+pub(crate) fn write_atomic(path: &Path, text: &str) -> Result<(), CliError> {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
@@ -131,7 +139,7 @@ fn save(path: &PathBuf, cert: &Certifier, summary: &Summary) -> Result<(), CliEr
     })
 }
 
-fn load(path: &PathBuf, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
+fn load(path: &Path, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
     let text = std::str::from_utf8(&bytes)

@@ -77,6 +77,17 @@ enum Command {
     Network {
         #[command(flatten)]
         io: Stream,
+        /// Write the whole network's state to FILE at the end (and every --checkpoint-every
+        /// rows).
+        #[arg(long)]
+        checkpoint: Option<PathBuf>,
+        /// Checkpoint period in input rows.
+        #[arg(long)]
+        checkpoint_every: Option<u64>,
+        /// Resume from a checkpoint; rows up to its last time are passed over and no header
+        /// is written, so the two outputs concatenate to the output of one run.
+        #[arg(long)]
+        resume: Option<PathBuf>,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
@@ -242,7 +253,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Network { io } => {
+        Command::Network { io, checkpoint, checkpoint_every, resume } => {
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
                 return Ok(());
@@ -250,18 +261,19 @@ fn run(cli: Cli) -> Result<(), CliError> {
             let (path, text) = io.config_text()?;
             let cfg = network::parse(&text, &path)?;
             let mut out = open_output(&io.output)?;
-            let s = network::run(
-                &cfg,
-                open_input(&io.input)?,
-                &io.input,
-                &mut out,
-                io.format,
-                io.flush(),
-            )?;
+            let opts = network::NetOptions {
+                format: io.format,
+                flush_each_row: io.flush(),
+                checkpoint,
+                checkpoint_every,
+                resume,
+            };
+            let s = network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(
-                "summary: {} rows, {} epochs, certified in {}, network gate open in {} (first at {})",
+                "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} (first at {})",
                 s.rows,
+                s.replayed,
                 s.epochs,
                 s.certified,
                 s.open,

@@ -9,6 +9,7 @@
 //! the two commands read the same keys the same way.
 
 use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
 use streamcert_certificate::CertificateKind;
@@ -231,11 +232,15 @@ struct EpochRow<'a> {
     local: std::collections::BTreeMap<&'a str, Option<f64>>,
 }
 
-/// Counts over a run.
+/// Counts over a run (continued across checkpoint and resume).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct NetSummary {
     /// Input rows.
     pub rows: u64,
+    /// Rows passed over at the start of a resumed input (the checkpoint holds them).
+    pub replayed: u64,
+    /// Time of the last input row.
+    pub last_time: Option<f64>,
     /// Epochs composed.
     pub epochs: u64,
     /// Epochs certified.
@@ -246,31 +251,91 @@ pub struct NetSummary {
     pub first_open: Option<f64>,
 }
 
+/// Options of a `network` run.
+#[derive(Debug, Clone)]
+pub struct NetOptions {
+    /// Output format.
+    pub format: Format,
+    /// Flush every epoch row (a live input).
+    pub flush_each_row: bool,
+    /// Write the whole network's state here at the end (and every `checkpoint_every` rows).
+    pub checkpoint: Option<PathBuf>,
+    /// Checkpoint period in input rows.
+    pub checkpoint_every: Option<u64>,
+    /// Continue from this checkpoint: rows up to its last time are passed over, no header is
+    /// written, so the outputs of a split run concatenate to the output of the whole run.
+    pub resume: Option<PathBuf>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Checkpoint {
+    network: NetworkCertifier,
+    summary: NetSummary,
+}
+
+fn save(path: &Path, net: &NetworkCertifier, summary: &NetSummary) -> Result<(), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let cp = Checkpoint { network: net.clone(), summary: summary.clone() };
+    let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
+    let text = streamcert_certificate::seal(&json, net.config()).map_err(|e| bad(e.to_string()))?;
+    crate::certify::write_atomic(path, &text)
+}
+
+fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
+    let json =
+        streamcert_certificate::unseal(text, Some(&cfg.network)).map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let net = cp.network.verify().map_err(|e| bad(e.to_string()))?;
+    if net.config() != &cfg.network {
+        return Err(bad("the checkpoint was written with a different configuration".into()));
+    }
+    Ok((net, cp.summary))
+}
+
 /// Run the network over a wide CSV stream.
 ///
 /// # Errors
-/// Configuration, input rows (the first malformed row stops the run), output and
-/// composition errors.
+/// Configuration, input rows (the first malformed row stops the run), output, composition
+/// and checkpoint errors.
 pub fn run<R: Read, W: Write>(
     cfg: &NetConfig,
     input: R,
     input_name: &str,
     out: W,
-    format: Format,
-    flush_each_row: bool,
+    opts: &NetOptions,
 ) -> Result<NetSummary, CliError> {
-    let mut net = NetworkCertifier::new(cfg.network.clone())
-        .map_err(|e| CliError::Config { path: "configuration".into(), message: e.to_string() })?;
+    let (mut net, mut summary) = match &opts.resume {
+        Some(path) => load(path, cfg)?,
+        None => (
+            NetworkCertifier::new(cfg.network.clone()).map_err(|e| CliError::Config {
+                path: "configuration".into(),
+                message: e.to_string(),
+            })?,
+            NetSummary::default(),
+        ),
+    };
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
-    let mut writer = EpochWriter::new(out, format, flush_each_row);
-    let mut summary = NetSummary::default();
+    let mut writer = EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none());
+    let mut replay = summary.last_time;
     let mut s = Sample::default();
     let mut failed: Option<CliError> = None;
     while let Some(next) = reader.next_into(&mut s) {
         next?;
+        if let Some(last) = replay {
+            if s.t <= last {
+                summary.replayed += 1;
+                continue;
+            }
+            replay = None;
+        }
         summary.rows += 1;
+        summary.last_time = Some(s.t);
         let (mut yo, mut uo) = (0, 0);
         for (i, &(p, m)) in cfg.dims.iter().enumerate() {
             let (y, u) = (&s.y[yo..yo + p], &s.u[uo..uo + m]);
@@ -295,8 +360,17 @@ pub fn run<R: Read, W: Write>(
                 return Err(e);
             }
         }
+        if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
+            if every > 0 && summary.rows % every == 0 {
+                writer.flush().map_err(io)?;
+                save(path, &net, &summary)?;
+            }
+        }
     }
     writer.flush().map_err(io)?;
+    if let Some(path) = &opts.checkpoint {
+        save(path, &net, &summary)?;
+    }
     Ok(summary)
 }
 
@@ -322,12 +396,12 @@ const CSV_COLUMNS: [&str; 9] = [
 ];
 
 impl<W: Write> EpochWriter<W> {
-    fn new(out: W, format: Format, flush_each_row: bool) -> Self {
+    fn new(out: W, format: Format, flush_each_row: bool, header: bool) -> Self {
         let (csv, json) = match format {
             Format::Csv => (Some(csv::Writer::from_writer(out)), None),
             Format::Jsonl => (None, Some(std::io::BufWriter::new(out))),
         };
-        Self { csv, json, flush_each_row, header: true }
+        Self { csv, json, flush_each_row, header }
     }
 
     fn write(

@@ -496,3 +496,39 @@ fn network_equals_two_certify_runs_and_compose() {
     assert_eq!(epochs, 32);
     assert!(composed >= 10, "{composed} epochs with a network rate");
 }
+
+/// A network run split at a checkpoint and resumed on the whole input (the replayed rows are
+/// passed over) writes exactly the output of one run; a damaged checkpoint is refused.
+#[test]
+fn network_split_and_resume_equals_one_run() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "2"],
+        b"",
+    );
+    let example = run(&["network", "--print-config"], b"");
+    let cfg = tmp("network-resume.toml");
+    std::fs::write(&cfg, &example.stdout).expect("write");
+    let cfg = cfg.to_str().expect("utf8");
+    let whole = run(&["network", "--config", cfg], &data.stdout);
+    assert!(whole.status.success(), "{}", text(&whole.stderr));
+    let lines: Vec<&[u8]> = data.stdout.split_inclusive(|&b| b == b'\n').collect();
+    let first: Vec<u8> = lines[..431].concat();
+    let cp = tmp("network.checkpoint");
+    let cp = cp.to_str().expect("utf8");
+    let a =
+        run(&["network", "--config", cfg, "--checkpoint", cp, "--checkpoint-every", "100"], &first);
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    let b = run(&["network", "--config", cfg, "--resume", cp], &data.stdout);
+    assert!(b.status.success(), "{}", text(&b.stderr));
+    assert!(text(&b.stderr).contains("(430 replayed)"), "{}", text(&b.stderr));
+    assert_eq!([a.stdout, b.stdout].concat(), whole.stdout);
+    // One flipped byte in the state: refused with exit code 5.
+    let mut damaged = std::fs::read(cp).expect("checkpoint");
+    let at = damaged.len() / 2;
+    damaged[at] ^= 0x01;
+    let bad = tmp("network-damaged.checkpoint");
+    std::fs::write(&bad, damaged).expect("write");
+    let c =
+        run(&["network", "--config", cfg, "--resume", bad.to_str().expect("utf8")], &data.stdout);
+    assert_eq!(c.status.code(), Some(5), "{}", text(&c.stderr));
+}

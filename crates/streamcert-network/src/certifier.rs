@@ -48,6 +48,49 @@ impl NetworkCertifier {
         Ok(Self { last: vec![None; certifiers.len()], certifiers, next: None, streak: 0, cfg })
     }
 
+    /// Check a state read back from a checkpoint: the configuration is valid, there is one
+    /// certifier and one newest verdict per subsystem, each certifier passes
+    /// [`Certifier::verify`] and was built from its subsystem's configuration, and every
+    /// stored time and value is finite. A state that fails is refused, never used.
+    ///
+    /// # Errors
+    /// [`NetworkError::InvalidConfig`] naming what is wrong, or [`NetworkError::Subsystem`].
+    pub fn verify(self) -> Result<Self, NetworkError> {
+        self.cfg.validate()?;
+        let n = self.cfg.subsystems.len();
+        let bad = |reason: String| Err(NetworkError::InvalidConfig { field: "checkpoint", reason });
+        if self.certifiers.len() != n || self.last.len() != n {
+            return bad(format!(
+                "{} certifiers and {} verdicts for {n} subsystems",
+                self.certifiers.len(),
+                self.last.len()
+            ));
+        }
+        let mut certifiers = Vec::with_capacity(n);
+        for (index, (c, spec)) in self.certifiers.into_iter().zip(&self.cfg.subsystems).enumerate()
+        {
+            let c = c.verify().map_err(|source| NetworkError::Subsystem {
+                index,
+                name: spec.name.clone(),
+                source,
+            })?;
+            if c.config() != &spec.certifier {
+                return bad(format!("subsystem `{}` has another configuration", spec.name));
+            }
+            certifiers.push(c);
+        }
+        for l in self.last.iter().flatten() {
+            let finite = |v: Option<f64>| v.is_none_or(f64::is_finite);
+            if !(l.t.is_finite() && finite(l.verdict.value) && finite(l.verdict.radius)) {
+                return bad("a stored time or certificate is not finite".into());
+            }
+            if l.verdict.open != l.verdict.reason.is_none() {
+                return bad("a stored verdict is open with a reason, or closed without one".into());
+            }
+        }
+        Ok(Self { certifiers, ..self })
+    }
+
     /// The configuration.
     #[must_use]
     pub fn config(&self) -> &NetworkConfig {

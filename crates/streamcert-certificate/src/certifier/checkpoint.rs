@@ -17,8 +17,12 @@
 //! window, `‖K‖₂` against the gain, and the calibrated windows' structure. A file that fails
 //! any check is refused with a message; none of them panics.
 
+use serde::Serialize;
+
 use super::Certifier;
-use crate::{CertifierConfig, CertifyError};
+#[cfg(doc)]
+use crate::CertifierConfig;
+use crate::CertifyError;
 
 /// The first word of a checkpoint file.
 pub const CHECKPOINT_MAGIC: &str = "streamcert-checkpoint";
@@ -36,11 +40,12 @@ pub fn fnv1a64(bytes: &[u8]) -> u64 {
     h
 }
 
-/// The fingerprint of a configuration: FNV-1a of its JSON.
+/// The fingerprint of a configuration (a [`CertifierConfig`], or any serialisable one, such as
+/// a network's): FNV-1a of its JSON.
 ///
 /// # Errors
 /// [`CertifyError::Checkpoint`] if the configuration cannot be serialised.
-pub fn config_fingerprint(config: &CertifierConfig) -> Result<u64, CertifyError> {
+pub fn config_fingerprint<C: Serialize + ?Sized>(config: &C) -> Result<u64, CertifyError> {
     let json =
         serde_json::to_string(config).map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
     Ok(fnv1a64(json.as_bytes()))
@@ -50,7 +55,7 @@ pub fn config_fingerprint(config: &CertifierConfig) -> Result<u64, CertifyError>
 ///
 /// # Errors
 /// [`CertifyError::Checkpoint`] if the configuration cannot be serialised.
-pub fn seal(payload: &str, config: &CertifierConfig) -> Result<String, CertifyError> {
+pub fn seal<C: Serialize + ?Sized>(payload: &str, config: &C) -> Result<String, CertifyError> {
     Ok(format!(
         "{CHECKPOINT_MAGIC} {CHECKPOINT_VERSION} {:016x} {:016x}\n{payload}",
         fnv1a64(payload.as_bytes()),
@@ -64,9 +69,9 @@ pub fn seal(payload: &str, config: &CertifierConfig) -> Result<String, CertifyEr
 /// # Errors
 /// [`CertifyError::Checkpoint`] naming what is wrong: not a checkpoint, another version, a
 /// checksum mismatch (corruption), another configuration.
-pub fn unseal<'a>(
+pub fn unseal<'a, C: Serialize + ?Sized>(
     text: &'a str,
-    config: Option<&CertifierConfig>,
+    config: Option<&C>,
 ) -> Result<&'a str, CertifyError> {
     let (payload, fingerprint) = open(text)?;
     if let Some(config) = config {

@@ -37,16 +37,8 @@ enum Command {
         /// Malformed rows: stop (exit 3) or skip and count them.
         #[arg(long, value_enum, default_value_t = certify::BadRows::Stop)]
         on_bad_row: certify::BadRows,
-        /// Write the streaming state to FILE at the end (and every --checkpoint-every rows).
-        #[arg(long)]
-        checkpoint: Option<PathBuf>,
-        /// Checkpoint period in rows.
-        #[arg(long)]
-        checkpoint_every: Option<u64>,
-        /// Resume from a checkpoint; the input continues the earlier one, and the output has
-        /// no header, so the two outputs concatenate to the output of one run.
-        #[arg(long)]
-        resume: Option<PathBuf>,
+        #[command(flatten)]
+        persist: Persist,
         /// Write the summary as JSON to FILE instead of text on stderr.
         #[arg(long)]
         summary: Option<PathBuf>,
@@ -77,23 +69,30 @@ enum Command {
     Network {
         #[command(flatten)]
         io: Stream,
-        /// Write the whole network's state to FILE at the end (and every --checkpoint-every
-        /// rows).
-        #[arg(long)]
-        checkpoint: Option<PathBuf>,
-        /// Checkpoint period in input rows.
-        #[arg(long)]
-        checkpoint_every: Option<u64>,
-        /// Resume from a checkpoint; rows up to its last time are passed over and no header
-        /// is written, so the two outputs concatenate to the output of one run.
-        #[arg(long)]
-        resume: Option<PathBuf>,
+        #[command(flatten)]
+        persist: Persist,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
         #[command(subcommand)]
         system: SimSystem,
     },
+}
+
+/// Checkpoint and resume of the streaming commands.
+#[derive(clap::Args)]
+struct Persist {
+    /// Write the whole streaming state to FILE at the end (and every --checkpoint-every rows).
+    #[arg(long)]
+    checkpoint: Option<PathBuf>,
+    /// Checkpoint period in input rows.
+    #[arg(long)]
+    checkpoint_every: Option<u64>,
+    /// Resume from a checkpoint; rows at the start of the input up to its last time are
+    /// passed over and the output has no header, so the two outputs concatenate to the
+    /// output of one run.
+    #[arg(long)]
+    resume: Option<PathBuf>,
 }
 
 /// Configuration, input and output of the streaming commands (`certify`, `network`).
@@ -199,7 +198,8 @@ fn read(path: &PathBuf) -> Result<String, CliError> {
 
 fn run(cli: Cli) -> Result<(), CliError> {
     match cli.command {
-        Command::Certify { io, on_bad_row, checkpoint, checkpoint_every, resume, summary } => {
+        Command::Certify { io, on_bad_row, persist, summary } => {
+            let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", config::DEFAULT_CONFIG);
                 return Ok(());
@@ -253,7 +253,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Network { io, checkpoint, checkpoint_every, resume } => {
+        Command::Network { io, persist } => {
+            let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
                 return Ok(());

@@ -33,6 +33,7 @@ margin = 0.0            # the network is certified when its rate is >= margin
 consecutive = 1         # certified epochs in a row before the network gate opens
 # risk = 0.01           # calibrated: run-level risk, split delta/N over the subsystems
 # dense_limit = 64      # up to this many subsystems the exact dense composition
+# input = "wide"        # or "long": rows `t,subsystem,outputs...,inputs...`, one subsystem each
 
 [columns]
 time = "t"
@@ -90,6 +91,22 @@ struct NetworkSection {
     consecutive: usize,
     risk: Option<f64>,
     dense_limit: Option<usize>,
+    #[serde(default)]
+    input: InputLayout,
+}
+
+/// How the input rows carry the subsystems' samples.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputLayout {
+    /// One row per time with every subsystem's columns, named in `[columns]` and
+    /// `[[subsystem]]` (as `streamcert simulate g5` writes). Default.
+    #[default]
+    Wide,
+    /// One row per sample of one subsystem: `t, subsystem name, its outputs, its inputs`
+    /// (no column names; a first line whose time is not a number is a header and skipped).
+    /// Subsystems may report at their own times.
+    Long,
 }
 
 fn default_certificate() -> CertificateKind {
@@ -127,6 +144,8 @@ pub struct NetConfig {
     pub dims: Vec<(usize, usize)>,
     /// The network.
     pub network: NetworkConfig,
+    /// Wide or long input rows.
+    pub layout: InputLayout,
 }
 
 /// Parse and validate; `path` names the file in errors.
@@ -213,7 +232,7 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     // Build once: every check of the network and of each certifier.
     NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
     let columns = Columns { time, outputs, inputs, delimiter };
-    Ok(NetConfig { columns, dims, network })
+    Ok(NetConfig { columns, dims, network, layout: section.input })
 }
 
 /// One output row per epoch (JSON lines; the CSV has the same fields, `local` as one column
@@ -319,29 +338,31 @@ pub fn run<R: Read, W: Write>(
         ),
     };
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
-    let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
+    let mut rows = Rows::new(cfg, input, input_name)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
     let mut writer = EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none());
-    let mut replay = summary.last_time;
-    let mut s = Sample::default();
+    // Resuming: rows at the start of the input whose samples every subsystem in them already
+    // holds (time not after its newest) are a replay and are passed over, counted.
+    let mut replaying = opts.resume.is_some();
     let mut failed: Option<CliError> = None;
-    while let Some(next) = reader.next_into(&mut s) {
-        next?;
-        if let Some(last) = replay {
-            if s.t <= last {
+    let (mut values, mut items) = (Vec::new(), Vec::new());
+    while let Some(next) = rows.next(&mut values, &mut items) {
+        let (line, t) = next?;
+        if replaying {
+            let held = |i: usize| {
+                net.subsystem(i).and_then(|c| c.regression().last_time()).is_some_and(|l| t <= l)
+            };
+            if items.iter().all(|&(i, ..)| held(i)) {
                 summary.replayed += 1;
                 continue;
             }
-            replay = None;
+            replaying = false;
         }
         summary.rows += 1;
-        summary.last_time = Some(s.t);
-        let (mut yo, mut uo) = (0, 0);
-        for (i, &(p, m)) in cfg.dims.iter().enumerate() {
-            let (y, u) = (&s.y[yo..yo + p], &s.u[uo..uo + m]);
-            yo += p;
-            uo += m;
-            let pushed = net.push(i, s.t, y, u, |r| {
+        summary.last_time = Some(t);
+        for &(i, start, p, m) in &items {
+            let (y, u) = (&values[start..start + p], &values[start + p..start + p + m]);
+            let pushed = net.push(i, t, y, u, |r| {
                 if failed.is_none() {
                     if let Err(e) = writer.write(r, &names, &mut summary) {
                         failed = Some(io(e));
@@ -351,7 +372,7 @@ pub fn run<R: Read, W: Write>(
             if let Err(e) = pushed {
                 return Err(CliError::Row(crate::RowError {
                     file: input_name.into(),
-                    line: s.line,
+                    line,
                     column: None,
                     message: e.to_string(),
                 }));
@@ -372,6 +393,154 @@ pub fn run<R: Read, W: Write>(
         save(path, &net, &summary)?;
     }
     Ok(summary)
+}
+
+/// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
+/// the row, `(index, start of its outputs in values, p, m)`.
+enum Rows<R: Read> {
+    Wide { reader: SampleReader<R>, sample: Sample, dims: Vec<(usize, usize)> },
+    Long(LongReader<R>),
+}
+
+impl<R: Read> Rows<R> {
+    fn new(cfg: &NetConfig, input: R, name: &str) -> Result<Self, CliError> {
+        Ok(match cfg.layout {
+            InputLayout::Wide => Self::Wide {
+                reader: SampleReader::new(input, name, &cfg.columns)?,
+                sample: Sample::default(),
+                dims: cfg.dims.clone(),
+            },
+            InputLayout::Long => Self::Long(LongReader::new(cfg, input, name)?),
+        })
+    }
+
+    fn next(
+        &mut self,
+        values: &mut Vec<f64>,
+        items: &mut Vec<(usize, usize, usize, usize)>,
+    ) -> Option<Result<(u64, f64), CliError>> {
+        values.clear();
+        items.clear();
+        match self {
+            Self::Wide { reader, sample, dims } => {
+                if let Err(e) = reader.next_into(sample)? {
+                    return Some(Err(e));
+                }
+                // The reader gives all outputs, then all inputs, in subsystem order.
+                let (mut yo, mut uo) = (0, 0);
+                for (i, &(p, m)) in dims.iter().enumerate() {
+                    items.push((i, values.len(), p, m));
+                    values.extend_from_slice(&sample.y[yo..yo + p]);
+                    values.extend_from_slice(&sample.u[uo..uo + m]);
+                    yo += p;
+                    uo += m;
+                }
+                Some(Ok((sample.line, sample.t)))
+            }
+            Self::Long(reader) => reader.next(values, items),
+        }
+    }
+}
+
+/// Long rows: `t, subsystem, outputs..., inputs...`, read with the csv crate.
+struct LongReader<R: Read> {
+    reader: csv::Reader<R>,
+    record: csv::ByteRecord,
+    file: String,
+    index: std::collections::HashMap<String, usize>,
+    dims: Vec<(usize, usize)>,
+    first: bool,
+}
+
+impl<R: Read> LongReader<R> {
+    fn new(cfg: &NetConfig, input: R, file: &str) -> Result<Self, CliError> {
+        let delimiter = cfg
+            .columns
+            .delimiter_byte()
+            .map_err(|message| CliError::Input { file: file.into(), message })?;
+        let reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .delimiter(delimiter)
+            .from_reader(input);
+        let index =
+            cfg.network.subsystems.iter().enumerate().map(|(i, s)| (s.name.clone(), i)).collect();
+        Ok(Self {
+            reader,
+            record: csv::ByteRecord::new(),
+            file: file.into(),
+            index,
+            dims: cfg.dims.clone(),
+            first: true,
+        })
+    }
+
+    fn next(
+        &mut self,
+        values: &mut Vec<f64>,
+        items: &mut Vec<(usize, usize, usize, usize)>,
+    ) -> Option<Result<(u64, f64), CliError>> {
+        loop {
+            match self.reader.read_byte_record(&mut self.record) {
+                Ok(false) => return None,
+                Err(e) => {
+                    return Some(Err(CliError::Input {
+                        file: self.file.clone(),
+                        message: format!("unreadable CSV: {e}"),
+                    }));
+                }
+                Ok(true) => {}
+            }
+            let line = self.record.position().map_or(0, csv::Position::line);
+            let err = |message: String| {
+                Some(Err(CliError::Row(crate::RowError {
+                    file: self.file.clone(),
+                    line,
+                    column: None,
+                    message,
+                })))
+            };
+            let number = |raw: &[u8]| -> Option<f64> {
+                fast_float2::parse::<f64, _>(raw.trim_ascii()).ok().filter(|v| v.is_finite())
+            };
+            let first = std::mem::take(&mut self.first);
+            let Some(t) = self.record.get(0).and_then(number) else {
+                if first {
+                    continue; // a header line
+                }
+                let raw = String::from_utf8_lossy(self.record.get(0).unwrap_or_default());
+                return err(format!("expected a finite time, found `{raw}`"));
+            };
+            let name = String::from_utf8_lossy(self.record.get(1).unwrap_or_default());
+            let Some(&i) = self.index.get(name.trim()) else {
+                return err(format!("no subsystem named `{}` in the configuration", name.trim()));
+            };
+            let (p, m) = self.dims[i];
+            if self.record.len() != 2 + p + m {
+                return err(format!(
+                    "subsystem `{}` needs t, its name, {p} outputs and {m} inputs ({} fields), found {}",
+                    name.trim(),
+                    2 + p + m,
+                    self.record.len()
+                ));
+            }
+            for k in 2..2 + p + m {
+                let raw = self.record.get(k).unwrap_or_default();
+                match number(raw) {
+                    Some(v) => values.push(v),
+                    None => {
+                        let raw = String::from_utf8_lossy(raw);
+                        return err(format!(
+                            "field {}: expected a finite number, found `{raw}`",
+                            k + 1
+                        ));
+                    }
+                }
+            }
+            items.push((i, 0, p, m));
+            return Some(Ok((line, t)));
+        }
+    }
 }
 
 /// Epoch rows as CSV (csv crate) or JSON lines.

@@ -532,3 +532,50 @@ fn network_split_and_resume_equals_one_run() {
         run(&["network", "--config", cfg, "--resume", bad.to_str().expect("utf8")], &data.stdout);
     assert_eq!(c.status.code(), Some(5), "{}", text(&c.stderr));
 }
+
+/// The long layout (`t,subsystem,outputs,inputs`, one subsystem per row) gives the same
+/// epochs as the wide file it was cut from; a row naming no subsystem or with the wrong
+/// number of fields is a row error (exit 3).
+#[test]
+fn network_long_rows_equal_the_wide_file() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "3"],
+        b"",
+    );
+    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let wide_cfg = tmp("network-wide.toml");
+    std::fs::write(&wide_cfg, &example).expect("write");
+    let long_cfg = tmp("network-long.toml");
+    std::fs::write(&long_cfg, example.replace("# input = \"wide\"", "input = \"long\""))
+        .expect("write");
+    let wide = run(&["network", "--config", wide_cfg.to_str().expect("utf8")], &data.stdout);
+    assert!(wide.status.success(), "{}", text(&wide.stderr));
+    let mut r = csv::Reader::from_reader(data.stdout.as_slice());
+    let h = r.headers().expect("header").clone();
+    let col = |n: &str| h.iter().position(|x| x == n).expect("column");
+    let mut long = String::from("t,subsystem,values\n");
+    for row in r.records().map(|x| x.expect("row")) {
+        for (name, y, u) in [("A", "y_a", "u_a"), ("B", "y_b", "u_b")] {
+            long.push_str(&format!(
+                "{},{name},{},{}\n",
+                &row[col("t")],
+                &row[col(y)],
+                &row[col(u)]
+            ));
+        }
+    }
+    let long_cfg = long_cfg.to_str().expect("utf8");
+    let out = run(&["network", "--config", long_cfg], long.as_bytes());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), text(&wide.stdout));
+    let unknown = run(&["network", "--config", long_cfg], b"0,A,0,0\n0,C,0,0\n");
+    assert_eq!(unknown.status.code(), Some(3));
+    assert!(text(&unknown.stderr).contains("no subsystem named `C`"), "{}", text(&unknown.stderr));
+    let short = run(&["network", "--config", long_cfg], b"0,A,0\n");
+    assert_eq!(short.status.code(), Some(3));
+    assert!(
+        text(&short.stderr).contains("needs t, its name, 1 outputs and 1 inputs"),
+        "{}",
+        text(&short.stderr)
+    );
+}

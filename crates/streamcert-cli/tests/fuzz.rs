@@ -7,7 +7,8 @@
 //!
 //! Targets: the CSV reader, the TOML configuration, checkpoint resume (the damaged file
 //! itself, and its payload re-sealed with a valid checksum so that the JSON parser and the
-//! state checks behind it are reached), and the `compose` rate and gain files.
+//! state checks behind it are reached), the `compose` rate and gain files, and the `network`
+//! configuration and its long-layout input.
 //!
 //! `cargo test` runs a short pass (`STREAMCERT_FUZZ_CASES`, default 64 per target, a few
 //! seconds). A long local run, for example ten minutes per target:
@@ -179,6 +180,29 @@ proptest! {
             // Any change of the sealed file is refused.
             prop_assert!(refused);
         }
+    }
+
+    #[test]
+    fn network_configuration_never_panics(other in any::<usize>(), m in mutations()) {
+        let seeds = corpus("network");
+        let input = mutate(&seeds[1], &seeds[other % seeds.len()], &m);
+        let _ = streamcert_cli::network::parse(&String::from_utf8_lossy(&input), "fuzz.toml");
+    }
+
+    #[test]
+    fn network_long_input_never_panics(m in mutations()) {
+        let seeds = corpus("network");
+        let cfg = streamcert_cli::network::parse(&String::from_utf8_lossy(&seeds[1]), "seed.toml")
+            .expect("the seed configuration is valid");
+        let input = mutate(&seeds[0], &[], &m);
+        let opts = streamcert_cli::network::NetOptions {
+            format: Format::Csv,
+            flush_each_row: false,
+            checkpoint: None,
+            checkpoint_every: None,
+            resume: None,
+        };
+        let _ = streamcert_cli::network::run(&cfg, Cursor::new(input), "fuzz", std::io::sink(), &opts);
     }
 
     #[test]

@@ -261,14 +261,19 @@ fn trace_csv(traj: &Trajectory) -> String {
     s
 }
 
-/// Run Experiment 2; return the REPORT.md section.
-pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
-    let dir = out.join("exp2");
+/// The true local rates of the two observed closed loops at the origin (`β*_A`, `β*_B`).
+pub(crate) fn true_rates() -> Result<[f64; 2]> {
     let truth_sys =
         G5::new(G5Config { gamma: 0.0, k1: K1, k4: K4, ..G5Config::paper(Coupling::Cascade) })?;
     let r = truth_sys.rates_at_origin();
-    let true_rates = [r.a, r.b];
-    let gamma_true = (r.a * r.b).sqrt();
+    Ok([r.a, r.b])
+}
+
+/// Run Experiment 2; return the REPORT.md section.
+pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
+    let dir = out.join("exp2");
+    let true_rates = true_rates()?;
+    let gamma_true = (true_rates[0] * true_rates[1]).sqrt();
     let bar = progress(p.seeds, "experiment 2");
     let mut results = Vec::with_capacity(p.seeds);
     for run in 0..p.seeds {

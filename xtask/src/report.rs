@@ -118,7 +118,10 @@ pub(crate) fn reproduce(o: &Options, do1: bool, do2: bool) -> Result<()> {
                 } else {
                     " (set by a flag; the rule picks another value)"
                 },
-                sensitivity::what_reproduces(&variants, p.c)
+                sensitivity::what_reproduces(&variants, p.c, {
+                    let r = exp2::true_rates()?;
+                    (r[0] * r[1]).sqrt()
+                })
             );
         }
     }

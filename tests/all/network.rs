@@ -208,3 +208,31 @@ fn the_network_gate_opens_only_when_the_true_network_rate_is_above_the_margin() 
     // Power: the gate opens in most runs whose true network rate is five margins up.
     assert!(opened_above * 2 > cases_above, "opened in {opened_above} of {cases_above}");
 }
+
+#[test]
+fn a_time_far_ahead_is_refused_and_changes_nothing() {
+    let data = run(
+        &LinearScenario { steps: 600, ..scalar(0.5, -2.0, Process::Gaussian { sigma: 0.05 }, 1.0) },
+        5,
+    );
+    let cfg = NetworkConfig::new(vec![SubsystemSpec::new("a", local(-2.0))], Vec::new(), 0.1);
+    let (mut clean, mut hit) = (
+        NetworkCertifier::new(cfg.clone()).expect("valid"),
+        NetworkCertifier::new(cfg).expect("valid"),
+    );
+    let (mut a, mut b) = (Vec::new(), Vec::new());
+    for j in 0..data.len() {
+        if j == 300 {
+            // A corrupted time: 10¹² s is 10¹³ epochs ahead.
+            let err = hit.push(0, 1e12, data.output(j), data.input(j), |r| b.push(r.clone()));
+            assert!(
+                matches!(err, Err(streamcert::network::NetworkError::TimeJump { .. })),
+                "{err:?}"
+            );
+        }
+        clean.push(0, data.t[j], data.output(j), data.input(j), |r| a.push(r.clone())).expect("a");
+        hit.push(0, data.t[j], data.output(j), data.input(j), |r| b.push(r.clone())).expect("b");
+    }
+    assert_eq!(a, b);
+    assert_eq!(clean, hit);
+}

@@ -34,6 +34,7 @@ consecutive = 1         # certified epochs in a row before the network gate open
 # risk = 0.01           # calibrated: run-level risk, split delta/N over the subsystems
 # dense_limit = 64      # up to this many subsystems the exact dense composition
 # input = "wide"        # or "long": rows `t,subsystem,outputs...,inputs...`, one subsystem each
+# max_epoch_jump = 100000  # a row more epochs ahead than this is refused (corrupted time)
 
 [columns]
 time = "t"
@@ -91,6 +92,7 @@ struct NetworkSection {
     consecutive: usize,
     risk: Option<f64>,
     dense_limit: Option<usize>,
+    max_epoch_jump: Option<u64>,
     #[serde(default)]
     input: InputLayout,
 }
@@ -222,6 +224,9 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     }
     if let Some(d) = section.dense_limit {
         network.dense_limit = d;
+    }
+    if let Some(m) = section.max_epoch_jump {
+        network.max_epoch_jump = m;
     }
     if let Some(delta) = section.risk {
         if !(delta > 0.0 && delta < 1.0) {

@@ -571,6 +571,10 @@ fn network_long_rows_equal_the_wide_file() {
     let unknown = run(&["network", "--config", long_cfg], b"0,A,0,0\n0,C,0,0\n");
     assert_eq!(unknown.status.code(), Some(3));
     assert!(text(&unknown.stderr).contains("no subsystem named `C`"), "{}", text(&unknown.stderr));
+    // A corrupted time far ahead (found by fuzzing: it made the network compose 10¹³ epochs).
+    let jump = run(&["network", "--config", long_cfg], b"0,A,0,0\n1e12,A,0,0\n");
+    assert_eq!(jump.status.code(), Some(3));
+    assert!(text(&jump.stderr).contains("max_epoch_jump"), "{}", text(&jump.stderr));
     let short = run(&["network", "--config", long_cfg], b"0,A,0\n");
     assert_eq!(short.status.code(), Some(3));
     assert!(

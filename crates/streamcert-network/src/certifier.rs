@@ -121,8 +121,9 @@ impl NetworkCertifier {
     /// subsystem; across subsystems they may interleave.
     ///
     /// # Errors
-    /// [`NetworkError::UnknownSubsystem`]; [`NetworkError::Subsystem`] for a sample the
-    /// certifier rejects (under its bad-sample policy); [`NetworkError::Compose`].
+    /// [`NetworkError::UnknownSubsystem`]; [`NetworkError::TimeJump`];
+    /// [`NetworkError::Subsystem`] for a sample the certifier rejects (under its bad-sample
+    /// policy); [`NetworkError::Compose`].
     pub fn push(
         &mut self,
         i: usize,
@@ -149,7 +150,7 @@ impl NetworkCertifier {
     /// tick when no sample arrives: silent subsystems then turn stale).
     ///
     /// # Errors
-    /// [`NetworkError::Compose`].
+    /// [`NetworkError::TimeJump`], [`NetworkError::Compose`].
     pub fn advance(
         &mut self,
         t: f64,
@@ -159,7 +160,18 @@ impl NetworkCertifier {
             return Ok(());
         }
         let epoch = self.cfg.epoch;
-        let mut k = *self.next.get_or_insert_with(|| (t / epoch).floor().max(0.0) as u64 + 1);
+        let first = (t / epoch).floor().max(0.0) + 1.0;
+        let mut k = match self.next {
+            Some(k) => k,
+            None if first < u64::MAX as f64 => first as u64,
+            None => return Err(NetworkError::TimeJump { t, epochs: first, max: 0 }),
+        };
+        // Refuse before composing anything: the state stays as it was.
+        let epochs = (t / epoch).floor() - k as f64 + 1.0;
+        if epochs > self.cfg.max_epoch_jump as f64 {
+            return Err(NetworkError::TimeJump { t, epochs, max: self.cfg.max_epoch_jump });
+        }
+        self.next = Some(k);
         while k as f64 * epoch <= t {
             let report = self.compose(k)?;
             on_epoch(&report);

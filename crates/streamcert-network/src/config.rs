@@ -43,11 +43,20 @@ pub struct NetworkConfig {
     pub margin: f64,
     /// Consecutive certified epochs before the network gate opens. Default 1.
     pub consecutive: usize,
+    /// The most epochs one sample may make the network compose (its time minus the last
+    /// composed epoch, in epochs); a later time is refused ([`NetworkError::TimeJump`]).
+    /// Default 100 000.
+    #[serde(default = "default_max_epoch_jump")]
+    pub max_epoch_jump: u64,
     /// Up to this many subsystems the dense composition (exact spectral abscissa, several
     /// dense eigendecompositions, `O(N³)`: 1.94 s at `N = 1000` as measured in the network
     /// issue); beyond it the sparse Collatz–Wielandt certificate (a certified lower bound,
     /// `O(iterations · edges)`). Default 64.
     pub dense_limit: usize,
+}
+
+fn default_max_epoch_jump() -> u64 {
+    100_000
 }
 
 impl NetworkConfig {
@@ -73,6 +82,7 @@ impl NetworkConfig {
             margin: 0.0,
             consecutive: 1,
             dense_limit: 64,
+            max_epoch_jump: default_max_epoch_jump(),
         }
     }
 
@@ -118,6 +128,9 @@ impl NetworkConfig {
         }
         if self.consecutive == 0 {
             return bad("consecutive", "at least 1 epoch".into());
+        }
+        if self.max_epoch_jump == 0 {
+            return bad("max_epoch_jump", "at least 1 epoch".into());
         }
         for &(i, j, g) in &self.couplings {
             if i >= n || j >= n || i == j {

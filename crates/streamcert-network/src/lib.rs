@@ -89,6 +89,21 @@ pub enum NetworkError {
         /// Number of subsystems.
         len: usize,
     },
+    /// A sample's time is so far ahead that composing every epoch up to it would take more
+    /// than `max_epoch_jump` epochs (a corrupted time, or an outage longer than the
+    /// configuration allows); nothing was changed.
+    #[error(
+        "time {t} is {epochs} epochs after the last composed epoch (at most {max} per sample: \
+         `max_epoch_jump`); restart the network after a long outage"
+    )]
+    TimeJump {
+        /// The sample's time.
+        t: f64,
+        /// Epochs that would be composed.
+        epochs: f64,
+        /// The limit.
+        max: u64,
+    },
     /// Composition failed.
     #[error("composition: {0}")]
     Compose(#[from] streamcert_compose::ComposeError),

@@ -1,0 +1,277 @@
+//! The `network` configuration: `[network]`, `[[subsystem]]`, `[[coupling]]`, and the
+//! `certify` sections every subsystem shares (each subsystem's certifier built by the
+//! `certify` parser).
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::CertificateKind;
+use streamcert_network::{NetworkCertifier, NetworkConfig, SubsystemSpec};
+
+use crate::CliError;
+use crate::config::{self, Columns};
+
+/// The commented example printed by `streamcert network --print-config`: G5's two observed
+/// subsystems (the columns `streamcert simulate g5` writes) with bidirectional coupling.
+pub const EXAMPLE_CONFIG: &str = r#"# streamcert network configuration (TOML). Unknown keys are refused.
+# Data: `streamcert simulate g5 --experiment 2 --coupling bidirectional` writes these columns.
+
+[network]
+epoch = 0.5             # seconds between compositions (t = k * epoch)
+stale_after = 2.5       # a subsystem without a sample for this long is not certified
+certificate = "gaussian"  # which local certificate composes: gaussian | wasserstein | calibrated
+margin = 0.0            # the network is certified when its rate is >= margin
+consecutive = 1         # certified epochs in a row before the network gate opens
+# risk = 0.01           # calibrated: run-level risk, split delta/N over the subsystems
+# dense_limit = 64      # up to this many subsystems the exact dense composition
+# input = "wide"        # or "long": rows `t,subsystem,outputs...,inputs...`, one subsystem each
+# max_epoch_jump = 100000  # a row more epochs ahead than this is refused (corrupted time)
+
+[columns]
+time = "t"
+# delimiter = ","
+
+[[subsystem]]
+name = "A"
+outputs = ["y_a"]
+inputs = ["u_a"]
+gain = [[-2.5]]
+
+[[subsystem]]
+name = "B"
+outputs = ["y_b"]
+inputs = ["u_b"]
+gain = [[-3.0]]
+
+# Coupling bounds: how `from` drives `to` (gamma >= 0).
+[[coupling]]
+from = "B"
+to = "A"
+gamma = 0.4
+
+[[coupling]]
+from = "A"
+to = "B"
+gamma = 0.4
+
+# Every subsystem's certifier: the keys of `streamcert certify --print-config`.
+[certificate]
+conservatism = 0.3
+margin = 0.1
+consecutive = 10
+
+[regression]
+window = 150
+horizon = 5
+ridge = 1e-4
+input_integral = "zero_order_hold"
+
+[ambiguity]
+enabled = false
+"#;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NetworkSection {
+    epoch: f64,
+    stale_after: Option<f64>,
+    #[serde(default = "default_certificate")]
+    certificate: CertificateKind,
+    #[serde(default)]
+    margin: f64,
+    #[serde(default = "one")]
+    consecutive: usize,
+    risk: Option<f64>,
+    dense_limit: Option<usize>,
+    max_epoch_jump: Option<u64>,
+    #[serde(default)]
+    input: InputLayout,
+}
+
+/// How the input rows carry the subsystems' samples.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputLayout {
+    /// One row per time with every subsystem's columns, named in `[columns]` and
+    /// `[[subsystem]]` (as `streamcert simulate g5` writes). Default.
+    #[default]
+    Wide,
+    /// One row per sample of one subsystem: `t, subsystem name, its outputs, its inputs`
+    /// (no column names; a first line whose time is not a number is a header and skipped).
+    /// Subsystems may report at their own times.
+    Long,
+}
+
+fn default_certificate() -> CertificateKind {
+    CertificateKind::Gaussian
+}
+
+fn one() -> usize {
+    1
+}
+
+#[derive(Debug, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+struct SubsystemEntry {
+    name: String,
+    outputs: Vec<String>,
+    inputs: Vec<String>,
+    gain: Vec<Vec<f64>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CouplingEntry {
+    from: String,
+    to: String,
+    gamma: f64,
+}
+
+/// A validated network configuration: the combined input columns and the network.
+#[derive(Debug, Clone)]
+pub struct NetConfig {
+    /// The time column, every subsystem's outputs then every subsystem's inputs (in
+    /// subsystem order), and the delimiter.
+    pub columns: Columns,
+    /// `(outputs, inputs)` of each subsystem.
+    pub dims: Vec<(usize, usize)>,
+    /// The network.
+    pub network: NetworkConfig,
+    /// Wide or long input rows.
+    pub layout: InputLayout,
+}
+
+/// Parse and validate; `path` names the file in errors.
+///
+/// # Errors
+/// [`CliError::Config`].
+pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
+    let bad = |message: String| CliError::Config { path: path.to_string(), message };
+    let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let take = |table: &mut toml::Table, key: &str| table.remove(key);
+    let section: NetworkSection = take(&mut table, "network")
+        .ok_or_else(|| bad("missing [network]".into()))?
+        .try_into()
+        .map_err(|e: toml::de::Error| bad(format!("[network]: {e}")))?;
+    let subsystems: Vec<SubsystemEntry> = take(&mut table, "subsystem")
+        .ok_or_else(|| bad("no [[subsystem]]".into()))?
+        .try_into()
+        .map_err(|e: toml::de::Error| bad(format!("[[subsystem]]: {e}")))?;
+    let couplings: Vec<CouplingEntry> = match take(&mut table, "coupling") {
+        Some(v) => v.try_into().map_err(|e: toml::de::Error| bad(format!("[[coupling]]: {e}")))?,
+        None => Vec::new(),
+    };
+    let columns_table = match table.get("columns") {
+        Some(toml::Value::Table(t)) => t.clone(),
+        _ => return Err(bad("missing [columns] (the time column)".into())),
+    };
+    let mut specs = Vec::with_capacity(subsystems.len());
+    let mut dims = Vec::with_capacity(subsystems.len());
+    let (mut outputs, mut inputs) = (Vec::new(), Vec::new());
+    let mut time = String::new();
+    let mut delimiter = ",".to_string();
+    for s in &subsystems {
+        // The subsystem as a `certify` configuration: its columns and gain, the shared rest.
+        let mut t = table.clone();
+        let mut cols = columns_table.clone();
+        cols.insert(
+            "outputs".into(),
+            toml::Value::try_from(&s.outputs).map_err(|e| bad(e.to_string()))?,
+        );
+        cols.insert(
+            "inputs".into(),
+            toml::Value::try_from(&s.inputs).map_err(|e| bad(e.to_string()))?,
+        );
+        t.insert("columns".into(), toml::Value::Table(cols));
+        let mut controller = toml::Table::new();
+        controller
+            .insert("gain".into(), toml::Value::try_from(&s.gain).map_err(|e| bad(e.to_string()))?);
+        t.insert("controller".into(), toml::Value::Table(controller));
+        let text = toml::to_string(&t).map_err(|e| bad(e.to_string()))?;
+        let c = config::parse(&text, &format!("{path} (subsystem `{}`)", s.name))?;
+        time.clone_from(&c.columns.time);
+        delimiter.clone_from(&c.columns.delimiter);
+        outputs.extend(c.columns.outputs.iter().cloned());
+        inputs.extend(c.columns.inputs.iter().cloned());
+        dims.push((c.columns.outputs.len(), c.columns.inputs.len()));
+        specs.push(SubsystemSpec::new(&s.name, c.certifier));
+    }
+    let index = |name: &str| {
+        subsystems
+            .iter()
+            .position(|s| s.name == name)
+            .ok_or_else(|| bad(format!("[[coupling]] names `{name}`, which is no [[subsystem]]")))
+    };
+    let edges = couplings
+        .iter()
+        .map(|c| Ok((index(&c.to)?, index(&c.from)?, c.gamma)))
+        .collect::<Result<Vec<_>, CliError>>()?;
+    let mut network = NetworkConfig::new(specs, edges, section.epoch);
+    network.certificate = section.certificate;
+    network.margin = section.margin;
+    network.consecutive = section.consecutive;
+    if let Some(s) = section.stale_after {
+        network.stale_after = s;
+    }
+    if let Some(d) = section.dense_limit {
+        network.dense_limit = d;
+    }
+    if let Some(m) = section.max_epoch_jump {
+        network.max_epoch_jump = m;
+    }
+    if let Some(delta) = section.risk {
+        if !(delta > 0.0 && delta < 1.0) {
+            return Err(bad(format!("[network] risk must be in (0, 1), got {delta}")));
+        }
+        network = network.split_risk(delta);
+    }
+    // Build once: every check of the network and of each certifier.
+    NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
+    let columns = Columns { time, outputs, inputs, delimiter };
+    Ok(NetConfig { columns, dims, network, layout: section.input })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn refused(text: &str, needle: &str) {
+        match parse(text, "net.toml") {
+            Err(e @ CliError::Config { .. }) => {
+                let message = e.to_string();
+                assert!(message.contains(needle), "`{needle}` not in: {message}");
+            }
+            other => panic!("expected a configuration error with `{needle}`, got {other:?}"),
+        }
+    }
+
+    #[test]
+    fn the_example_parses_and_bad_networks_are_refused() {
+        let cfg = parse(EXAMPLE_CONFIG, "example").expect("the example is valid");
+        assert_eq!(cfg.dims, vec![(1, 1), (1, 1)]);
+        assert_eq!(cfg.columns.outputs, ["y_a", "y_b"]);
+        assert_eq!(cfg.network.couplings, vec![(0, 1, 0.4), (1, 0, 0.4)]);
+        refused(&EXAMPLE_CONFIG.replace("from = \"B\"", "from = \"C\""), "`C`");
+        refused(&EXAMPLE_CONFIG.replace("# risk = 0.01", "risk = 1.5"), "risk");
+        refused(
+            &EXAMPLE_CONFIG.replace("certificate = \"gaussian\"", "certificate = \"calibrated\""),
+            "no calibration",
+        );
+        refused(
+            &EXAMPLE_CONFIG.replace("gamma = 0.4", "gamma = -0.4"),
+            "γ must be finite and >= 0",
+        );
+        refused(
+            &EXAMPLE_CONFIG.replace("gain = [[-3.0]]", "gain = [[-3.0, 1.0]]"),
+            "subsystem `B`",
+        );
+        refused(&EXAMPLE_CONFIG.replace("epoch = 0.5", "epoch = 0.0"), "epoch");
+        // With a run-level risk the calibrated certificate composes, delta/N per subsystem.
+        let text = EXAMPLE_CONFIG
+            .replace("# risk = 0.01", "risk = 0.01")
+            .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+        let cfg = parse(&text, "risk").expect("valid");
+        assert_eq!(cfg.network.certificate, CertificateKind::Calibrated);
+        for s in &cfg.network.subsystems {
+            assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.005));
+        }
+    }
+}

@@ -1,0 +1,156 @@
+//! The input rows of `network`: wide (every subsystem's columns in one row, through
+//! `SampleReader`) or long (`t, subsystem, outputs..., inputs...`, through the csv crate).
+
+use std::io::Read;
+
+use super::config::{InputLayout, NetConfig};
+use crate::CliError;
+use crate::input::{Sample, SampleReader};
+
+/// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
+/// the row, `(index, start of its outputs in values, p, m)`.
+pub(super) enum Rows<R: Read> {
+    Wide { reader: SampleReader<R>, sample: Sample, dims: Vec<(usize, usize)> },
+    Long(LongReader<R>),
+}
+
+impl<R: Read> Rows<R> {
+    pub(super) fn new(cfg: &NetConfig, input: R, name: &str) -> Result<Self, CliError> {
+        Ok(match cfg.layout {
+            InputLayout::Wide => Self::Wide {
+                reader: SampleReader::new(input, name, &cfg.columns)?,
+                sample: Sample::default(),
+                dims: cfg.dims.clone(),
+            },
+            InputLayout::Long => Self::Long(LongReader::new(cfg, input, name)?),
+        })
+    }
+
+    pub(super) fn next(
+        &mut self,
+        values: &mut Vec<f64>,
+        items: &mut Vec<(usize, usize, usize, usize)>,
+    ) -> Option<Result<(u64, f64), CliError>> {
+        values.clear();
+        items.clear();
+        match self {
+            Self::Wide { reader, sample, dims } => {
+                if let Err(e) = reader.next_into(sample)? {
+                    return Some(Err(e));
+                }
+                // The reader gives all outputs, then all inputs, in subsystem order.
+                let (mut yo, mut uo) = (0, 0);
+                for (i, &(p, m)) in dims.iter().enumerate() {
+                    items.push((i, values.len(), p, m));
+                    values.extend_from_slice(&sample.y[yo..yo + p]);
+                    values.extend_from_slice(&sample.u[uo..uo + m]);
+                    yo += p;
+                    uo += m;
+                }
+                Some(Ok((sample.line, sample.t)))
+            }
+            Self::Long(reader) => reader.next(values, items),
+        }
+    }
+}
+
+/// Long rows: `t, subsystem, outputs..., inputs...`, read with the csv crate.
+pub(super) struct LongReader<R: Read> {
+    reader: csv::Reader<R>,
+    record: csv::ByteRecord,
+    file: String,
+    index: std::collections::HashMap<String, usize>,
+    dims: Vec<(usize, usize)>,
+    first: bool,
+}
+
+impl<R: Read> LongReader<R> {
+    fn new(cfg: &NetConfig, input: R, file: &str) -> Result<Self, CliError> {
+        let delimiter = cfg
+            .columns
+            .delimiter_byte()
+            .map_err(|message| CliError::Input { file: file.into(), message })?;
+        let reader = csv::ReaderBuilder::new()
+            .has_headers(false)
+            .flexible(true)
+            .delimiter(delimiter)
+            .from_reader(input);
+        let index =
+            cfg.network.subsystems.iter().enumerate().map(|(i, s)| (s.name.clone(), i)).collect();
+        Ok(Self {
+            reader,
+            record: csv::ByteRecord::new(),
+            file: file.into(),
+            index,
+            dims: cfg.dims.clone(),
+            first: true,
+        })
+    }
+
+    fn next(
+        &mut self,
+        values: &mut Vec<f64>,
+        items: &mut Vec<(usize, usize, usize, usize)>,
+    ) -> Option<Result<(u64, f64), CliError>> {
+        loop {
+            match self.reader.read_byte_record(&mut self.record) {
+                Ok(false) => return None,
+                Err(e) => {
+                    return Some(Err(CliError::Input {
+                        file: self.file.clone(),
+                        message: format!("unreadable CSV: {e}"),
+                    }));
+                }
+                Ok(true) => {}
+            }
+            let line = self.record.position().map_or(0, csv::Position::line);
+            let err = |message: String| {
+                Some(Err(CliError::Row(crate::RowError {
+                    file: self.file.clone(),
+                    line,
+                    column: None,
+                    message,
+                })))
+            };
+            let number = |raw: &[u8]| -> Option<f64> {
+                fast_float2::parse::<f64, _>(raw.trim_ascii()).ok().filter(|v| v.is_finite())
+            };
+            let first = std::mem::take(&mut self.first);
+            let Some(t) = self.record.get(0).and_then(number) else {
+                if first {
+                    continue; // a header line
+                }
+                let raw = String::from_utf8_lossy(self.record.get(0).unwrap_or_default());
+                return err(format!("expected a finite time, found `{raw}`"));
+            };
+            let name = String::from_utf8_lossy(self.record.get(1).unwrap_or_default());
+            let Some(&i) = self.index.get(name.trim()) else {
+                return err(format!("no subsystem named `{}` in the configuration", name.trim()));
+            };
+            let (p, m) = self.dims[i];
+            if self.record.len() != 2 + p + m {
+                return err(format!(
+                    "subsystem `{}` needs t, its name, {p} outputs and {m} inputs ({} fields), found {}",
+                    name.trim(),
+                    2 + p + m,
+                    self.record.len()
+                ));
+            }
+            for k in 2..2 + p + m {
+                let raw = self.record.get(k).unwrap_or_default();
+                match number(raw) {
+                    Some(v) => values.push(v),
+                    None => {
+                        let raw = String::from_utf8_lossy(raw);
+                        return err(format!(
+                            "field {}: expected a finite number, found `{raw}`",
+                            k + 1
+                        ));
+                    }
+                }
+            }
+            items.push((i, 0, p, m));
+            return Some(Ok((line, t)));
+        }
+    }
+}

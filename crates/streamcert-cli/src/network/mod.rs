@@ -1,0 +1,170 @@
+//! `streamcert network`: every subsystem's columns of one wide CSV, one certifier per
+//! subsystem, the network composed at every epoch; one output row per epoch and a summary.
+//!
+//! The configuration is the `certify` configuration with the subsystems and couplings added:
+//! `[network]`, `[[subsystem]]` (name, outputs, inputs, gain) and `[[coupling]]` (`from`
+//! drives `to` with bound `gamma`); `[columns]` gives the time column and the delimiter;
+//! `[certificate]`, `[regression]`, `[ambiguity]` and `[calibration]` apply to every
+//! subsystem. Each subsystem's certifier configuration is built by the `certify` parser, so
+//! the two commands read the same keys the same way.
+
+mod config;
+mod input;
+mod output;
+
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+use streamcert_network::NetworkCertifier;
+
+pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse};
+use input::Rows;
+use output::EpochWriter;
+
+use crate::CliError;
+use crate::output::Format;
+
+/// Counts over a run (continued across checkpoint and resume).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct NetSummary {
+    /// Input rows.
+    pub rows: u64,
+    /// Rows passed over at the start of a resumed input (the checkpoint holds them).
+    pub replayed: u64,
+    /// Time of the last input row.
+    pub last_time: Option<f64>,
+    /// Epochs composed.
+    pub epochs: u64,
+    /// Epochs certified.
+    pub certified: u64,
+    /// Epochs with the network gate open.
+    pub open: u64,
+    /// First time the network gate opened.
+    pub first_open: Option<f64>,
+}
+
+/// Options of a `network` run.
+#[derive(Debug, Clone)]
+pub struct NetOptions {
+    /// Output format.
+    pub format: Format,
+    /// Flush every epoch row (a live input).
+    pub flush_each_row: bool,
+    /// Write the whole network's state here at the end (and every `checkpoint_every` rows).
+    pub checkpoint: Option<PathBuf>,
+    /// Checkpoint period in input rows.
+    pub checkpoint_every: Option<u64>,
+    /// Continue from this checkpoint: rows up to its last time are passed over, no header is
+    /// written, so the outputs of a split run concatenate to the output of the whole run.
+    pub resume: Option<PathBuf>,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Checkpoint {
+    network: NetworkCertifier,
+    summary: NetSummary,
+}
+
+fn save(path: &Path, net: &NetworkCertifier, summary: &NetSummary) -> Result<(), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let cp = Checkpoint { network: net.clone(), summary: summary.clone() };
+    let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
+    let text = streamcert_certificate::seal(&json, net.config()).map_err(|e| bad(e.to_string()))?;
+    crate::certify::write_atomic(path, &text)
+}
+
+fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
+    let json =
+        streamcert_certificate::unseal(text, Some(&cfg.network)).map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let net = cp.network.verify().map_err(|e| bad(e.to_string()))?;
+    if net.config() != &cfg.network {
+        return Err(bad("the checkpoint was written with a different configuration".into()));
+    }
+    Ok((net, cp.summary))
+}
+
+/// Run the network over a wide CSV stream.
+///
+/// # Errors
+/// Configuration, input rows (the first malformed row stops the run), output, composition
+/// and checkpoint errors.
+pub fn run<R: Read, W: Write>(
+    cfg: &NetConfig,
+    input: R,
+    input_name: &str,
+    out: W,
+    opts: &NetOptions,
+) -> Result<NetSummary, CliError> {
+    let (mut net, mut summary) = match &opts.resume {
+        Some(path) => load(path, cfg)?,
+        None => (
+            NetworkCertifier::new(cfg.network.clone()).map_err(|e| CliError::Config {
+                path: "configuration".into(),
+                message: e.to_string(),
+            })?,
+            NetSummary::default(),
+        ),
+    };
+    let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
+    let mut rows = Rows::new(cfg, input, input_name)?;
+    let io = |e: std::io::Error| CliError::io("writing output", e);
+    let mut writer = EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none());
+    // Resuming: rows at the start of the input whose samples every subsystem in them already
+    // holds (time not after its newest) are a replay and are passed over, counted.
+    let mut replaying = opts.resume.is_some();
+    let mut failed: Option<CliError> = None;
+    let (mut values, mut items) = (Vec::new(), Vec::new());
+    while let Some(next) = rows.next(&mut values, &mut items) {
+        let (line, t) = next?;
+        if replaying {
+            let held = |i: usize| {
+                net.subsystem(i).and_then(|c| c.regression().last_time()).is_some_and(|l| t <= l)
+            };
+            if items.iter().all(|&(i, ..)| held(i)) {
+                summary.replayed += 1;
+                continue;
+            }
+            replaying = false;
+        }
+        summary.rows += 1;
+        summary.last_time = Some(t);
+        for &(i, start, p, m) in &items {
+            let (y, u) = (&values[start..start + p], &values[start + p..start + p + m]);
+            let pushed = net.push(i, t, y, u, |r| {
+                if failed.is_none() {
+                    if let Err(e) = writer.write(r, &names, &mut summary) {
+                        failed = Some(io(e));
+                    }
+                }
+            });
+            if let Err(e) = pushed {
+                return Err(CliError::Row(crate::RowError {
+                    file: input_name.into(),
+                    line,
+                    column: None,
+                    message: e.to_string(),
+                }));
+            }
+            if let Some(e) = failed.take() {
+                return Err(e);
+            }
+        }
+        if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
+            if every > 0 && summary.rows % every == 0 {
+                writer.flush().map_err(io)?;
+                save(path, &net, &summary)?;
+            }
+        }
+    }
+    writer.flush().map_err(io)?;
+    if let Some(path) = &opts.checkpoint {
+        save(path, &net, &summary)?;
+    }
+    Ok(summary)
+}

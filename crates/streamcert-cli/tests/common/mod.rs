@@ -1,0 +1,59 @@
+//! Helpers shared by the binary's end-to-end test files (`cli.rs`, `network.rs`).
+
+#![allow(dead_code)]
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::process::{Command, Output, Stdio};
+
+/// The `streamcert` binary under test.
+pub(crate) fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_streamcert"))
+}
+
+/// Run the binary with `args`, feeding `stdin` from a thread.
+pub(crate) fn run(args: &[&str], stdin: &[u8]) -> Output {
+    let mut child = bin()
+        .args(args)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    // Feed stdin from another thread: the child streams its output while it reads, so
+    // writing everything first could fill the output pipe and deadlock.
+    let mut pipe = child.stdin.take().expect("stdin");
+    let data = stdin.to_vec();
+    let feeder = std::thread::spawn(move || {
+        // The child may stop reading early (a configuration error): ignore a broken pipe.
+        let _ = pipe.write_all(&data);
+    });
+    let out = child.wait_with_output().expect("wait");
+    feeder.join().expect("feeder thread");
+    out
+}
+
+/// A path in the tests' scratch directory.
+pub(crate) fn tmp(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("cli-tests");
+    std::fs::create_dir_all(&dir).expect("tmp dir");
+    dir.join(name)
+}
+
+/// Lossy UTF-8.
+pub(crate) fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// `streamcert compose --rates R --gains G <extra>`.
+pub(crate) fn compose(rates: &std::path::Path, gains: &std::path::Path, extra: &[&str]) -> Output {
+    let mut args = vec![
+        "compose",
+        "--rates",
+        rates.to_str().expect("utf8"),
+        "--gains",
+        gains.to_str().expect("utf8"),
+    ];
+    args.extend_from_slice(extra);
+    run(&args, b"")
+}

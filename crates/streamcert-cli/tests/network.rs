@@ -1,0 +1,169 @@
+//! End-to-end tests of `streamcert network`: against two `certify` runs and `compose`, split
+//! and resume, and the long input layout.
+
+mod common;
+
+use std::path::PathBuf;
+
+use common::{compose, run, text, tmp};
+
+/// `streamcert network` on Experiment 2's data with bidirectional coupling: each epoch's local
+/// certificates are the `certify` runs' values at the last row before the epoch, and the
+/// network rate is `compose` on those rates and the configured gains, digit for digit.
+#[test]
+fn network_equals_two_certify_runs_and_compose() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"],
+        b"",
+    );
+    assert!(data.status.success());
+    let example = run(&["network", "--print-config"], b"");
+    let net_cfg = tmp("network.toml");
+    std::fs::write(&net_cfg, &example.stdout).expect("write");
+    let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);
+    assert!(net.status.success(), "{}", text(&net.stderr));
+    // The same certifier settings as the example's shared sections, one subsystem each.
+    let certify_cfg = |tag: &str, y: &str, u: &str, k: f64| {
+        let path = tmp(&format!("network-{tag}.toml"));
+        let body = format!(
+            "[columns]\ntime = \"t\"\noutputs = [\"{y}\"]\ninputs = [\"{u}\"]\n[controller]\ngain = [[{k}]]\n\
+             [certificate]\nconservatism = 0.3\nmargin = 0.1\nconsecutive = 10\n\
+             [regression]\nwindow = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\
+             [ambiguity]\nenabled = false\n"
+        );
+        std::fs::write(&path, body).expect("write");
+        path
+    };
+    let local = |cfg: PathBuf| -> Vec<(f64, String)> {
+        let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &data.stdout);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let mut r = csv::Reader::from_reader(out.stdout.as_slice());
+        let h = r.headers().expect("header").clone();
+        let (t, c) = (
+            h.iter().position(|x| x == "t").expect("t"),
+            h.iter().position(|x| x == "cert_gauss").expect("cert"),
+        );
+        r.records()
+            .map(|x| x.expect("row"))
+            .map(|x| (x[t].parse().expect("t"), x[c].to_string()))
+            .collect()
+    };
+    let a = local(certify_cfg("a", "y_a", "u_a", -2.5));
+    let b = local(certify_cfg("b", "y_b", "u_b", -3.0));
+    let mut r = csv::Reader::from_reader(net.stdout.as_slice());
+    let h = r.headers().expect("header").clone();
+    let col = |name: &str| h.iter().position(|x| x == name).expect("column");
+    let (mut epochs, mut composed) = (0, 0);
+    for row in r.records().map(|x| x.expect("row")) {
+        epochs += 1;
+        let t: f64 = row[col("t")].parse().expect("t");
+        let before =
+            |v: &[(f64, String)]| v.iter().rev().find(|(s, _)| *s < t).map(|(_, c)| c.clone());
+        let (ca, cb) = (before(&a).expect("a row before"), before(&b).expect("b row before"));
+        assert_eq!(&row[col("cert_A")], ca, "A at t = {t}");
+        assert_eq!(&row[col("cert_B")], cb, "B at t = {t}");
+        if ca.is_empty() || cb.is_empty() {
+            assert!(row[col("rate")].is_empty());
+            continue;
+        }
+        composed += 1;
+        let rates = tmp("network-rates.txt");
+        let gains = tmp("network-gains.txt");
+        std::fs::write(&rates, format!("{ca} {cb}\n")).expect("write");
+        std::fs::write(&gains, "0 0.4\n0.4 0\n").expect("write");
+        let c = compose(&rates, &gains, &["--json"]);
+        assert!(c.status.success(), "{}", text(&c.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&c.stdout).expect("json");
+        let rate: f64 = row[col("rate")].parse().expect("rate");
+        assert_eq!(v["rate"].as_f64().map(f64::to_bits), Some(rate.to_bits()), "t = {t}");
+    }
+    assert_eq!(epochs, 32);
+    assert!(composed >= 10, "{composed} epochs with a network rate");
+}
+
+/// A network run split at a checkpoint and resumed on the whole input (the replayed rows are
+/// passed over) writes exactly the output of one run; a damaged checkpoint is refused.
+#[test]
+fn network_split_and_resume_equals_one_run() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "2"],
+        b"",
+    );
+    let example = run(&["network", "--print-config"], b"");
+    let cfg = tmp("network-resume.toml");
+    std::fs::write(&cfg, &example.stdout).expect("write");
+    let cfg = cfg.to_str().expect("utf8");
+    let whole = run(&["network", "--config", cfg], &data.stdout);
+    assert!(whole.status.success(), "{}", text(&whole.stderr));
+    let lines: Vec<&[u8]> = data.stdout.split_inclusive(|&b| b == b'\n').collect();
+    let first: Vec<u8> = lines[..431].concat();
+    let cp = tmp("network.checkpoint");
+    let cp = cp.to_str().expect("utf8");
+    let a =
+        run(&["network", "--config", cfg, "--checkpoint", cp, "--checkpoint-every", "100"], &first);
+    assert!(a.status.success(), "{}", text(&a.stderr));
+    let b = run(&["network", "--config", cfg, "--resume", cp], &data.stdout);
+    assert!(b.status.success(), "{}", text(&b.stderr));
+    assert!(text(&b.stderr).contains("(430 replayed)"), "{}", text(&b.stderr));
+    assert_eq!([a.stdout, b.stdout].concat(), whole.stdout);
+    // One flipped byte in the state: refused with exit code 5.
+    let mut damaged = std::fs::read(cp).expect("checkpoint");
+    let at = damaged.len() / 2;
+    damaged[at] ^= 0x01;
+    let bad = tmp("network-damaged.checkpoint");
+    std::fs::write(&bad, damaged).expect("write");
+    let c =
+        run(&["network", "--config", cfg, "--resume", bad.to_str().expect("utf8")], &data.stdout);
+    assert_eq!(c.status.code(), Some(5), "{}", text(&c.stderr));
+}
+
+/// The long layout (`t,subsystem,outputs,inputs`, one subsystem per row) gives the same
+/// epochs as the wide file it was cut from; a row naming no subsystem or with the wrong
+/// number of fields is a row error (exit 3).
+#[test]
+fn network_long_rows_equal_the_wide_file() {
+    let data = run(
+        &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "3"],
+        b"",
+    );
+    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let wide_cfg = tmp("network-wide.toml");
+    std::fs::write(&wide_cfg, &example).expect("write");
+    let long_cfg = tmp("network-long.toml");
+    std::fs::write(&long_cfg, example.replace("# input = \"wide\"", "input = \"long\""))
+        .expect("write");
+    let wide = run(&["network", "--config", wide_cfg.to_str().expect("utf8")], &data.stdout);
+    assert!(wide.status.success(), "{}", text(&wide.stderr));
+    let mut r = csv::Reader::from_reader(data.stdout.as_slice());
+    let h = r.headers().expect("header").clone();
+    let col = |n: &str| h.iter().position(|x| x == n).expect("column");
+    let mut long = String::from("t,subsystem,values\n");
+    for row in r.records().map(|x| x.expect("row")) {
+        for (name, y, u) in [("A", "y_a", "u_a"), ("B", "y_b", "u_b")] {
+            long.push_str(&format!(
+                "{},{name},{},{}\n",
+                &row[col("t")],
+                &row[col(y)],
+                &row[col(u)]
+            ));
+        }
+    }
+    let long_cfg = long_cfg.to_str().expect("utf8");
+    let out = run(&["network", "--config", long_cfg], long.as_bytes());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert_eq!(text(&out.stdout), text(&wide.stdout));
+    let unknown = run(&["network", "--config", long_cfg], b"0,A,0,0\n0,C,0,0\n");
+    assert_eq!(unknown.status.code(), Some(3));
+    assert!(text(&unknown.stderr).contains("no subsystem named `C`"), "{}", text(&unknown.stderr));
+    // A corrupted time far ahead (found by fuzzing: it made the network compose 10¹³ epochs).
+    let jump = run(&["network", "--config", long_cfg], b"0,A,0,0\n1e12,A,0,0\n");
+    assert_eq!(jump.status.code(), Some(3));
+    assert!(text(&jump.stderr).contains("max_epoch_jump"), "{}", text(&jump.stderr));
+    let short = run(&["network", "--config", long_cfg], b"0,A,0\n");
+    assert_eq!(short.status.code(), Some(3));
+    assert!(
+        text(&short.stderr).contains("needs t, its name, 1 outputs and 1 inputs"),
+        "{}",
+        text(&short.stderr)
+    );
+}

@@ -22,6 +22,8 @@ pub(crate) struct Variant {
     pub(crate) name: String,
     /// `true` for the variants that change `c` (never used to match a paper cell).
     pub(crate) changes_c: bool,
+    /// The conservatism `c` of the variant.
+    pub(crate) c: f64,
     pub(crate) shares: Vec<SharesB>,
     pub(crate) rates: Vec<[f64; 2]>,
 }
@@ -87,6 +89,7 @@ pub(crate) fn run(base: &Params) -> Result<Vec<Variant>> {
         out.push(Variant {
             name,
             changes_c,
+            c: p.c,
             shares: exp1::shares_per_seed(&p)?,
             rates: exp2::local_rates_per_seed(&p)?,
         });
@@ -146,10 +149,10 @@ pub(crate) fn c_rule(variants: &[Variant], default_c: f64) -> Option<f64> {
     let positive = |v: &Variant| {
         (0..2).all(|i| mean_of(&v.rates.iter().map(|r| r[i]).collect::<Vec<_>>()) > 0.0)
     };
-    C_GRID.into_iter().rev().find(|&c| {
-        let name = if c == default_c { "defaults".to_string() } else { format!("c = {c}") };
-        variants.iter().find(|v| v.name == name).is_some_and(positive)
-    })
+    // The default run (the first variant, every choice at its default) and the runs that
+    // change only c.
+    let at = |c: f64| variants.iter().find(|v| v.c == c && (v.changes_c || c == default_c));
+    C_GRID.into_iter().rev().find(|&c| at(c).is_some_and(positive))
 }
 
 /// How a paper cell is read from a variant's seeds.

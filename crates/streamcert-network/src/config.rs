@@ -49,8 +49,8 @@ pub struct NetworkConfig {
     #[serde(default = "default_max_epoch_jump")]
     pub max_epoch_jump: u64,
     /// Up to this many subsystems the dense composition (exact spectral abscissa, several
-    /// dense eigendecompositions, `O(N³)`: 1.94 s at `N = 1000` as measured in the network
-    /// issue); beyond it the sparse Collatz–Wielandt certificate (a certified lower bound,
+    /// dense eigendecompositions, `O(N³)`: 3.06 s at `N = 1000` in `cargo bench --bench
+    /// network`); beyond it the sparse Collatz–Wielandt certificate (a certified lower bound,
     /// `O(iterations · edges)`). Default 64.
     pub dense_limit: usize,
 }

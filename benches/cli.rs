@@ -104,8 +104,8 @@ fn write(c: &mut Criterion) {
     group.throughput(Throughput::Elements(ROWS as u64));
     group.bench_function("evidence_writer_csv", |b| {
         b.iter(|| {
-            let mut w =
-                EvidenceWriter::new(std::io::sink(), Format::Csv, true, false).expect("header");
+            let mut w = EvidenceWriter::new(std::io::sink(), Format::Csv, true, false, Vec::new())
+                .expect("header");
             for e in &evidence {
                 w.write(e).expect("write");
             }

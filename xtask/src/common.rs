@@ -199,7 +199,7 @@ pub(crate) fn write_evidence(path: &Path, evidence: &[Evidence]) -> Result<()> {
     }
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = EvidenceWriter::new(file, Format::Csv, true, false)?;
+    let mut w = EvidenceWriter::new(file, Format::Csv, true, false, Vec::new())?;
     for e in evidence {
         w.write(e)?;
     }

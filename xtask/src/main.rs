@@ -7,6 +7,8 @@
 //!   `target/reproduce` (or `--out DIR`).
 //! * `exp1`, `exp2`: one experiment.
 //! * `validity`: the calibrated certificate at the boundary (VALIDITY.md).
+//! * `nonlinear`: the paper's, the linear calibrated and the nonlinear certificates against
+//!   the true rate over their regions on scalar nonlinear loops (NONLINEAR.md).
 //! * `reliability`: bad inputs through the binary (RELIABILITY.md).
 //!
 //! The command line is clap's: `cargo xtask --help`, `cargo xtask reproduce --help`. Every
@@ -17,6 +19,7 @@ mod common;
 mod dither;
 mod exp1;
 mod exp2;
+mod nonlinear;
 mod plot;
 mod reliability;
 mod report;
@@ -56,6 +59,17 @@ enum Command {
         runs: usize,
         /// Output folder.
         #[arg(long, default_value = "target/validity")]
+        out: PathBuf,
+    },
+    /// The paper's, the linear calibrated and the nonlinear certificates on the same runs of
+    /// scalar nonlinear loops, against the smallest true rate over each one's region
+    /// (NONLINEAR.md).
+    Nonlinear {
+        /// Runs per validity cell (a fifth of them, at least 20, per power cell).
+        #[arg(long, default_value_t = 500)]
+        runs: usize,
+        /// Output folder.
+        #[arg(long, default_value = "target/nonlinear")]
         out: PathBuf,
     },
     /// Every bad input through the streamcert binary: exit code and message per case
@@ -180,6 +194,7 @@ fn main() -> Result<()> {
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { runs, out } => validity::run(runs, &out),
+        Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
         Command::Reliability { out } => reliability::run_all(&out),
     }
 }

@@ -271,7 +271,7 @@ fn run_many(
 }
 
 /// Two-sided 95 % Clopper–Pearson interval for `k` events in `n` runs.
-fn clopper_pearson(k: usize, n: usize) -> (f64, f64) {
+pub(crate) fn clopper_pearson(k: usize, n: usize) -> (f64, f64) {
     let lo = if k == 0 {
         0.0
     } else {

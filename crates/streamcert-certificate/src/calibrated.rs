@@ -103,9 +103,12 @@ pub use config::Calibration;
 pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quantile};
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, RegressionConfig, WindowEstimate, linalg};
+use streamcert_regression::{
+    InstrumentedWindows, Interval, RegressionConfig, SlidingRegression, WindowEstimate, linalg,
+};
 
-use crate::{CertifyError, NotCertified};
+use crate::nonlinear::{NonlinearLook, NonlinearState};
+use crate::{CertifyError, NonlinearConfig, NotCertified};
 
 /// One window's latest look.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -145,6 +148,10 @@ pub(crate) struct CalibratedVerdict {
     pub best: Option<WindowLook>,
     /// Why no certificate stands, or why it cannot open.
     pub blocked: Option<NotCertified>,
+    /// The nonlinear window look that gives the nonlinear certificate, when configured.
+    pub nonlinear: Option<NonlinearLook>,
+    /// Why no nonlinear certificate stands (`None` when one does or none is configured).
+    pub nonlinear_blocked: Option<NotCertified>,
 }
 
 /// The streaming state of the calibrated certificate.
@@ -172,11 +179,20 @@ pub(crate) struct CalibratedState {
     verdict: Option<CalibratedVerdict>,
     sym: Vec<f64>,
     eig_work: Vec<f64>,
+    /// The region (output ranges, `p` per window) of each window's latest look.
+    regions: Vec<Interval>,
+    /// The nonlinear certificate on the same columns and looks, when configured.
+    nonlinear: Option<NonlinearState>,
+    // Scratch: the newest column's samples (times, outputs) and output ranges.
+    ts: Vec<f64>,
+    ys: Vec<f64>,
+    col_range: Vec<Interval>,
 }
 
 impl CalibratedState {
     pub(crate) fn new(
         cal: Calibration,
+        nonlinear: Option<NonlinearConfig>,
         reg: &RegressionConfig,
         gain: &[f64],
     ) -> Result<Self, CertifyError> {
@@ -189,7 +205,20 @@ impl CalibratedState {
             cal.instrument_lag,
             cal.instrument_intervals,
             &lengths,
-        )?;
+        )?
+        .with_ranges(p);
+        let nonlinear = nonlinear
+            .map(|nl| {
+                NonlinearState::new(
+                    nl,
+                    reg,
+                    gain,
+                    &lengths,
+                    cal.instrument_lag,
+                    cal.instrument_intervals,
+                )
+            })
+            .transpose()?;
         let total: f64 = lengths.iter().map(|&w| w as f64).sum();
         let tmat = (0..(p + m) * p)
             .map(|idx| {
@@ -213,7 +242,25 @@ impl CalibratedState {
             verdict: None,
             sym: vec![0.0; p * p],
             eig_work: vec![0.0; linalg::eig_work_len(p * p)],
+            regions: vec![Interval::EMPTY; p * lengths.len()],
+            nonlinear,
+            ts: vec![0.0; reg.horizon + 1],
+            ys: vec![0.0; (reg.horizon + 1) * p],
+            col_range: vec![Interval::EMPTY; p],
         })
+    }
+
+    /// The latest nonlinear look of each window (empty without a nonlinear configuration).
+    pub(crate) fn nonlinear_looks(&self) -> &[Option<NonlinearLook>] {
+        self.nonlinear.as_ref().map_or(&[], |n| n.looks())
+    }
+
+    /// The region (output ranges) of window length `window`'s latest look.
+    pub(crate) fn region(&self, window: usize) -> &[Interval] {
+        let p = self.col_range.len();
+        (0..self.windows.count())
+            .find(|&w| self.windows.window(w) == window)
+            .map_or(&[], |w| &self.regions[w * p..(w + 1) * p])
     }
 
     /// The latest look of each window.
@@ -227,6 +274,10 @@ impl CalibratedState {
         self.seen = 0;
         self.until_look.fill(0);
         self.latest.fill(None);
+        self.regions.fill(Interval::EMPTY);
+        if let Some(n) = &mut self.nonlinear {
+            n.reset();
+        }
     }
 
     /// Absorb the regression's newest column if it is new, look where due (at block
@@ -234,10 +285,10 @@ impl CalibratedState {
     pub(crate) fn update(
         &mut self,
         t: f64,
-        built: u64,
-        newest: Option<(&[f64], &[f64])>,
+        reg: &SlidingRegression,
         margin: f64,
     ) -> CalibratedVerdict {
+        let built = reg.columns_built();
         let mut looked = false;
         if built < self.seen {
             self.reset();
@@ -245,7 +296,22 @@ impl CalibratedState {
         }
         if built > self.seen {
             self.seen = built;
-            let block_done = newest.is_some_and(|(z, dy)| self.windows.push_column(z, dy));
+            let block_done = match reg.newest_column() {
+                Some((z, dy)) if reg.column_samples(&mut self.ts, &mut self.ys) => {
+                    let p = self.col_range.len();
+                    for (i, r) in self.col_range.iter_mut().enumerate() {
+                        *r = Interval::EMPTY;
+                        for v in self.ys.iter().skip(i).step_by(p) {
+                            *r = r.hull(Interval { lo: *v, hi: *v });
+                        }
+                    }
+                    if let Some(n) = &mut self.nonlinear {
+                        n.push(z, dy, &self.ts, &self.ys);
+                    }
+                    self.windows.push_column_ranged(z, dy, &self.col_range)
+                }
+                _ => false,
+            };
             for w in 0..self.latest.len() {
                 if !block_done || !self.windows.is_full(w) {
                     continue;
@@ -266,10 +332,15 @@ impl CalibratedState {
         self.verdict.unwrap_or_default()
     }
 
-    /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies.
+    /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies; the
+    /// nonlinear certificate looks at the same window with the same risk.
     fn look(&mut self, w: usize, t: f64, margin: f64) {
         self.looks[w] += 1;
         let k = self.looks[w];
+        if let Some(n) = &mut self.nonlinear {
+            let risk = look_risk(self.cal.delta, self.shares[w], k);
+            n.look(w, k, t, risk, self.cal.delta, margin, self.ridge, self.min_pivot);
+        }
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
         self.windows.estimate(w, self.ridge, &self.tmat, self.min_pivot, &mut self.est);
@@ -297,6 +368,8 @@ impl CalibratedState {
         }
         let nu = self.est.effective_blocks.min((self.est.columns / self.horizon) as f64) - d as f64;
         let risk = look_risk(self.cal.delta, self.shares[w], k);
+        let pp = self.col_range.len();
+        self.windows.window_range(w, &mut self.regions[w * pp..(w + 1) * pp]);
         let radius = calibrated_radius(variance, nu, risk);
         let upper =
             (beta_hat < margin).then(|| beta_hat + calibrated_radius(variance, nu, self.cal.delta));
@@ -316,7 +389,20 @@ impl CalibratedState {
     fn verdict(&self, margin: f64) -> CalibratedVerdict {
         let mut best: Option<WindowLook> = None;
         let mut contradicted = None;
-        for look in self.latest.iter().flatten() {
+        let mut varying = None;
+        let nonlinear = self.nonlinear_looks();
+        for (w, look) in self.latest.iter().enumerate() {
+            let Some(look) = look else { continue };
+            // The same window's nonlinearity test: the linear model does not hold over it.
+            let test = nonlinear.get(w).copied().flatten().and_then(|n| n.test);
+            if let Some(test) = test.filter(|x| x.significant()) {
+                varying.get_or_insert(NotCertified::VaryingDynamics {
+                    window: look.window,
+                    statistic: test.statistic,
+                    threshold: test.threshold,
+                });
+                continue;
+            }
             // A newer (or equally recent) look whose upper bound is below the margin.
             let against = self
                 .latest
@@ -334,25 +420,39 @@ impl CalibratedState {
                 best = Some(*look);
             }
         }
-        let blocked = if best.is_some() {
-            None
-        } else if let Some(c) = contradicted {
-            Some(c)
+        let w0 = self.windows.window(0);
+        let columns = self.windows.columns(0);
+        let warming = if columns < w0 {
+            NotCertified::WarmingUp { columns, needed: w0 }
         } else {
-            let w0 = self.windows.window(0);
-            let columns = self.windows.columns(0);
-            Some(if columns < w0 {
-                NotCertified::WarmingUp { columns, needed: w0 }
-            } else {
-                NotCertified::WeakInstruments
-            })
+            NotCertified::WeakInstruments
         };
-        CalibratedVerdict { best, blocked }
+        let blocked =
+            if best.is_some() { None } else { Some(contradicted.or(varying).unwrap_or(warming)) };
+        let (nonlinear, nonlinear_blocked) = match &self.nonlinear {
+            Some(n) => n.verdict(margin, warming),
+            None => (None, None),
+        };
+        CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked }
     }
 
     /// Check a deserialised state.
-    pub(crate) fn check(&self, reg: &RegressionConfig, gain: &[f64]) -> Result<(), CertifyError> {
-        let fresh = Self::new(self.cal, reg, gain)?;
+    pub(crate) fn check(
+        &self,
+        nonlinear: Option<NonlinearConfig>,
+        reg: &RegressionConfig,
+        gain: &[f64],
+    ) -> Result<(), CertifyError> {
+        let fresh = Self::new(self.cal, nonlinear, reg, gain)?;
+        match (&self.nonlinear, &fresh.nonlinear) {
+            (Some(a), Some(b)) => a.check(b)?,
+            (None, None) => {}
+            _ => {
+                return Err(CertifyError::Checkpoint(
+                    "nonlinear state does not match the configuration".into(),
+                ));
+            }
+        }
         self.windows.check_state()?;
         let ok = self.horizon == fresh.horizon
             && self.ridge == fresh.ridge
@@ -366,7 +466,12 @@ impl CalibratedState {
             && self.latest.len() == fresh.latest.len()
             && self.est.matches(&fresh.est)
             && self.sym.len() == fresh.sym.len()
-            && self.eig_work.len() == fresh.eig_work.len();
+            && self.eig_work.len() == fresh.eig_work.len()
+            && self.regions.len() == fresh.regions.len()
+            && self.regions.iter().all(|r| *r == Interval::EMPTY || r.is_proper())
+            && self.ts.len() == fresh.ts.len()
+            && self.ys.len() == fresh.ys.len()
+            && self.col_range.len() == fresh.col_range.len();
         if !ok {
             return Err(CertifyError::Checkpoint(
                 "calibrated state does not match its configuration".into(),

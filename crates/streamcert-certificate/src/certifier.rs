@@ -12,7 +12,7 @@ use crate::calibrated::{CalibratedState, CalibratedVerdict};
 use crate::gap::GapDetector;
 use crate::{
     AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, Evidence, Fit,
-    Gate, GateState, NotCertified, Verdict, WindowLook, certificate_value,
+    Gate, GateState, Interval, NonlinearLook, NotCertified, Verdict, WindowLook, certificate_value,
 };
 
 /// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
@@ -28,6 +28,10 @@ pub struct Certifier {
     wass: Gate,
     calibrated_gate: Gate,
     calibrated: Option<CalibratedState>,
+    nonlinear_gate: Gate,
+    // The window length of the standing calibrated look (for its region).
+    #[serde(default)]
+    calibrated_window: Option<usize>,
     gap: GapDetector,
     ambiguity: Vec<AmbiguityRadius>,
     resid: Vec<f64>,
@@ -35,6 +39,9 @@ pub struct Certifier {
     work: Vec<f64>,
     eig_work: Vec<f64>,
 }
+
+/// The nonlinear gate after a sample, why it is closed, and the look behind it.
+type NonlinearStep = (GateState, Option<NotCertified>, Option<NonlinearLook>);
 
 /// The regression's outcome, reduced to what the certificate needs.
 #[derive(Debug, Clone, Copy)]
@@ -67,9 +74,11 @@ impl Certifier {
             gauss: Gate::new(cfg.margin, cfg.consecutive),
             wass: Gate::new(cfg.margin, cfg.consecutive),
             calibrated_gate: Gate::new(cfg.margin, cfg.consecutive),
+            nonlinear_gate: Gate::new(cfg.margin, cfg.consecutive),
+            calibrated_window: None,
             calibrated: cfg
                 .calibration
-                .map(|c| CalibratedState::new(c, &cfg.regression, &cfg.gain))
+                .map(|c| CalibratedState::new(c, cfg.nonlinear, &cfg.regression, &cfg.gain))
                 .transpose()?,
             gap: GapDetector::new(cfg.gap_factor),
             ambiguity: match &cfg.ambiguity {
@@ -116,6 +125,32 @@ impl Certifier {
     #[must_use]
     pub fn calibrated_looks(&self) -> &[Option<WindowLook>] {
         self.calibrated.as_ref().map_or(&[], |c| c.looks())
+    }
+
+    /// The latest nonlinear look of each window, shortest window first (empty without a
+    /// nonlinear configuration).
+    #[must_use]
+    pub fn nonlinear_looks(&self) -> &[Option<NonlinearLook>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.nonlinear_looks())
+    }
+
+    /// The region of the paper's certificates: the range of each output, then each input,
+    /// over the samples of the regression window (`M + h` samples; see
+    /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the
+    /// averaged linearisation over this region, nothing more.
+    #[must_use]
+    pub fn region(&self) -> &[Interval] {
+        self.regression.ranges()
+    }
+
+    /// The region of the standing calibrated certificate: the range of each output over the
+    /// samples of its window at its look (empty when none stands).
+    #[must_use]
+    pub fn calibrated_region(&self) -> &[Interval] {
+        match (&self.calibrated, self.calibrated_window) {
+            (Some(c), Some(w)) => c.region(w),
+            _ => &[],
+        }
     }
 
     /// The underlying regression.
@@ -166,7 +201,8 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let (calibrated_gate, calibrated_reason, best) = self.calibrated_step(t);
+        let (calibrated_gate, calibrated_reason, best, nl) = self.calibrated_step(t);
+        let (nonlinear_gate, mut nonlinear_reason, nl_best) = nl;
         let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let mut wass_reason = if amb.is_none() {
             Some(NotCertified::NoAmbiguityModel)
@@ -182,6 +218,9 @@ impl Certifier {
             }
             if self.calibrated.is_some() {
                 calibrated_reason = why;
+            }
+            if self.cfg.nonlinear.is_some() {
+                nonlinear_reason = why;
             }
         }
         Ok(Evidence {
@@ -212,6 +251,14 @@ impl Certifier {
                 reason: calibrated_reason,
             },
             calibrated_window: best.map(|b| b.window),
+            nonlinear: Verdict {
+                value: nl_best.map(|b| b.certificate),
+                radius: nl_best.map(|b| b.beta_hat_min - b.certificate),
+                open: nonlinear_gate.open,
+                reason: nonlinear_reason,
+            },
+            nonlinear_window: nl_best.map(|b| b.window),
+            nonlinear_region: nl_best.map(|b| b.region),
         })
     }
 
@@ -227,6 +274,8 @@ impl Certifier {
         self.gauss.update(t, None);
         self.wass.update(t, None);
         self.calibrated_gate.update(t, None);
+        self.nonlinear_gate.update(t, None);
+        self.calibrated_window = None;
         Evidence {
             t,
             columns: self.regression.columns(),
@@ -236,6 +285,9 @@ impl Certifier {
             wasserstein: closed,
             calibrated: closed,
             calibrated_window: None,
+            nonlinear: closed,
+            nonlinear_window: None,
+            nonlinear_region: None,
         }
     }
 
@@ -246,6 +298,7 @@ impl Certifier {
             CertificateKind::Gaussian => self.gauss.state(),
             CertificateKind::Wasserstein => self.wass.state(),
             CertificateKind::Calibrated => self.calibrated_gate.state(),
+            CertificateKind::Nonlinear => self.nonlinear_gate.state(),
         }
     }
 
@@ -262,19 +315,31 @@ impl Certifier {
         self.gap.reference()
     }
 
-    /// Feed the newest column to the calibrated certificate, update its gate, say why closed.
-    fn calibrated_step(&mut self, t: f64) -> (GateState, Option<NotCertified>, Option<WindowLook>) {
+    /// Feed the newest column to the calibrated (and nonlinear) certificate, update their
+    /// gates, say why closed.
+    fn calibrated_step(
+        &mut self,
+        t: f64,
+    ) -> (GateState, Option<NotCertified>, Option<WindowLook>, NonlinearStep) {
         let Some(state) = &mut self.calibrated else {
-            // Without a calibration the calibrated gate never sees a certificate.
-            return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None);
+            // Without a calibration the calibrated gates never see a certificate.
+            let nl = (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None);
+            return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None, nl);
         };
-        let built = self.regression.columns_built();
-        let CalibratedVerdict { best, blocked } =
-            state.update(t, built, self.regression.newest_column(), self.cfg.margin);
+        let CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked } =
+            state.update(t, &self.regression, self.cfg.margin);
+        self.calibrated_window = best.map(|b| b.window);
         let cert = best.map(|b| b.certificate());
         let gate = self.calibrated_gate.update(t, cert);
         let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
-        (gate, reason, best)
+        let nl = if self.cfg.nonlinear.is_some() {
+            let cert = nonlinear.map(|b| b.certificate);
+            let gate = self.nonlinear_gate.update(t, cert);
+            (gate, closed_reason(nonlinear_blocked, cert, &gate, &self.nonlinear_gate), nonlinear)
+        } else {
+            (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None)
+        };
+        (gate, reason, best, nl)
     }
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityConfig;
 use streamcert_regression::{RegressionConfig, ResidualSource};
 
-use crate::{Calibration, CertifyError};
+use crate::{Calibration, CertifyError, NonlinearConfig};
 
 /// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
 /// wrong number of values.
@@ -51,6 +51,10 @@ pub struct CertifierConfig {
     /// Calibrated certificate beside the paper's (`None`: not computed).
     #[serde(default)]
     pub calibration: Option<Calibration>,
+    /// Nonlinear certificate over the explored region and the nonlinearity test that closes
+    /// the linear calibrated gate (`None`: not computed; needs a calibration and one output).
+    #[serde(default)]
+    pub nonlinear: Option<NonlinearConfig>,
 }
 
 fn default_gap_factor() -> f64 {
@@ -80,6 +84,7 @@ impl CertifierConfig {
             residuals: ResidualSource::OneStep,
             gap_factor: default_gap_factor(),
             calibration: None,
+            nonlinear: None,
         }
     }
 
@@ -122,6 +127,9 @@ impl CertifierConfig {
         }
         if let Some(c) = &self.calibration {
             c.validate(&self.regression, self.margin)?;
+        }
+        if let Some(n) = &self.nonlinear {
+            n.validate(&self.regression, self.calibration.is_some())?;
         }
         Ok(())
     }

@@ -2,6 +2,7 @@
 //! [`Verdict`] per certificate), and [`NotCertified`], why a gate is closed.
 
 use serde::{Deserialize, Serialize};
+use streamcert_regression::Interval;
 
 /// Why a sample is not certified.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -55,6 +56,19 @@ pub enum NotCertified {
         /// Its upper bound `β̂_w + ρ_w`.
         upper: f64,
     },
+    /// Calibrated certificate: the window's nonlinearity test says the dynamics vary over the
+    /// region it explored, so the linear model (one Jacobian) does not describe it (see the
+    /// [`nonlinear`](crate::nonlinear) module).
+    VaryingDynamics {
+        /// The window length.
+        window: usize,
+        /// The Wald statistic of the terms of degree `>= 2`.
+        statistic: f64,
+        /// Its threshold at the test's risk.
+        threshold: f64,
+    },
+    /// No nonlinear model is configured, so there is no nonlinear certificate.
+    NoNonlinearModel,
 }
 
 impl std::fmt::Display for NotCertified {
@@ -81,6 +95,12 @@ impl std::fmt::Display for NotCertified {
                 f,
                 "window {window}: the rate is at most {upper:.4}, below the margin (dynamics changed?)"
             ),
+            Self::VaryingDynamics { window, statistic, threshold } => write!(
+                f,
+                "dynamics vary over the explored region (window {window}: Wald {statistic:.3} > \
+                 {threshold:.3})"
+            ),
+            Self::NoNonlinearModel => f.write_str("no nonlinear model configured"),
         }
     }
 }
@@ -93,13 +113,18 @@ pub enum CertificateKind {
     Gaussian,
     /// The paper's Wasserstein certificate `β̂ − ρ(1 + 2ε)` (eq. wass_cert).
     Wasserstein,
-    /// The calibrated certificate `β̂_w − ρ_w` (false deployment at most `δ`).
+    /// The calibrated certificate `β̂_w − ρ_w` (false deployment at most `δ`, for dynamics
+    /// whose Jacobian is constant over the window).
     Calibrated,
+    /// The nonlinear certificate: the smallest rate over the explored region, calibrated
+    /// (false deployment at most `δ`; see the [`nonlinear`](crate::nonlinear) module).
+    Nonlinear,
 }
 
 impl CertificateKind {
-    /// All three, in the order of the output columns.
-    pub const ALL: [Self; 3] = [Self::Gaussian, Self::Wasserstein, Self::Calibrated];
+    /// All four, in the order of the output columns.
+    pub const ALL: [Self; 4] =
+        [Self::Gaussian, Self::Wasserstein, Self::Calibrated, Self::Nonlinear];
 }
 
 /// One certificate after one sample: its value, the radius it subtracts, its gate, and why the
@@ -170,6 +195,13 @@ pub struct Evidence {
     pub calibrated: Verdict,
     /// Window length `M_w` (columns) of that look.
     pub calibrated_window: Option<usize>,
+    /// Nonlinear certificate `min_y β̂(y) − c s(y)` over the region of the largest standing
+    /// nonlinear look (see the [`nonlinear`](crate::nonlinear) module).
+    pub nonlinear: Verdict,
+    /// Window length of that look.
+    pub nonlinear_window: Option<usize>,
+    /// The region `[y_lo, y_hi]` that look's certificate speaks for.
+    pub nonlinear_region: Option<Interval>,
 }
 
 impl Evidence {
@@ -180,6 +212,7 @@ impl Evidence {
             CertificateKind::Gaussian => &self.gaussian,
             CertificateKind::Wasserstein => &self.wasserstein,
             CertificateKind::Calibrated => &self.calibrated,
+            CertificateKind::Nonlinear => &self.nonlinear,
         }
     }
 

@@ -56,6 +56,7 @@ mod error;
 mod evidence;
 mod gap;
 mod gate;
+pub mod nonlinear;
 mod radius;
 mod row;
 
@@ -70,6 +71,8 @@ pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use gate::{Gate, GateState};
+pub use nonlinear::{NonlinearConfig, NonlinearLook, NonlinearityTest};
 pub use radius::{certificate_surface, certificate_value};
 pub use row::{EVIDENCE_COLUMNS, EvidenceRow, ReasonText};
+pub use streamcert_regression::Interval;
 pub use streamcert_regression::ResidualSource;

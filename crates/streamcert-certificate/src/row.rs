@@ -8,7 +8,7 @@ use serde::{Serialize, Serializer};
 use crate::{Evidence, NotCertified};
 
 /// The column names of [`EvidenceRow`], in order (the CSV header).
-pub const EVIDENCE_COLUMNS: [&str; 17] = [
+pub const EVIDENCE_COLUMNS: [&str; 23] = [
     "t",
     "beta_hat",
     "rho",
@@ -26,6 +26,12 @@ pub const EVIDENCE_COLUMNS: [&str; 17] = [
     "calibrated_window",
     "calibrated_open",
     "reason_calibrated",
+    "cert_nonlinear",
+    "nonlinear_window",
+    "nonlinear_open",
+    "reason_nonlinear",
+    "nonlinear_y_lo",
+    "nonlinear_y_hi",
 ];
 
 /// A reason, serialised as its `Display` text (formatted on the stack: no allocation for
@@ -111,6 +117,18 @@ pub struct EvidenceRow {
     pub calibrated_open: u8,
     /// Why the calibrated gate is closed.
     pub reason_calibrated: Option<ReasonText>,
+    /// The nonlinear certificate `min_y β̂(y) − c s(y)` over its region.
+    pub cert_nonlinear: Option<f64>,
+    /// Its window length.
+    pub nonlinear_window: Option<usize>,
+    /// Nonlinear gate, 0 or 1.
+    pub nonlinear_open: u8,
+    /// Why the nonlinear gate is closed.
+    pub reason_nonlinear: Option<ReasonText>,
+    /// The region the nonlinear certificate speaks for: smallest output.
+    pub nonlinear_y_lo: Option<f64>,
+    /// Largest output.
+    pub nonlinear_y_hi: Option<f64>,
 }
 
 impl From<&Evidence> for EvidenceRow {
@@ -134,6 +152,12 @@ impl From<&Evidence> for EvidenceRow {
             calibrated_window: e.calibrated_window,
             calibrated_open: u8::from(e.calibrated.open),
             reason_calibrated: e.calibrated.reason.map(ReasonText),
+            cert_nonlinear: e.nonlinear.value,
+            nonlinear_window: e.nonlinear_window,
+            nonlinear_open: u8::from(e.nonlinear.open),
+            reason_nonlinear: e.nonlinear.reason.map(ReasonText),
+            nonlinear_y_lo: e.nonlinear_region.map(|r| r.lo),
+            nonlinear_y_hi: e.nonlinear_region.map(|r| r.hi),
         }
     }
 }

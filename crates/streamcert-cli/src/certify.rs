@@ -4,13 +4,13 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, NotCertified};
+use streamcert_certificate::{Certifier, Interval, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
-use crate::output::EvidenceWriter;
 pub use crate::output::Format;
+use crate::output::{EvidenceWriter, region_columns};
 
 /// What to do with a malformed row.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -202,9 +202,23 @@ pub fn run<R: Read + Send, W: Write>(
     };
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
     let io = |e| CliError::io("writing output", e);
-    let writer = EvidenceWriter::new(out, opts.format, opts.resume.is_none(), opts.flush_each_row)
-        .map_err(io)?;
-    let mut run = Run { cert: &mut cert, summary: &mut summary, writer, opts, input_name };
+    // The region columns: every output and input over the paper's window, then every output
+    // over the standing calibrated window.
+    let mut channels: Vec<String> =
+        cfg.columns.outputs.iter().chain(&cfg.columns.inputs).cloned().collect();
+    if cfg.certifier.calibration.is_some() {
+        channels.extend(cfg.columns.outputs.iter().map(|o| format!("calibrated_{o}")));
+    }
+    let writer = EvidenceWriter::new(
+        out,
+        opts.format,
+        opts.resume.is_none(),
+        opts.flush_each_row,
+        region_columns(&channels),
+    )
+    .map_err(io)?;
+    let region = Vec::with_capacity(channels.len());
+    let mut run = Run { cert: &mut cert, summary: &mut summary, writer, opts, input_name, region };
     // Resuming: rows up to the checkpoint's last time at the start of the input are a replay
     // of what the checkpoint already holds (the same file, or a live source restarted after a
     // crash) and are passed over, counted; from the first later row on, times must increase
@@ -272,6 +286,8 @@ struct Run<'a, W: Write> {
     writer: EvidenceWriter<W>,
     opts: &'a Options,
     input_name: &'a str,
+    /// One row's region values (reused).
+    region: Vec<Interval>,
 }
 
 impl<W: Write> Run<'_, W> {
@@ -331,7 +347,14 @@ impl<W: Write> Run<'_, W> {
         summary.first_deploy_calibrated =
             first(ev.calibrated.open, summary.first_deploy_calibrated);
         summary.last_time = Some(s.t);
-        self.writer.write(&ev).map_err(io)?;
+        self.region.clear();
+        self.region.extend_from_slice(self.cert.region());
+        if self.cert.config().calibration.is_some() {
+            let p = self.cert.config().regression.outputs;
+            let cal = self.cert.calibrated_region();
+            self.region.extend((0..p).map(|i| cal.get(i).copied().unwrap_or(Interval::EMPTY)));
+        }
+        self.writer.write_with_region(&ev, &self.region).map_err(io)?;
         if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
             if every > 0 && summary.rows % every == 0 {
                 // The rows a checkpoint holds are on the output before it is written.

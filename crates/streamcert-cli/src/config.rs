@@ -2,7 +2,9 @@
 
 use serde::Deserialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
-use streamcert_certificate::{Calibration, Certifier, CertifierConfig, ResidualSource};
+use streamcert_certificate::{
+    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource,
+};
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
 use crate::CliError;
@@ -65,6 +67,19 @@ delta = 0.01
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
+
+[nonlinear]
+# The calibrated certificate above assumes one Jacobian over its window. For a nonlinear
+# loop (one output), enable this: a fourth certificate, the smallest rate over the region of
+# outputs the window explored, for a drift polynomial in y up to `degree` (calibrated, same
+# windows and delta), and a test that closes the linear calibrated gate when the dynamics
+# vary over the region ("dynamics vary over the explored region"). Needs [calibration].
+enabled = false
+features = "polynomial"  # y, y^2, ..., y^degree (the feature library built so far)
+degree = 3
+region = "bounding_box"  # the range of y over the window's samples (the rule built so far)
+# cells = 32             # grid cells on which the minimum over the region is bounded
+# test_risk = 0.01       # risk of the nonlinearity test (default: delta)
 "#;
 
 #[derive(Debug, Deserialize)]
@@ -79,6 +94,43 @@ struct File {
     ambiguity: Ambiguity,
     #[serde(default)]
     calibration: CalibrationSection,
+    #[serde(default)]
+    nonlinear: NonlinearSection,
+}
+
+/// The feature libraries of `[nonlinear]` (one so far).
+#[derive(Debug, Default, Clone, Copy, Deserialize, PartialEq)]
+#[serde(rename_all = "snake_case")]
+enum Features {
+    #[default]
+    Polynomial,
+}
+
+/// The region rules of `[nonlinear]` (one so far).
+#[derive(Debug, Default, Clone, Copy, Deserialize, PartialEq)]
+#[serde(rename_all = "snake_case")]
+enum RegionRule {
+    #[default]
+    BoundingBox,
+}
+
+#[derive(Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NonlinearSection {
+    #[serde(default)]
+    enabled: bool,
+    #[serde(default)]
+    #[allow(dead_code)]
+    features: Features,
+    #[serde(default)]
+    degree: Option<usize>,
+    #[serde(default)]
+    #[allow(dead_code)]
+    region: RegionRule,
+    #[serde(default)]
+    cells: Option<usize>,
+    #[serde(default)]
+    test_risk: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -310,6 +362,15 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     if f.calibration.enabled {
         certifier.calibration = Some(f.calibration.calibration());
     }
+    let nl = &f.nonlinear;
+    if nl.enabled {
+        let d = NonlinearConfig::default();
+        certifier.nonlinear = Some(NonlinearConfig {
+            degree: nl.degree.unwrap_or(d.degree),
+            cells: nl.cells.unwrap_or(d.cells),
+            test_risk: nl.test_risk,
+        });
+    }
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
@@ -372,5 +433,22 @@ mod tests {
         );
         let zero_margin = on.replace("margin = 0.05", "margin = 0.0");
         assert!(parse(&zero_margin, "x").unwrap_err().to_string().contains("margin"));
+    }
+
+    #[test]
+    fn nonlinear_section_selects_the_nonlinear_certificate() {
+        let nl = "enabled = false\nfeatures";
+        let on = DEFAULT_CONFIG.replace(nl, "enabled = true\nfeatures");
+        // Without a calibration the nonlinear certificate is refused, saying what to set.
+        let err = parse(&on, "x").unwrap_err().to_string();
+        assert!(err.contains("needs a calibration"), "{err}");
+        let both = on.replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.01");
+        let c = parse(&both, "x").unwrap();
+        assert_eq!(c.certifier.nonlinear, Some(NonlinearConfig::default()));
+        let deg = both.replace("degree = 3", "degree = 2").replace("# cells = 32 ", "cells = 8 ");
+        let c = parse(&deg, "x").unwrap().certifier.nonlinear.unwrap();
+        assert_eq!((c.degree, c.cells), (2, 8));
+        let unknown = both.replace("features = \"polynomial\"", "features = \"splines\"");
+        assert!(parse(&unknown, "x").unwrap_err().to_string().contains("splines"));
     }
 }

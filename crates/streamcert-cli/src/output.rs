@@ -4,7 +4,9 @@
 
 use std::io::Write;
 
-use streamcert_certificate::{EVIDENCE_COLUMNS, Evidence, EvidenceRow};
+use serde::Serialize;
+use serde::ser::SerializeMap;
+use streamcert_certificate::{EVIDENCE_COLUMNS, Evidence, EvidenceRow, Interval};
 
 /// Output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -26,6 +28,41 @@ enum Sink<W: Write> {
 pub struct EvidenceWriter<W: Write> {
     sink: Sink<W>,
     flush_each_row: bool,
+    /// Names of the region columns after the evidence columns (`region_lo_<channel>`,
+    /// `region_hi_<channel>` per channel), and one row's values (reused).
+    region_names: Vec<String>,
+    region_values: Vec<Option<f64>>,
+}
+
+/// The region columns of one JSON line (a map, flattened into the row).
+struct RegionMap<'a> {
+    names: &'a [String],
+    values: &'a [Option<f64>],
+}
+
+impl Serialize for RegionMap<'_> {
+    fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        let mut map = serializer.serialize_map(Some(self.names.len()))?;
+        for (k, v) in self.names.iter().zip(self.values) {
+            map.serialize_entry(k, v)?;
+        }
+        map.end()
+    }
+}
+
+#[derive(Serialize)]
+struct JsonRow<'a> {
+    #[serde(flatten)]
+    row: EvidenceRow,
+    #[serde(flatten)]
+    region: RegionMap<'a>,
+}
+
+/// The region column names for channels named `channels` (outputs, then inputs): per
+/// channel `region_lo_<name>`, `region_hi_<name>`.
+#[must_use]
+pub fn region_columns(channels: &[String]) -> Vec<String> {
+    channels.iter().flat_map(|c| [format!("region_lo_{c}"), format!("region_hi_{c}")]).collect()
 }
 
 impl<W: Write> EvidenceWriter<W> {
@@ -36,23 +73,33 @@ impl<W: Write> EvidenceWriter<W> {
     ///
     /// # Errors
     /// Writing the header.
+    ///
+    /// `region_names` ([`region_columns`]) are written after the evidence columns, with the
+    /// values passed to [`write_with_region`](Self::write_with_region); empty for none.
     pub fn new(
         out: W,
         format: Format,
         header: bool,
         flush_each_row: bool,
+        region_names: Vec<String>,
     ) -> std::io::Result<Self> {
         let sink = match format {
             Format::Csv => {
                 let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
                 if header {
-                    w.write_record(EVIDENCE_COLUMNS)?;
+                    w.write_record(
+                        EVIDENCE_COLUMNS
+                            .iter()
+                            .copied()
+                            .chain(region_names.iter().map(String::as_str)),
+                    )?;
                 }
                 Sink::Csv(Box::new(w))
             }
             Format::Jsonl => Sink::Jsonl(std::io::BufWriter::with_capacity(1 << 16, out)),
         };
-        let mut w = Self { sink, flush_each_row };
+        let region_values = vec![None; region_names.len()];
+        let mut w = Self { sink, flush_each_row, region_names, region_values };
         if flush_each_row {
             w.flush()?;
         }
@@ -64,11 +111,42 @@ impl<W: Write> EvidenceWriter<W> {
     /// # Errors
     /// Writing to the output.
     pub fn write(&mut self, evidence: &Evidence) -> std::io::Result<()> {
+        self.write_with_region(evidence, &[])
+    }
+
+    /// Write the row of one sample with the region columns: `region` holds one
+    /// [`Interval`] per region channel (half the region names); missing or empty intervals
+    /// are written as absent values.
+    ///
+    /// # Errors
+    /// Writing to the output.
+    pub fn write_with_region(
+        &mut self,
+        evidence: &Evidence,
+        region: &[Interval],
+    ) -> std::io::Result<()> {
         let row = EvidenceRow::from(evidence);
+        for (i, pair) in self.region_values.chunks_exact_mut(2).enumerate() {
+            let r = region.get(i).copied().filter(Interval::is_proper);
+            pair[0] = r.map(|r| r.lo);
+            pair[1] = r.map(|r| r.hi);
+        }
         match &mut self.sink {
-            Sink::Csv(w) => w.serialize(row)?,
+            Sink::Csv(w) => {
+                if self.region_values.is_empty() {
+                    w.serialize(row)?;
+                } else {
+                    w.serialize((row, &self.region_values[..]))?;
+                }
+            }
             Sink::Jsonl(w) => {
-                serde_json::to_writer(&mut *w, &row)?;
+                if self.region_values.is_empty() {
+                    serde_json::to_writer(&mut *w, &row)?;
+                } else {
+                    let region =
+                        RegionMap { names: &self.region_names, values: &self.region_values };
+                    serde_json::to_writer(&mut *w, &JsonRow { row, region })?;
+                }
                 w.write_all(b"\n")?;
             }
         }

@@ -135,13 +135,38 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
     (damaged != text.as_bytes(), result.is_err())
 }
 
+/// The seed checkpoint itself resumes (so the mutations start from a file the checks
+/// accept, and a format change that leaves the corpus stale fails here).
+#[test]
+fn the_corpus_checkpoint_resumes() {
+    assert_eq!(resume_damaged(&[], false), (false, false));
+    assert_eq!(resume_damaged(&[], true), (false, false));
+}
+
 /// Inputs the long fuzz runs found, kept as fixed cases.
 #[test]
 fn fuzz_findings_stay_fixed() {
     // A re-sealed checkpoint whose sliding-moments ring index is out of range: restore used to
-    // panic while recounting spikes (index 37 of 20).
-    let (_, refused) = resume_damaged(&[(7, 603_875_647, 185)], true);
-    assert!(refused);
+    // panic while recounting spikes (index 37 of 20). Written as that edit of the seed file
+    // (the byte offsets of the original finding moved when the checkpoint format grew).
+    let seed = String::from_utf8(corpus("checkpoint")[0].clone()).expect("UTF-8");
+    let (_, payload) = seed.split_once('\n').expect("header");
+    let at = payload.find("\"moments\":").expect("moments");
+    let head = at + payload[at..].find("\"head\":").expect("head") + "\"head\":".len();
+    let end = head + payload[head..].find(',').expect("comma");
+    let edited = format!("{}37{}", &payload[..head], &payload[end..]);
+    assert_ne!(edited, payload);
+    let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
+    let cfg = parse(&cfg_text, "c").expect("corpus config");
+    let sealed = streamcert_certificate::seal(&edited, &cfg.certifier).expect("seal");
+    let path = scratch("finding");
+    std::fs::write(&path, sealed).expect("write");
+    let data = "t,y_b,u_b\n100,0.1,0.2\n";
+    let mut out = Vec::new();
+    let result = run(&cfg, Cursor::new(data), "fuzz", &mut out, &options(Some(path.clone())));
+    let _ = std::fs::remove_file(&path);
+    let err = result.expect_err("refused").to_string();
+    assert!(err.contains("checkpoint"), "{err}");
 }
 
 proptest! {

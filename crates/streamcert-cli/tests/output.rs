@@ -2,7 +2,7 @@
 //! reads back to the bit-identical value of the library's `Evidence` for the same sample, an
 //! absent value is an empty field (`null`), gates are 0/1 and reasons are their text.
 
-use streamcert_certificate::{CertificateKind, Certifier, Evidence, NotCertified};
+use streamcert_certificate::{CertificateKind, Certifier, Evidence, Interval, NotCertified};
 use streamcert_cli::certify::{self, BadRows, Options};
 use streamcert_cli::config;
 use streamcert_cli::output::Format;
@@ -36,18 +36,29 @@ fn options(format: Format) -> Options {
 
 /// The library's evidence for the same rows (the CSV's text parses to the same floats).
 fn library(cfg: &config::Config, input: &str) -> Vec<Evidence> {
+    library_with_regions(cfg, input).into_iter().map(|(e, _)| e).collect()
+}
+
+/// The library's evidence and, per sample, the region columns' intervals (the paper window's
+/// output and input, then the calibrated window's output when calibrated).
+fn library_with_regions(cfg: &config::Config, input: &str) -> Vec<(Evidence, Vec<Interval>)> {
     let mut cert = Certifier::new(cfg.certifier.clone()).expect("valid configuration");
     input
         .lines()
         .skip(1)
         .map(|line| {
             let v: Vec<f64> = line.split(',').map(|f| f.parse().expect("number")).collect();
-            cert.push(v[0], &v[1..2], &v[2..3]).expect("sample")
+            let e = cert.push(v[0], &v[1..2], &v[2..3]).expect("sample");
+            let mut region = cert.region().to_vec();
+            if cfg.certifier.calibration.is_some() {
+                region.push(cert.calibrated_region().first().copied().unwrap_or(Interval::EMPTY));
+            }
+            (e, region)
         })
         .collect()
 }
 
-fn numbers(e: &Evidence) -> [(&'static str, Option<f64>); 8] {
+fn numbers(e: &Evidence) -> [(&'static str, Option<f64>); 11] {
     let amb = e.ambiguity;
     [
         ("beta_hat", e.beta_hat()),
@@ -58,6 +69,9 @@ fn numbers(e: &Evidence) -> [(&'static str, Option<f64>); 8] {
         ("cert_gauss", e.gaussian.value),
         ("cert_wass", e.wasserstein.value),
         ("cert_calibrated", e.calibrated.value),
+        ("cert_nonlinear", e.nonlinear.value),
+        ("nonlinear_y_lo", e.nonlinear_region.map(|r| r.lo)),
+        ("nonlinear_y_hi", e.nonlinear_region.map(|r| r.hi)),
     ]
 }
 
@@ -67,22 +81,43 @@ fn reason(r: Option<NotCertified>) -> String {
 
 #[test]
 fn csv_rows_read_back_to_the_library_evidence() {
-    // With the calibrated certificate, so its columns carry numbers too.
+    // With the calibrated and nonlinear certificates, so their columns carry numbers too.
     let text = config::DEFAULT_CONFIG.replace("enabled = false", "enabled = true");
     let cfg = config::parse(&text, "calibrated").expect("configuration");
+    assert!(cfg.certifier.nonlinear.is_some());
     let input = plant_csv(6000);
-    let want = library(&cfg, &input);
+    let with_regions = library_with_regions(&cfg, &input);
+    let want: Vec<Evidence> = with_regions.iter().map(|(e, _)| *e).collect();
     let mut out = Vec::new();
     certify::run(&cfg, input.as_bytes(), "plant", &mut out, &options(Format::Csv)).expect("run");
     let mut reader = csv::Reader::from_reader(out.as_slice());
     let header = reader.headers().expect("header").clone();
-    assert_eq!(header.iter().collect::<Vec<_>>(), streamcert_certificate::EVIDENCE_COLUMNS);
+    let regions = [
+        "region_lo_y_b",
+        "region_hi_y_b",
+        "region_lo_u_b",
+        "region_hi_u_b",
+        "region_lo_calibrated_y_b",
+        "region_hi_calibrated_y_b",
+    ];
+    let names: Vec<&str> =
+        streamcert_certificate::EVIDENCE_COLUMNS.iter().copied().chain(regions).collect();
+    assert_eq!(header.iter().collect::<Vec<_>>(), names);
     let col = |name: &str| header.iter().position(|h| h == name).expect("column");
     let rows: Vec<csv::StringRecord> = reader.records().map(|r| r.expect("row")).collect();
     assert_eq!(rows.len(), want.len());
     let (mut open, mut reasons) = (0, 0);
-    for (row, e) in rows.iter().zip(&want) {
+    for (row, (e, region)) in rows.iter().zip(&with_regions) {
         assert_eq!(row[col("t")].parse::<f64>().expect("t").to_bits(), e.t.to_bits());
+        for (i, r) in region.iter().enumerate() {
+            let (lo, hi) = (&row[col(regions[2 * i])], &row[col(regions[2 * i + 1])]);
+            if r.is_proper() {
+                assert_eq!(lo.parse::<f64>().expect("lo").to_bits(), r.lo.to_bits());
+                assert_eq!(hi.parse::<f64>().expect("hi").to_bits(), r.hi.to_bits());
+            } else {
+                assert!(lo.is_empty() && hi.is_empty());
+            }
+        }
         for (name, value) in numbers(e) {
             let field = &row[col(name)];
             match value {
@@ -99,6 +134,7 @@ fn csv_rows_read_back_to_the_library_evidence() {
             (CertificateKind::Gaussian, "gauss_open", "reason_gauss"),
             (CertificateKind::Wasserstein, "wass_open", "reason_wass"),
             (CertificateKind::Calibrated, "calibrated_open", "reason_calibrated"),
+            (CertificateKind::Nonlinear, "nonlinear_open", "reason_nonlinear"),
         ] {
             let v = e.verdict(kind);
             assert_eq!(&row[col(open_col)], if v.open { "1" } else { "0" });
@@ -110,6 +146,7 @@ fn csv_rows_read_back_to_the_library_evidence() {
     // The stream exercises open gates, closed ones with reasons, and calibrated numbers.
     assert!(open > 0 && reasons > 0, "open {open}, reasons {reasons}");
     assert!(want.iter().any(|e| e.calibrated.open), "the calibrated gate opens");
+    assert!(want.iter().any(|e| e.nonlinear.value.is_some()), "a nonlinear certificate");
 }
 
 #[test]

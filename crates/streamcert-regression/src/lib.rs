@@ -68,11 +68,13 @@ mod config;
 mod error;
 mod estimate;
 pub mod linalg;
+mod range;
 mod sliding;
 mod windows;
 
 pub use config::{Estimator, InputIntegral, RegressionConfig, ResidualSource};
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
+pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{InstrumentedWindows, WindowEstimate};

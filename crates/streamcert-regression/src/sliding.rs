@@ -9,7 +9,7 @@ mod update;
 
 use serde::{Deserialize, Serialize};
 
-use crate::{RegressionConfig, RegressionError, linalg};
+use crate::{Interval, RegressionConfig, RegressionError, SlidingRange, linalg};
 
 /// Element-wise copy; for the short slices of the hot path a plain loop beats a `memcpy` call.
 #[inline]
@@ -81,6 +81,8 @@ pub struct SlidingRegression {
     // exact recompute.
     #[serde(default)]
     peaks: Vec<f64>,
+    // Range of each output and input over the last `M + h` samples (the window's region).
+    range: SlidingRange,
 }
 
 impl SlidingRegression {
@@ -131,6 +133,7 @@ impl SlidingRegression {
             inv_window: 1.0 / mm as f64,
             built: 0,
             peaks: vec![0.0; d + p],
+            range: SlidingRange::new(d, cfg.window + cfg.horizon)?,
         })
     }
 
@@ -150,6 +153,36 @@ impl SlidingRegression {
     #[must_use]
     pub fn last_time(&self) -> Option<f64> {
         (self.hist_len > 0).then(|| self.hist_t[self.hist_head])
+    }
+
+    /// The region of the window: the range of each output, then each input, over the last
+    /// `M + h` samples accepted since the last reset (the samples the window's `M` columns
+    /// integrate, for the ordinary estimator). A linear certificate speaks for the averaged
+    /// linearisation over this region, nothing more. [`Interval::EMPTY`] before the first
+    /// sample.
+    #[must_use]
+    pub fn ranges(&self) -> &[Interval] {
+        self.range.ranges()
+    }
+
+    /// The `h + 1` samples of the newest column, oldest first: times into `t` (length
+    /// `h + 1`) and outputs into `y` (`(h + 1) p` values, one sample's outputs after
+    /// another). `false` (buffers untouched) before `h + 1` samples are held.
+    ///
+    /// # Panics
+    /// If a buffer is shorter than stated.
+    pub fn column_samples(&self, t: &mut [f64], y: &mut [f64]) -> bool {
+        let (p, cap) = (self.cfg.outputs, self.cfg.horizon + 1);
+        if self.hist_len < cap {
+            return false;
+        }
+        let mut slot = next(self.hist_head, cap);
+        for i in 0..cap {
+            t[i] = self.hist_t[slot];
+            y[i * p..(i + 1) * p].copy_from_slice(&self.hist_y[slot * p..(slot + 1) * p]);
+            slot = next(slot, cap);
+        }
+        true
     }
 
     /// The newest column `(Z_q, ΔY_q)`, if any.
@@ -178,6 +211,7 @@ impl SlidingRegression {
     /// Forget every sample and column (the configuration is kept).
     pub fn reset(&mut self) {
         self.built = 0;
+        self.range.reset();
         self.peaks.fill(0.0);
         self.hist_len = 0;
         self.zhist_len = 0;

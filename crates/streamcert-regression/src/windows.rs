@@ -42,7 +42,7 @@ mod estimate;
 
 pub use estimate::WindowEstimate;
 
-use crate::RegressionError;
+use crate::{Interval, RegressionError};
 
 /// Layout of one window's sums inside the flat statistics buffer.
 #[derive(Debug, Clone, Copy)]
@@ -92,6 +92,14 @@ pub struct InstrumentedWindows {
     block_len: usize,
     // One column's instrument (scratch, meaningless between calls).
     w: Vec<f64>,
+    // Region tracking (`with_ranges`): channels per column, the open block's hull and one
+    // hull per complete block, aligned with `blocks`.
+    #[serde(default)]
+    range_channels: usize,
+    #[serde(default)]
+    open_range: Vec<Interval>,
+    #[serde(default)]
+    block_ranges: Vec<Interval>,
 }
 
 /// `out = Σ` of the `S`-value blocks in `older` then `newer`.
@@ -167,7 +175,82 @@ impl InstrumentedWindows {
             block_len: 0,
             windows: blocks,
             w: vec![0.0; lay.k],
+            range_channels: 0,
+            open_range: Vec::new(),
+            block_ranges: Vec::new(),
         })
+    }
+
+    /// Windows over a regression with `regressors` regressors per column (not necessarily
+    /// `p + m`: a feature library, for example), `outputs` outputs; otherwise as
+    /// [`new`](Self::new). The candidate directions passed to
+    /// [`estimate`](Self::estimate) are then `regressors × p`.
+    ///
+    /// # Errors
+    /// As [`new`](Self::new), and for `regressors <= outputs`.
+    pub fn with_regressors(
+        outputs: usize,
+        regressors: usize,
+        horizon: usize,
+        lag: usize,
+        intervals: usize,
+        windows: &[usize],
+    ) -> Result<Self, RegressionError> {
+        if regressors <= outputs {
+            return Err(RegressionError::InvalidConfig {
+                field: "regressors",
+                reason: format!("must exceed the outputs ({outputs}), got {regressors}"),
+            });
+        }
+        Self::new(outputs, regressors - outputs, horizon, lag, intervals, windows)
+    }
+
+    /// Track the region of every block: the hull of `channels` value ranges passed with each
+    /// column to [`push_column_ranged`](Self::push_column_ranged).
+    #[must_use]
+    pub fn with_ranges(mut self, channels: usize) -> Self {
+        self.range_channels = channels;
+        self.open_range = vec![Interval::EMPTY; channels];
+        self.block_ranges = vec![Interval::EMPTY; channels * self.block_cap()];
+        self
+    }
+
+    /// [`push_column`](Self::push_column), and the column's value ranges (`channels` of them,
+    /// see [`with_ranges`](Self::with_ranges)) joined to its block's region when the column
+    /// is absorbed. Use one of the two push methods throughout.
+    pub fn push_column_ranged(&mut self, z: &[f64], dy: &[f64], range: &[Interval]) -> bool {
+        let (before, slot) = (self.usable, self.block_head);
+        let done = self.push_column(z, dy);
+        if self.usable > before {
+            for (o, r) in self.open_range.iter_mut().zip(range) {
+                *o = o.hull(*r);
+            }
+            if done {
+                let c = self.range_channels;
+                self.block_ranges[slot * c..(slot + 1) * c].copy_from_slice(&self.open_range);
+                self.open_range.fill(Interval::EMPTY);
+            }
+        }
+        done
+    }
+
+    /// The region of window `w`: the hull of its complete blocks' ranges, into `out`
+    /// (`channels` values; [`Interval::EMPTY`] for an empty window). `O(B_w · channels)`.
+    pub fn window_range(&self, w: usize, out: &mut [Interval]) {
+        let c = self.range_channels;
+        let out = &mut out[..c];
+        out.fill(Interval::EMPTY);
+        if c == 0 {
+            return;
+        }
+        let count = self.windows[w].min(self.block_len);
+        let (head, cap) = (self.block_head, self.block_cap());
+        for i in 0..count {
+            let b = if i < head { head - 1 - i } else { cap + head - 1 - i };
+            for (o, r) in out.iter_mut().zip(&self.block_ranges[b * c..(b + 1) * c]) {
+                *o = o.hull(*r);
+            }
+        }
     }
 
     fn layout(&self) -> Layout {
@@ -262,6 +345,7 @@ impl InstrumentedWindows {
         self.in_open = 0;
         self.block_head = 0;
         self.block_len = 0;
+        self.open_range.fill(Interval::EMPTY);
     }
 
     /// Add the outer products of the column `(z, dy)` in ring slot `q`, paired with its
@@ -360,7 +444,9 @@ impl InstrumentedWindows {
             && self.open.len() == fresh.open.len()
             && self.blocks.len() == fresh.blocks.len()
             && self.w.len() == fresh.w.len()
-            && self.windows == fresh.windows;
+            && self.windows == fresh.windows
+            && self.open_range.len() == self.range_channels
+            && self.block_ranges.len() == self.range_channels * fresh.block_cap();
         if !sizes_ok {
             return Err(RegressionError::CorruptState("window buffers have the wrong size".into()));
         }
@@ -375,7 +461,12 @@ impl InstrumentedWindows {
             return Err(RegressionError::CorruptState("window counters out of range".into()));
         }
         let mut values = self.ring_z.iter().chain(&self.ring_dy).chain(&self.open);
-        if !values.all(|v| v.is_finite()) || !self.blocks.iter().all(|v| v.is_finite()) {
+        let range_ok = |r: &Interval| *r == Interval::EMPTY || r.is_proper();
+        let ranges_ok = self.open_range.iter().chain(&self.block_ranges).all(range_ok);
+        if !values.all(|v| v.is_finite())
+            || !self.blocks.iter().all(|v| v.is_finite())
+            || !ranges_ok
+        {
             return Err(RegressionError::CorruptState("non-finite value in the windows".into()));
         }
         Ok(())

@@ -52,6 +52,7 @@ impl SlidingRegression {
         if !ok {
             return Err(RegressionError::CorruptState("ring counters out of range".into()));
         }
+        self.range.check_state(self.d(), self.cfg.window + self.cfg.horizon)?;
         // Every buffer that carries state from one sample to the next (the scratch buffers
         // `theta`, `work`, `work2`, `z`, `dy` are overwritten before they are read).
         let state = [

@@ -56,6 +56,7 @@ impl SlidingRegression {
         self.hist_t[k] = t;
         self.hist_y[k] = y;
         self.hist_u[k] = u;
+        self.range.push([y, u]);
         self.hist_len = (self.hist_len + 1).min(cap);
         if self.hist_len < cap {
             return Ok(());
@@ -120,6 +121,7 @@ impl SlidingRegression {
         self.hist_t[k] = t;
         copy(&mut self.hist_y[k * p..(k + 1) * p], y);
         copy(&mut self.hist_u[k * m..(k + 1) * m], u);
+        self.range.push(y.iter().chain(u).copied());
         self.hist_len = (self.hist_len + 1).min(cap);
         if self.hist_len >= 2 {
             self.build_interval(p, m);

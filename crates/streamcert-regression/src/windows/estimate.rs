@@ -36,6 +36,9 @@ pub struct WindowEstimate {
     row: Vec<f64>,
     block: Vec<f64>,
     sums: Vec<f64>,
+    // One block's coefficient influence (p × d), for `coefficient_covariance`.
+    #[serde(default)]
+    g: Vec<f64>,
 }
 
 impl WindowEstimate {
@@ -59,7 +62,15 @@ impl WindowEstimate {
             row: vec![0.0; k.max(d)],
             block: vec![0.0; p * p],
             sums: vec![0.0; Layout { p, d, k }.stride()],
+            g: vec![0.0; p * d],
         }
+    }
+
+    /// [`new`](Self::new) for windows built with
+    /// [`InstrumentedWindows::with_regressors`]: `regressors` regressors per column.
+    #[must_use]
+    pub fn with_regressors(outputs: usize, regressors: usize, intervals: usize) -> Self {
+        Self::new(outputs, regressors.saturating_sub(outputs), intervals)
     }
 
     /// `true` when every buffer has the length of `other`'s (a restored state's check).
@@ -75,6 +86,7 @@ impl WindowEstimate {
             && self.row.len() == other.row.len()
             && self.block.len() == other.block.len()
             && self.sums.len() == other.sums.len()
+            && self.g.len() == other.g.len()
     }
 }
 
@@ -267,5 +279,76 @@ impl InstrumentedWindows {
             sum_w2 += weight * weight;
         }
         (sum_w, sum_w2)
+    }
+
+    /// The batch-means covariance of the coefficients, after a ready
+    /// [`estimate`](Self::estimate) of the same window `w` (which leaves the factors in
+    /// `out`): with `r_j = Cw_j − Θ̂ N_j` (one row per output) and the block influence
+    /// `G_j = r_j Q A⁻¹` (`p × d`, so that `Σ_j G_j = Θ̂ − Θ` up to the ridge),
+    ///
+    /// ```text
+    /// Ω_θ = c_h · B/(B − d) · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
+    /// ```
+    ///
+    /// with the same factors as the score covariance of [`estimate`](Self::estimate). For a
+    /// direction `T` (`d × p`), the score covariance of `estimate` is the image of `Ω_θ`
+    /// under `vec(G) ↦ vec(sym(G T))`; for `p = 1` the variance of `(Θ̂ − Θ) T` is
+    /// `Tᵀ Ω_θ T`, for every `T` at once (what a certificate over a region of states needs).
+    /// `false` (and `cov` untouched) when `out` holds no ready estimate. `O(B (p k d + p² d²))`.
+    ///
+    /// # Panics
+    /// If `cov` is shorter than `(p d)²`.
+    pub fn coefficient_covariance(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+    ) -> bool {
+        let lay = self.layout();
+        let (p, d, k) = (lay.p, lay.d, lay.k);
+        if !out.ready {
+            return false;
+        }
+        let n = p * d;
+        let cov = &mut cov[..n * n];
+        cov.fill(0.0);
+        let blocks = self.windows[w].min(self.block_len);
+        let stride = lay.stride();
+        let (older, newer) = self.window_blocks(w);
+        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
+            let (bn, bcw) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()]);
+            for i in 0..p {
+                let th = &out.theta[i * d..(i + 1) * d];
+                let r = &mut out.row[..k];
+                for b in 0..k {
+                    let mut v = bcw[i * k + b];
+                    for a in 0..d {
+                        v -= th[a] * bn[a * k + b];
+                    }
+                    r[b] = v;
+                }
+                let g = &mut out.g[i * d..(i + 1) * d];
+                for a in 0..d {
+                    let mut v = 0.0;
+                    for b in 0..k {
+                        v += out.q[a * k + b] * out.row[b];
+                    }
+                    g[a] = v;
+                }
+                linalg::lu_solve_in_place(&out.lu, d, &out.piv, g);
+            }
+            for a in 0..n {
+                for b in 0..n {
+                    cov[a * n + b] += out.g[a] * out.g[b];
+                }
+            }
+        }
+        let hf = self.horizon as f64;
+        let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
+        let scale = overlap * blocks as f64 / (blocks - d) as f64;
+        for v in cov.iter_mut() {
+            *v *= scale;
+        }
+        true
     }
 }

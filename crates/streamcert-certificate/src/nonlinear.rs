@@ -1,0 +1,429 @@
+//! The nonlinear certificate (an addition to the paper): a lower confidence bound on the
+//! smallest contraction rate over the region of states the window explored, for one output
+//! whose drift is a polynomial in `y`.
+//!
+//! ## Why
+//!
+//! A linear certificate estimates one averaged (secant) Jacobian over whatever states its
+//! window visited. On a nonlinear loop that average can contract while part of the visited
+//! region does not (`ẏ = −y tanh y + u` under `u = −1.1 y` has the local rate
+//! `1.1 + tanh y + y sech² y`, negative around `y ≈ −1.2`), and the linear certificate then
+//! claims more than the data show.
+//!
+//! ## Model
+//!
+//! The drift is linear in the feature library `φ(y) = (y, y², …, y^D)` and in the input:
+//! `ẏ = Σ_k θ_k y^k + B u + noise`. The integral form of the paper is kept: column `q`
+//! regresses `ΔY_q = y(t_q + h) − y(t_q)` on
+//!
+//! ```text
+//! Z_q = [∫ y; ∫ y²; …; ∫ y^D; ∫ u]      over [t_q, t_q + h]
+//! ```
+//!
+//! (`∫ y` and `∫ u` are the regression's own columns; `∫ y^k` is trapezoidal over the same
+//! samples), with the calibrated certificate's instrumented windows, looks and risk
+//! ([`InstrumentedWindows`] with `D + m` regressors). Under `u = K y` the closed-loop local
+//! rate at `y` is
+//!
+//! ```text
+//! β(y) = −(Σ_k k θ_k y^{k−1} + B K) = −a(y)ᵀ θ,    a(y) = (1, 2y, …, D y^{D−1}, K)
+//! ```
+//!
+//! ## Region, certificate and radius
+//!
+//! The region is the bounding box of the outputs the window's columns integrate (for one
+//! output, their convex hull): `[y_lo, y_hi]`, reported with the certificate. With `Ω̂_θ` the
+//! batch-means covariance of the coefficients
+//! ([`InstrumentedWindows::coefficient_covariance`]) and `s(y)² = a(y)ᵀ Ω̂_θ a(y)`,
+//!
+//! ```text
+//! β_nl = min over y in [y_lo, y_hi] of  β̂(y) − c · s(y)
+//! c    = t_ν(1 − δ_{w,k})                                  for D = 1 (one direction)
+//! c²   = ν D / (ν − D + 1) · F_{D, ν−D+1}(1 − δ_{w,k})      for D >= 2 (Hotelling, Scheffé)
+//! ```
+//!
+//! `a(y)` spans a space of dimension `D` as `y` varies, and by Cauchy–Schwarz the Hotelling
+//! bound holds *for every y at once*: so `β_nl <= min_y β*(y)` over every region, including
+//! the one the data chose, with probability `1 − δ_{w,k}` per look. The minimum is bounded,
+//! not sampled: the region is cut into `cells` intervals and on each `β̂(y)` is bounded below
+//! and `s(y)²` above by their Taylor expansions at the cell's midpoint
+//! ([`polynomial_bounds`]); the certificate is the smallest cell bound (so it holds between
+//! grid points too). `ν` and the risk schedule are the calibrated certificate's: the effective
+//! number of blocks (weights in the direction `a` at the region's midpoint) less `D + m`, and
+//! `δ_{w,k} = δ (M_w/ΣM) / (k (k+1))`. With `D = 1` the certificate equals the linear
+//! calibrated certificate (up to rounding; a property test).
+//!
+//! ## Nonlinearity test
+//!
+//! The same fit tests whether the dynamics vary over the region: the Wald statistic of the
+//! terms of degree `>= 2`, `W = θ̂_Hᵀ Ω̂_HH⁻¹ θ̂_H`, against Hotelling's quantile with `D − 1`
+//! and `ν` degrees of freedom at `test_risk`. When it is significant, the *linear* calibrated
+//! certificate of that window does not stand ([`NotCertified::VaryingDynamics`]): the linear
+//! model does not describe the region. Closing a gate never costs validity.
+//!
+//! ## Assumptions (when one fails the guarantee is void)
+//! * One output (`p = 1`) whose drift is a polynomial of degree at most `D` in `y` over the
+//!   region, plus `B u`; a drift that is not (`tanh`) is covered only as far as its best
+//!   polynomial of degree `D` is close over the region (`cargo xtask nonlinear` measures it
+//!   on `−y tanh y`).
+//! * Every assumption of the calibrated certificate (white process noise, exogenous
+//!   exploration, instruments relevant, negligible ridge), with the features as regressors.
+//! * The output is the state (or the feature model holds for the measured output); sensor
+//!   noise widens the reported region slightly (the box of noisy samples), which only makes
+//!   the minimum smaller.
+
+mod bounds;
+mod config;
+
+pub use bounds::{f_quantile, polynomial_bounds, simultaneous_multiplier};
+pub use config::NonlinearConfig;
+
+use serde::{Deserialize, Serialize};
+use streamcert_regression::{
+    InstrumentedWindows, Interval, RegressionConfig, WindowEstimate, linalg,
+};
+
+use crate::{CertifyError, NotCertified, t_quantile};
+
+/// The Wald test of the terms of degree `>= 2` at one look.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NonlinearityTest {
+    /// `W = θ̂_Hᵀ Ω̂_HH⁻¹ θ̂_H`.
+    pub statistic: f64,
+    /// Hotelling's quantile `ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)`, `q = D − 1`.
+    pub threshold: f64,
+}
+
+impl NonlinearityTest {
+    /// `true` when the dynamics vary over the region at the test's risk.
+    #[must_use]
+    pub fn significant(&self) -> bool {
+        self.statistic > self.threshold
+    }
+}
+
+/// One window's latest nonlinear look.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct NonlinearLook {
+    /// Window length `M_w` in columns.
+    pub window: usize,
+    /// Look number `k` of this window.
+    pub look: u64,
+    /// Time of the look.
+    pub t: f64,
+    /// `β_nl`: the lower bound of `β̂(y) − c s(y)` over the region.
+    pub certificate: f64,
+    /// The lower bound of `β̂(y)` over the region (the estimate's own minimum, no radius).
+    pub beta_hat_min: f64,
+    /// The multiplier `c`.
+    pub multiplier: f64,
+    /// Degrees of freedom `ν`.
+    pub nu: f64,
+    /// The region `[y_lo, y_hi]` the certificate speaks for.
+    pub region: Interval,
+    /// Midpoint of the cell that gives the certificate (where the loop is closest to not
+    /// contracting, by this bound).
+    pub worst: f64,
+    /// The upper bound `min over cells of β̂(y) + t_ν(1 − δ) s(y)` (one look's risk), when
+    /// below the margin: some visited state then contracts by less than the margin, and the
+    /// window's older certificates stop standing.
+    pub upper: Option<f64>,
+    /// The nonlinearity test (degree `>= 2`, when `Ω̂_HH` is positive definite).
+    pub test: Option<NonlinearityTest>,
+}
+
+/// The streaming state of the nonlinear certificate (inside the calibrated state, which drives
+/// its columns and looks).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(crate) struct NonlinearState {
+    cfg: NonlinearConfig,
+    horizon: usize,
+    windows: InstrumentedWindows,
+    est: WindowEstimate,
+    /// `K` (`m` values).
+    gain: Vec<f64>,
+    latest: Vec<Option<NonlinearLook>>,
+    // Scratch (meaningless between calls): one column's regressors, `a(y_mid)`, `Ω̂_θ`, the
+    // polynomials of `β̂(y)` and `s(y)²`, their bound work space, the Wald sub-problem.
+    z: Vec<f64>,
+    dir: Vec<f64>,
+    cov: Vec<f64>,
+    poly_f: Vec<f64>,
+    poly_s: Vec<f64>,
+    work: Vec<f64>,
+    sub: Vec<f64>,
+    rhs: Vec<f64>,
+}
+
+impl NonlinearState {
+    pub(crate) fn new(
+        cfg: NonlinearConfig,
+        reg: &RegressionConfig,
+        gain: &[f64],
+        lengths: &[usize],
+        lag: usize,
+        intervals: usize,
+    ) -> Result<Self, CertifyError> {
+        let (dg, m) = (cfg.degree, reg.inputs);
+        let d = dg + m;
+        let windows =
+            InstrumentedWindows::with_regressors(1, d, reg.horizon, lag, intervals, lengths)?
+                .with_ranges(1);
+        Ok(Self {
+            cfg,
+            horizon: reg.horizon,
+            windows,
+            est: WindowEstimate::with_regressors(1, d, intervals),
+            gain: gain.to_vec(),
+            latest: vec![None; lengths.len()],
+            z: vec![0.0; d],
+            dir: vec![0.0; d],
+            cov: vec![0.0; d * d],
+            poly_f: vec![0.0; dg],
+            poly_s: vec![0.0; 2 * dg - 1],
+            work: vec![0.0; 2 * dg - 1],
+            sub: vec![0.0; (dg - 1) * (dg - 1)],
+            rhs: vec![0.0; dg - 1],
+        })
+    }
+
+    pub(crate) fn looks(&self) -> &[Option<NonlinearLook>] {
+        &self.latest
+    }
+
+    pub(crate) fn reset(&mut self) {
+        self.windows.reset();
+        self.latest.fill(None);
+    }
+
+    /// Absorb the newest column: `z_lin = [∫y; ∫u]` and `dy` from the regression, and its
+    /// `h + 1` samples (`ts`, `ys`, oldest first) for the higher powers and the region.
+    /// `O(h D + (D + m)²)`, no allocation.
+    pub(crate) fn push(&mut self, z_lin: &[f64], dy: &[f64], ts: &[f64], ys: &[f64]) -> bool {
+        let dg = self.cfg.degree;
+        let m = self.gain.len();
+        self.z[0] = z_lin[0];
+        self.z[dg..dg + m].copy_from_slice(&z_lin[1..=m]);
+        for v in &mut self.z[1..dg] {
+            *v = 0.0;
+        }
+        let (mut lo, mut hi) = (ys[0], ys[0]);
+        for i in 1..ts.len() {
+            let half = 0.5 * (ts[i] - ts[i - 1]);
+            let (ya, yb) = (ys[i - 1], ys[i]);
+            lo = lo.min(yb);
+            hi = hi.max(yb);
+            let (mut pa, mut pb) = (ya, yb);
+            for v in &mut self.z[1..dg] {
+                pa *= ya;
+                pb *= yb;
+                *v += half * (pa + pb);
+            }
+        }
+        self.windows.push_column_ranged(&self.z, dy, &[Interval { lo, hi }])
+    }
+
+    /// Window `w`'s look at time `t` with risk `risk` (the calibrated schedule's `δ_{w,k}`),
+    /// run-level risk `delta` and look number `k`.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn look(
+        &mut self,
+        w: usize,
+        k: u64,
+        t: f64,
+        risk: f64,
+        delta: f64,
+        margin: f64,
+        ridge: f64,
+        min_pivot: f64,
+    ) {
+        self.latest[w] = self.compute(w, k, t, risk, delta, margin, ridge, min_pivot);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn compute(
+        &mut self,
+        w: usize,
+        k: u64,
+        t: f64,
+        risk: f64,
+        delta: f64,
+        margin: f64,
+        ridge: f64,
+        min_pivot: f64,
+    ) -> Option<NonlinearLook> {
+        let (dg, m) = (self.cfg.degree, self.gain.len());
+        let d = dg + m;
+        let mut region = [Interval::EMPTY];
+        self.windows.window_range(w, &mut region);
+        let region = region[0];
+        if !region.is_proper() {
+            return None;
+        }
+        let mid = 0.5 * (region.lo + region.hi);
+        // a(y_mid): the direction whose weights give ν.
+        self.dir[0] = 1.0;
+        let mut power = 1.0;
+        for i in 1..dg {
+            power *= mid;
+            self.dir[i] = (i + 1) as f64 * power;
+        }
+        self.dir[dg..d].copy_from_slice(&self.gain);
+        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
+        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
+        {
+            return None;
+        }
+        let blocks = (self.est.columns / self.horizon) as f64;
+        let nu = self.est.effective_blocks.min(blocks) - d as f64;
+        let rank = if dg == 1 || region.hi == region.lo { 1 } else { dg };
+        let c = crate::nonlinear::simultaneous_multiplier(rank, nu, risk);
+        let c_upper = t_quantile(nu, delta);
+        let th = &self.est.theta;
+        // β̂(y) = Σ_i f_i y^i, f_0 = −(θ_1 + B K), f_i = −(i + 1) θ_{i+1}.
+        let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
+        self.poly_f[0] = -(th[0] + bk);
+        for i in 1..dg {
+            self.poly_f[i] = -((i + 1) as f64) * th[i];
+        }
+        // s(y)² = Σ_n y^n Σ_{i+j=n} A_iᵀ Ω A_j with A_0 = e_0 + Σ K_l e_{D+l}, A_i = (i+1) e_i.
+        let cov = &self.cov;
+        let a_om_a = |i: usize, j: usize| -> f64 {
+            let entry = |r: usize, s: usize| cov[r * d + s];
+            // Coordinates of A_i as (index, weight) pairs.
+            let coords = |i: usize, f: &mut dyn FnMut(usize, f64)| {
+                if i == 0 {
+                    f(0, 1.0);
+                    for (l, &g) in self.gain.iter().enumerate() {
+                        f(dg + l, g);
+                    }
+                } else {
+                    f(i, (i + 1) as f64);
+                }
+            };
+            let mut v = 0.0;
+            coords(i, &mut |r, wr| coords(j, &mut |s, ws| v += wr * ws * entry(r, s)));
+            v
+        };
+        self.poly_s.fill(0.0);
+        for i in 0..dg {
+            for j in 0..dg {
+                self.poly_s[i + j] += a_om_a(i, j);
+            }
+        }
+        let cells = if region.hi > region.lo { self.cfg.cells } else { 1 };
+        let width = (region.hi - region.lo) / cells as f64;
+        let (mut cert, mut worst, mut beta_min, mut upper) =
+            (f64::INFINITY, mid, f64::INFINITY, f64::INFINITY);
+        for cell in 0..cells {
+            let a = region.lo + width * cell as f64;
+            let b = if cell + 1 == cells { region.hi } else { a + width };
+            let (f_lo, f_hi) = polynomial_bounds(&self.poly_f, a, b, &mut self.work);
+            let (_, s2_hi) = polynomial_bounds(&self.poly_s, a, b, &mut self.work);
+            let s_hi = s2_hi.max(0.0).sqrt();
+            let value = f_lo - c * s_hi;
+            if value < cert {
+                cert = value;
+                worst = 0.5 * (a + b);
+            }
+            beta_min = beta_min.min(f_lo);
+            upper = upper.min(f_hi + c_upper * s_hi);
+        }
+        let test = self.wald_test(dg, d, nu, delta);
+        (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
+            window: self.windows.window(w),
+            look: k,
+            t,
+            certificate: cert,
+            beta_hat_min: beta_min,
+            multiplier: c,
+            nu,
+            region,
+            worst,
+            upper: (upper < margin).then_some(upper),
+            test,
+        })
+    }
+
+    /// The Wald test of `θ_2 … θ_D` (the coefficients of `y², …, y^D`).
+    fn wald_test(&mut self, dg: usize, d: usize, nu: f64, delta: f64) -> Option<NonlinearityTest> {
+        let q = dg - 1;
+        if q == 0 {
+            return None;
+        }
+        for i in 0..q {
+            for j in 0..q {
+                self.sub[i * q + j] = self.cov[(i + 1) * d + (j + 1)];
+            }
+            self.rhs[i] = self.est.theta[i + 1];
+        }
+        if !linalg::cholesky_in_place(&mut self.sub, q) {
+            return None;
+        }
+        self.work[..q].copy_from_slice(&self.rhs[..q]);
+        linalg::cholesky_solve_in_place(&self.sub, q, &mut self.rhs[..q]);
+        let quad: f64 = self.work[..q].iter().zip(&self.rhs[..q]).map(|(a, b)| a * b).sum();
+        let alpha = self.cfg.test_risk.unwrap_or(delta);
+        let (qf, d2) = (q as f64, nu - q as f64 + 1.0);
+        let threshold = nu * qf / d2 * f_quantile(qf, d2, alpha);
+        (quad.is_finite() && d2 > 0.0).then_some(NonlinearityTest { statistic: quad, threshold })
+    }
+
+    /// The largest standing nonlinear certificate, and why the gate stays closed if none.
+    pub(crate) fn verdict(
+        &self,
+        margin: f64,
+        warming: NotCertified,
+    ) -> (Option<NonlinearLook>, Option<NotCertified>) {
+        let mut best: Option<NonlinearLook> = None;
+        let mut contradicted = None;
+        for look in self.latest.iter().flatten() {
+            let against = self
+                .latest
+                .iter()
+                .flatten()
+                .find(|s| s.t >= look.t && s.upper.is_some_and(|u| u < margin));
+            if let Some(s) = against {
+                contradicted.get_or_insert(NotCertified::RateDropped {
+                    window: s.window,
+                    upper: s.upper.unwrap_or(f64::INFINITY),
+                });
+                continue;
+            }
+            if best.is_none_or(|b| look.certificate > b.certificate) {
+                best = Some(*look);
+            }
+        }
+        let blocked = if best.is_some() { None } else { Some(contradicted.unwrap_or(warming)) };
+        (best, blocked)
+    }
+
+    /// Check a deserialised state against a fresh one.
+    pub(crate) fn check(&self, fresh: &Self) -> Result<(), CertifyError> {
+        self.windows.check_state()?;
+        let ok = self.cfg == fresh.cfg
+            && self.horizon == fresh.horizon
+            && self.gain == fresh.gain
+            && self.windows.count() == fresh.windows.count()
+            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
+            && self.est.matches(&fresh.est)
+            && self.latest.len() == fresh.latest.len()
+            && [
+                (self.z.len(), fresh.z.len()),
+                (self.dir.len(), fresh.dir.len()),
+                (self.cov.len(), fresh.cov.len()),
+                (self.poly_f.len(), fresh.poly_f.len()),
+                (self.poly_s.len(), fresh.poly_s.len()),
+                (self.work.len(), fresh.work.len()),
+                (self.sub.len(), fresh.sub.len()),
+                (self.rhs.len(), fresh.rhs.len()),
+            ]
+            .iter()
+            .all(|(a, b)| a == b);
+        if ok {
+            Ok(())
+        } else {
+            Err(CertifyError::Checkpoint("nonlinear state does not match its configuration".into()))
+        }
+    }
+}

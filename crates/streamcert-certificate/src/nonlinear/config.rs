@@ -1,0 +1,114 @@
+//! [`NonlinearConfig`]: the feature library and region rule of the nonlinear certificate, and
+//! their validation.
+
+use serde::{Deserialize, Serialize};
+use streamcert_regression::RegressionConfig;
+
+use crate::CertifyError;
+
+/// Settings of the nonlinear certificate (an addition to the paper; see the
+/// [`nonlinear`](crate::nonlinear) module). It needs a [`Calibration`](crate::Calibration):
+/// it shares its windows, looks and risk `δ`.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NonlinearConfig {
+    /// Degree `D >= 1` of the polynomial feature library `φ(y) = (y, y², …, y^D)` (default 3).
+    /// `D = 1` is the linear model: the certificate then equals the calibrated one.
+    #[serde(default = "default_degree")]
+    pub degree: usize,
+    /// Cells of the grid over the region on which the certificate's minimum is bounded
+    /// (default 32; `1..=4096`). The bound holds between grid points too (interval bounds of
+    /// the polynomials on each cell), so more cells only tighten it.
+    #[serde(default = "default_cells")]
+    pub cells: usize,
+    /// Risk of the nonlinearity test (default: the calibration's `δ`). When the terms of
+    /// degree `>= 2` are significant at this risk for a window, that window's *linear*
+    /// calibrated certificate does not stand ([`NotCertified::VaryingDynamics`]). Closing a
+    /// gate costs no validity, so this risk is not part of `δ`.
+    ///
+    /// [`NotCertified::VaryingDynamics`]: crate::NotCertified::VaryingDynamics
+    #[serde(default)]
+    pub test_risk: Option<f64>,
+}
+
+fn default_degree() -> usize {
+    3
+}
+fn default_cells() -> usize {
+    32
+}
+
+impl Default for NonlinearConfig {
+    fn default() -> Self {
+        Self { degree: default_degree(), cells: default_cells(), test_risk: None }
+    }
+}
+
+impl NonlinearConfig {
+    /// Degree `degree`, every other setting at its default.
+    #[must_use]
+    pub fn with_degree(degree: usize) -> Self {
+        Self { degree, ..Self::default() }
+    }
+
+    /// Regressors per column: `D` features and `m` inputs.
+    #[must_use]
+    pub fn regressors(&self, inputs: usize) -> usize {
+        self.degree + inputs
+    }
+
+    /// Check the settings against the regression (one output) and the calibration's smallest
+    /// window for `D + m` unknowns.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] saying what would be valid.
+    pub fn validate(&self, reg: &RegressionConfig, calibrated: bool) -> Result<(), CertifyError> {
+        let bad = |field: &'static str, reason: String| {
+            Err(CertifyError::InvalidConfig { field, reason })
+        };
+        if !calibrated {
+            return bad(
+                "nonlinear",
+                "the nonlinear certificate is calibrated: it needs a calibration (set \
+                 [calibration] delta, for example 0.01)"
+                    .into(),
+            );
+        }
+        if reg.outputs != 1 {
+            return bad(
+                "nonlinear",
+                format!(
+                    "the nonlinear certificate is built for one output (p = 1), got p = {}: \
+                     certify each output's loop separately, or drop [nonlinear] and rely on \
+                     the linear calibrated certificate, which assumes the Jacobian is constant \
+                     over the window",
+                    reg.outputs
+                ),
+            );
+        }
+        if !(1..=8).contains(&self.degree) {
+            return bad("nonlinear.degree", format!("must lie in 1..=8, got {}", self.degree));
+        }
+        if !(1..=4096).contains(&self.cells) {
+            return bad("nonlinear.cells", format!("must lie in 1..=4096, got {}", self.cells));
+        }
+        if let Some(a) = self.test_risk {
+            if !(a > 0.0 && a < 1.0) {
+                return bad("nonlinear.test_risk", format!("must lie in (0, 1), got {a}"));
+            }
+        }
+        let d = self.regressors(reg.inputs);
+        let min = crate::Calibration::min_window(reg.horizon, d);
+        if reg.window < min {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for the nonlinear certificate of degree {} with h = {} \
+                     and m = {}: the smallest valid window is {min} columns (h · (D + m + 2))",
+                    reg.window, self.degree, reg.horizon, reg.inputs
+                ),
+            );
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,290 @@
+//! The nonlinear certificate and the region of every certificate: against the true
+//! state-dependent rate of scalar systems (`−x tanh x`, a cubic, a polynomial with a
+//! non-contracting band), the coefficient covariance against a batch recompute, degree 1
+//! against the linear calibrated certificate (property), and the nonlinearity test closing
+//! the linear calibrated gate.
+
+use nalgebra::{DMatrix, DVector};
+use proptest::prelude::*;
+use streamcert::certificate::{
+    Calibration, Certifier, CertifierConfig, CertifyError, Interval, NonlinearConfig, NotCertified,
+};
+use streamcert::dynamics::{Process, ScalarDrift, ScalarScenario, Trajectory};
+use streamcert::regression::{
+    InputIntegral, InstrumentedWindows, RegressionConfig, WindowEstimate,
+};
+
+const H: usize = 5;
+
+/// Calibrated (`δ = 0.01`, base window `window`) and nonlinear (degree `degree`) certifier
+/// for one output and one input.
+pub(crate) fn config(k: f64, margin: f64, window: usize, degree: usize) -> CertifierConfig {
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(1, 1, window, H, 1e-4)
+    };
+    CertifierConfig {
+        calibration: Some(Calibration::new(0.01)),
+        nonlinear: Some(NonlinearConfig::with_degree(degree)),
+        ..CertifierConfig::new(reg, vec![k], 0.1, margin, 1)
+    }
+}
+
+/// The loop: `ẋ = −x tanh x + u + w`, `u = −1.1 x + PRBS(±1.5, held 1 s)`, σ = 0.1,
+/// 40 s at dt = 0.01.
+fn tanh_loop() -> ScalarScenario {
+    ScalarScenario {
+        drift: ScalarDrift::NegXTanhX,
+        b: 1.0,
+        noise: Process::Gaussian { sigma: 0.1 },
+        k_explore: -1.1,
+        dither: 1.5,
+        dither_hold: 1.0,
+        dt: 0.01,
+        steps: 4000,
+        x0: 0.0,
+    }
+}
+
+/// The smallest true rate over `[lo, hi]` by a dense scan (the rates here are smooth).
+fn min_rate(s: &ScalarScenario, k: f64, r: Interval) -> f64 {
+    (0..=400)
+        .map(|i| s.local_rate(r.lo + (r.hi - r.lo) * f64::from(i) / 400.0, k))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Run `s` (seed) through `cfg`; for every sample with a nonlinear certificate, the
+/// certificate and the smallest true rate over its region.
+fn trace(
+    s: &ScalarScenario,
+    cfg: &CertifierConfig,
+    seed: u64,
+) -> (Trajectory, Vec<(f64, f64)>, Certifier) {
+    let traj = s.run(seed).expect("valid scenario");
+    let k = cfg.gain[0];
+    let mut cert = Certifier::new(cfg.clone()).expect("valid");
+    let mut out = Vec::new();
+    for i in 0..traj.t.len() {
+        let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite data");
+        if let (Some(v), Some(r)) = (ev.nonlinear.value, ev.nonlinear_region) {
+            out.push((v, min_rate(s, k, r)));
+        }
+    }
+    (traj, out, cert)
+}
+
+#[test]
+fn the_nonlinear_certificate_stays_below_the_true_rate_over_its_region() {
+    let cubic = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, 0.5, 0.0, -0.6]),
+        k_explore: -1.5,
+        dither: 1.0,
+        dither_hold: 0.5,
+        ..tanh_loop()
+    };
+    // A band of non-contraction between two contracting regions: f' = 0.3 − 1.2 x² + … .
+    let band = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, -0.2, 0.9, -0.5]),
+        k_explore: -1.2,
+        dither: 1.2,
+        dither_hold: 0.5,
+        ..tanh_loop()
+    };
+    for (name, s, k) in [("tanh", tanh_loop(), -1.1), ("cubic", cubic, -1.5), ("band", band, -1.2)]
+    {
+        let mut steps = 0;
+        for seed in 0..6 {
+            let (_, out, _) = trace(&s, &config(k, 0.05, 50, 3), seed);
+            steps += out.len();
+            for (v, truth) in out {
+                assert!(v <= truth, "{name} seed {seed}: certificate {v} above min rate {truth}");
+            }
+        }
+        assert!(steps > 1000, "{name}: only {steps} certified samples");
+    }
+}
+
+#[test]
+fn the_tanh_loop_is_refused_by_the_nonlinear_gate_and_the_linear_gate_is_told() {
+    let s = tanh_loop();
+    let cfg = config(-1.1, 0.05, 50, 3);
+    let mut opened_nl = 0;
+    let mut varying = 0;
+    for seed in 0..10 {
+        let traj = s.run(seed).expect("valid");
+        let mut cert = Certifier::new(cfg.clone()).expect("valid");
+        for i in 0..traj.t.len() {
+            let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite");
+            let visits_band = traj.x[..=i].iter().any(|&x| s.local_rate(x, -1.1) < 0.05);
+            if ev.nonlinear.open && visits_band {
+                // The region of the open certificate must then exclude every band state.
+                let r = ev.nonlinear_region.expect("an open gate has a region");
+                assert!(min_rate(&s, -1.1, r) >= 0.05, "seed {seed}: open over {r:?}");
+                opened_nl += 1;
+            }
+            if matches!(ev.calibrated.reason, Some(NotCertified::VaryingDynamics { .. })) {
+                varying += 1;
+            }
+        }
+    }
+    // The nonlinearity test fires on this loop (the linear model is refused at some looks).
+    assert!(varying > 0, "the nonlinearity test never fired");
+    // Whenever the gate was open after the band was visited, its region excluded the band.
+    let _ = opened_nl;
+}
+
+#[test]
+fn a_contracting_nonlinear_loop_is_certified_with_its_region() {
+    // f = −x − 0.3 x³ under k = −1: the rate 2 + 0.9 x² is at least 2 everywhere.
+    let s = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
+        k_explore: -1.0,
+        dither: 3.0,
+        dither_hold: 1.0,
+        ..tanh_loop()
+    };
+    let mut opened = 0;
+    for seed in 0..10 {
+        let (traj, out, cert) = trace(&s, &config(-1.0, 0.05, 50, 3), seed);
+        opened += usize::from(
+            cert.gate(streamcert::certificate::CertificateKind::Nonlinear)
+                .first_opened_at
+                .is_some(),
+        );
+        assert!(out.iter().all(|(v, truth)| v <= truth));
+        // The paper window's region is the range of the last M + h samples.
+        let n = traj.t.len();
+        let region = cert.region();
+        let from = n - (50 + H);
+        let lo = traj.y[from..].iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = traj.y[from..].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!(region[0], Interval { lo, hi });
+    }
+    assert!(opened >= 9, "opened in {opened} of 10 runs");
+}
+
+#[test]
+fn the_coefficient_covariance_equals_a_batch_recompute() {
+    // Random columns with p = 1, d = 3 (two features and one input), J = 2.
+    let mut w = InstrumentedWindows::with_regressors(1, 3, 2, 1, 2, &[20, 40]).expect("valid");
+    let mut cols = Vec::new();
+    let mut x = 0.37f64;
+    for _ in 0..200 {
+        let mut z = [0.0; 3];
+        for v in &mut z {
+            x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+            *v = x - 0.5;
+        }
+        x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+        let dy = [0.8 * z[0] - 0.3 * z[1] + 0.5 * z[2] + 0.1 * (x - 0.5)];
+        w.push_column(&z, &dy);
+        cols.push((z, dy[0]));
+    }
+    let mut est = WindowEstimate::with_regressors(1, 3, 2);
+    let t = [1.0, 0.4, -1.2];
+    w.estimate(1, 1e-9, &t, 1e-12, &mut est);
+    assert!(est.ready);
+    let mut cov = vec![0.0; 9];
+    assert!(w.coefficient_covariance(1, &mut est, &mut cov));
+    // tᵀ Ω_θ t is the score variance of `estimate` for the same direction.
+    let quad: f64 = (0..3).map(|a| (0..3).map(|b| t[a] * cov[a * 3 + b] * t[b]).sum::<f64>()).sum();
+    assert!((quad / est.score_cov[0] - 1.0).abs() < 1e-9, "{quad} vs {}", est.score_cov[0]);
+    // Batch: the window's 40 instrumented columns (the newest), blocks of h = 2.
+    // Usable from column 5 (the instrument ring holds J h + L + 1 = 6 columns); 97 complete
+    // blocks of 2 end at column 198, so the window is columns 159..=198.
+    let usable: Vec<_> = cols.iter().enumerate().skip(159).take(40).collect();
+    let inst = |q: usize| DVector::from_iterator(6, (1..=2).flat_map(|j| cols[q - j * 2 - 1].0));
+    let (mut nm, mut cw, mut hm) =
+        (DMatrix::zeros(3, 6), DMatrix::zeros(1, 6), DMatrix::zeros(6, 6));
+    for &(q, (z, dy)) in &usable {
+        let wq = inst(q);
+        nm += DVector::from_row_slice(z) * wq.transpose();
+        cw += DMatrix::from_element(1, 1, *dy) * wq.transpose();
+        hm += &wq * wq.transpose();
+    }
+    let hinv = (hm + DMatrix::identity(6, 6) * 1e-9).try_inverse().expect("invertible");
+    let a = &nm * &hinv * nm.transpose() + DMatrix::identity(3, 3) * 1e-9;
+    let ainv = a.try_inverse().expect("invertible");
+    let theta = &cw * &hinv * nm.transpose() * &ainv;
+    for i in 0..3 {
+        assert!((theta[i] - est.theta[i]).abs() < 1e-8 * (1.0 + theta[i].abs()));
+    }
+    let mut omega = DMatrix::zeros(3, 3);
+    for block in usable.chunks(2) {
+        let (mut bn, mut bcw) = (DMatrix::zeros(3, 6), DMatrix::zeros(1, 6));
+        for &(q, (z, dy)) in block {
+            let wq = inst(q);
+            bn += DVector::from_row_slice(z) * wq.transpose();
+            bcw += DMatrix::from_element(1, 1, *dy) * wq.transpose();
+        }
+        let r = bcw - &theta * bn;
+        let g = (r * &hinv * nm.transpose() * &ainv).transpose();
+        omega += &g * g.transpose();
+    }
+    let hf = 2.0f64;
+    omega *= 3.0 * hf * hf / (2.0 * hf * hf + 1.0) * 20.0 / 17.0;
+    for i in 0..9 {
+        assert!(
+            (omega[i] - cov[i]).abs() < 1e-8 * (1.0 + omega[i].abs()),
+            "{i}: {} vs {}",
+            omega[i],
+            cov[i]
+        );
+    }
+}
+
+#[test]
+fn the_configuration_says_what_is_valid() {
+    let mut cfg = config(-1.0, 0.05, 50, 3);
+    cfg.calibration = None;
+    let err = Certifier::new(cfg).unwrap_err();
+    assert!(matches!(err, CertifyError::InvalidConfig { field: "nonlinear", .. }), "{err}");
+    let err = Certifier::new(config(-1.0, 0.05, 25, 3)).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 30"), "{err}");
+    let mut cfg = config(-1.0, 0.05, 50, 3);
+    cfg.regression = RegressionConfig::new(2, 2, 80, H, 1e-4);
+    cfg.gain = vec![0.0; 4];
+    let err = Certifier::new(cfg).unwrap_err();
+    assert!(err.to_string().contains("one output"), "{err}");
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(12))]
+
+    /// On linear data the nonlinear certificate of degree 1 is the linear calibrated one.
+    #[test]
+    fn degree_one_equals_the_linear_calibrated_certificate(
+        a in -1.0f64..0.8, k in -2.5f64..-0.5, seed in 0u64..1000, window in 20usize..80,
+    ) {
+        let s = ScalarScenario {
+            drift: ScalarDrift::Polynomial(vec![0.0, a]),
+            k_explore: k,
+            dither: 1.0,
+            dither_hold: 0.2,
+            steps: 1500,
+            ..tanh_loop()
+        };
+        let traj = s.run(seed).expect("valid");
+        let mut cert = Certifier::new(config(k, 0.05, window, 1)).expect("valid");
+        let mut compared = 0;
+        for i in 0..traj.t.len() {
+            let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite");
+            let lin = cert.calibrated_looks().to_vec();
+            let nl = cert.nonlinear_looks().to_vec();
+            for (l, n) in lin.iter().zip(&nl) {
+                match (l, n) {
+                    (Some(l), Some(n)) => {
+                        let tol = 1e-9 * (1.0 + l.certificate().abs());
+                        prop_assert!((l.certificate() - n.certificate).abs() < tol,
+                            "{} vs {}", l.certificate(), n.certificate);
+                        compared += 1;
+                    }
+                    (None, None) => {}
+                    _ => prop_assert!(false, "one certificate without the other"),
+                }
+            }
+            prop_assert_eq!(ev.calibrated.value.is_some(), ev.nonlinear.value.is_some());
+        }
+        prop_assert!(compared > 0);
+    }
+}

@@ -103,6 +103,41 @@ fn cells() -> Vec<Cell> {
             validity: false,
         },
         Cell {
+            name: "same, process noise σ = 0.02",
+            scenario: ScalarScenario {
+                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
+                k_explore: -1.5,
+                dither: 1.0,
+                dither_hold: 0.5,
+                noise: Process::Gaussian { sigma: 0.02 },
+                ..base()
+            },
+            k: -0.65,
+            validity: false,
+        },
+        Cell {
+            name: "same, rate 0.5 + 1.8 x² (10× the margin)",
+            scenario: ScalarScenario {
+                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
+                k_explore: -1.5,
+                dither: 1.0,
+                dither_hold: 0.5,
+                ..base()
+            },
+            k: -1.0,
+            validity: false,
+        },
+        Cell {
+            name: "−x tanh x, K = −2, process noise σ = 0.02",
+            scenario: ScalarScenario {
+                k_explore: -2.0,
+                noise: Process::Gaussian { sigma: 0.02 },
+                ..base()
+            },
+            k: -2.0,
+            validity: false,
+        },
+        Cell {
             name: "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
             scenario: ScalarScenario { k_explore: -2.0, ..base() },
             k: -2.0,

@@ -393,15 +393,24 @@ impl CalibratedState {
         let nonlinear = self.nonlinear_looks();
         for (w, look) in self.latest.iter().enumerate() {
             let Some(look) = look else { continue };
-            // The same window's nonlinearity test: the linear model does not hold over it.
-            let test = nonlinear.get(w).copied().flatten().and_then(|n| n.test);
-            if let Some(test) = test.filter(|x| x.significant()) {
-                varying.get_or_insert(NotCertified::VaryingDynamics {
-                    window: look.window,
-                    statistic: test.statistic,
-                    threshold: test.threshold,
-                });
-                continue;
+            // With a nonlinear model, the same window's nonlinearity test must have run and
+            // found no variation: a significant test says the linear model does not hold over
+            // the region, and a missing one (no feature fit yet) cannot say that it does.
+            if let Some(state) = &self.nonlinear {
+                let look_nl = nonlinear.get(w).copied().flatten();
+                let tested = look_nl.is_some_and(|n| n.test.is_some() || state.degree() == 1);
+                if let Some(test) = look_nl.and_then(|n| n.test).filter(|t| t.significant()) {
+                    varying.get_or_insert(NotCertified::VaryingDynamics {
+                        window: look.window,
+                        statistic: test.statistic,
+                        threshold: test.threshold,
+                    });
+                    continue;
+                }
+                if !tested {
+                    varying.get_or_insert(NotCertified::LinearityUntested { window: look.window });
+                    continue;
+                }
             }
             // A newer (or equally recent) look whose upper bound is below the margin.
             let against = self

@@ -67,6 +67,13 @@ pub enum NotCertified {
         /// Its threshold at the test's risk.
         threshold: f64,
     },
+    /// Calibrated certificate with a nonlinear model: the window's nonlinearity test has no
+    /// estimate yet (too few columns for the feature fit, or a singular one), so the linear
+    /// model is not checked and the window's linear certificate does not stand.
+    LinearityUntested {
+        /// The window length.
+        window: usize,
+    },
     /// No nonlinear model is configured, so there is no nonlinear certificate.
     NoNonlinearModel,
 }
@@ -100,6 +107,9 @@ impl std::fmt::Display for NotCertified {
                 "dynamics vary over the explored region (window {window}: Wald {statistic:.3} > \
                  {threshold:.3})"
             ),
+            Self::LinearityUntested { window } => {
+                write!(f, "window {window}: linearity not yet tested (no feature fit)")
+            }
             Self::NoNonlinearModel => f.write_str("no nonlinear model configured"),
         }
     }
@@ -135,7 +145,9 @@ pub struct Verdict {
     /// warming up, no excitation, not configured, skipped sample).
     pub value: Option<f64>,
     /// The radius subtracted from the estimate: `ρ` (Gaussian, eq. rho), `ρ(1 + 2ε)`
-    /// (Wasserstein), `ρ_w` (calibrated, [`calibrated_radius`](crate::calibrated_radius)).
+    /// (Wasserstein), `ρ_w` (calibrated, [`calibrated_radius`](crate::calibrated_radius)),
+    /// `min_y β̂(y) − β_nl` (nonlinear: the estimate's own minimum over the region less the
+    /// certificate).
     pub radius: Option<f64>,
     /// The gate: open once `value >= margin` for `consecutive` samples ([`Gate`](crate::Gate)).
     pub open: bool,

@@ -187,6 +187,11 @@ impl NonlinearState {
         })
     }
 
+    /// The polynomial degree `D`.
+    pub(crate) fn degree(&self) -> usize {
+        self.cfg.degree
+    }
+
     pub(crate) fn looks(&self) -> &[Option<NonlinearLook>] {
         &self.latest
     }

@@ -11,7 +11,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, ResidualSource, certificate_value,
+    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, certificate_value,
 };
 use streamcert::regression::{EstimateStatus, RegressionConfig, SlidingRegression};
 
@@ -90,7 +90,17 @@ fn certifier_step(c: &mut Criterion) {
     // Variant 3 is the naive baseline of the full step: the same Gaussian + Wasserstein
     // certifier with `refresh_period = 1`, so the regression statistics are recomputed from the
     // whole window at every sample (`O(M d²)`).
-    let cases = [(1usize, 1usize, 0u8), (1, 1, 1), (1, 1, 2), (1, 1, 3), (10, 10, 0), (10, 10, 1)];
+    // Variant 4 adds the nonlinear certificate of degree 3 to the calibrated one (variant 2 is
+    // its baseline in the same run).
+    let cases = [
+        (1usize, 1usize, 0u8),
+        (1, 1, 1),
+        (1, 1, 2),
+        (1, 1, 3),
+        (1, 1, 4),
+        (10, 10, 0),
+        (10, 10, 1),
+    ];
     for (p, m, variant) in cases {
         let wasserstein = variant == 1 || variant == 3;
         let d = p + m;
@@ -103,8 +113,11 @@ fn certifier_step(c: &mut Criterion) {
         if wasserstein {
             cfg.ambiguity = Some(AmbiguityConfig::paper(150));
         }
-        if variant == 2 {
+        if variant == 2 || variant == 4 {
             cfg.calibration = Some(Calibration::new(0.01));
+        }
+        if variant == 4 {
+            cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
         }
         if variant == 3 {
             cfg.regression.refresh_period = 1;
@@ -114,6 +127,7 @@ fn certifier_step(c: &mut Criterion) {
             "gaussian_and_wasserstein",
             "gaussian_and_calibrated",
             "naive_gaussian_and_wasserstein",
+            "gaussian_calibrated_and_nonlinear_degree3",
         ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
@@ -134,6 +148,7 @@ fn certifier_step(c: &mut Criterion) {
                     ev.gaussian.value,
                     ev.wasserstein.value,
                     ev.calibrated.value,
+                    ev.nonlinear.value,
                     ev.wasserstein.open,
                 ));
             });

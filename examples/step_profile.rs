@@ -12,7 +12,8 @@
 //! Modes: `update` (`SlidingRegression::push`), `estimate` (push + estimate), `ambiguity`
 //! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein),
 //! `gaussian` (`Certifier::push`, the paper's Gaussian certificate only), `calibrated`
-//! (`Certifier::push`, Gaussian + calibrated with its default four windows);
+//! (`Certifier::push`, Gaussian + calibrated with its default windows), `nonlinear` (the same
+//! plus the nonlinear certificate of degree 3);
 //! all for `p = m = 1`, `M = 150`, `h = 5`, on the stream of `benches/regression.rs`.
 
 use std::hint::black_box;
@@ -20,7 +21,7 @@ use std::hint::black_box;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
-use streamcert::certificate::{Calibration, Certifier, CertifierConfig};
+use streamcert::certificate::{Calibration, Certifier, CertifierConfig, NonlinearConfig};
 use streamcert::regression::{RegressionConfig, SlidingRegression};
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -44,7 +45,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Gaussian + calibrated (δ = 0.01, four windows), as the bench's `gaussian_and_calibrated`.
     let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cal_cfg.calibration = Some(Calibration::new(0.01));
-    let mut cal = Certifier::new(cal_cfg)?;
+    let mut cal = Certifier::new(cal_cfg.clone())?;
+    cal_cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
+    let mut nonlinear = Certifier::new(cal_cfg)?;
     let mut gauss = Certifier::new(CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10))?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
@@ -76,6 +79,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "calibrated" => {
                 let ev = cal.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
+            }
+            "nonlinear" => {
+                let ev = nonlinear.push(black_box(t), y, u)?;
+                black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
             }
             other => return Err(format!("unknown mode {other}").into()),
         }

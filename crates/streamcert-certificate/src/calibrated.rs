@@ -96,7 +96,7 @@
 //!   `cargo xtask validity` measures the false-opening rate down to it.
 
 mod config;
-mod quantile;
+pub(crate) mod quantile;
 
 pub use config::Calibration;
 

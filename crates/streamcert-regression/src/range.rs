@@ -2,11 +2,13 @@
 //! the *region* a window's certificate speaks for.
 //!
 //! A linear certificate estimates one averaged (secant) Jacobian over the states its window
-//! visited; the ranges say which states those are. Each channel keeps two monotonic deques
-//! (indices and values, in ring buffers of `W` slots): the maximum's deque holds the samples
-//! not dominated by a later, larger one, so its front is the window's maximum (likewise the
-//! minimum). A push costs amortised `O(1)` per channel, allocates nothing, and the ranges are
-//! exact (no rounding: they are sample values).
+//! visited; the ranges say which states those are. The samples are cut into blocks of `W`; the
+//! window ending at a sample is the tail of the previous block and the head of the current
+//! one, so its extremes are those of the previous block's suffix (formed once when the block
+//! ended) and of the current block's prefix (a running extreme): the block algorithm of van
+//! Herk (1992) and Gil and Werman (1993). A push costs two comparisons per channel and extreme
+//! plus, amortised, two more, allocates nothing, and the ranges are exact (no rounding: they
+//! are sample values).
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -57,69 +59,20 @@ impl Interval {
     }
 }
 
-/// One monotonic deque in a ring of `width` slots.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-struct Deque {
-    idx: Vec<u64>,
-    val: Vec<f64>,
-    head: usize,
-    len: usize,
-}
-
-impl Deque {
-    fn new(width: usize) -> Self {
-        Self { idx: vec![0; width], val: vec![0.0; width], head: 0, len: 0 }
-    }
-
-    /// Push sample `n` with value `x`, dropping samples at or before `n − width` from the
-    /// front and, from the back, the samples `x` dominates (`dominates(x, old)`).
-    #[inline(always)]
-    fn push(&mut self, n: u64, x: f64, width: usize, dominates: impl Fn(f64, f64) -> bool) -> f64 {
-        let slot = |i: usize| if i >= width { i - width } else { i };
-        if self.len > 0 && self.idx[self.head] + width as u64 <= n {
-            self.head = slot(self.head + 1);
-            self.len -= 1;
-        }
-        while self.len > 0 && dominates(x, self.val[slot(self.head + self.len - 1)]) {
-            self.len -= 1;
-        }
-        let back = slot(self.head + self.len);
-        self.idx[back] = n;
-        self.val[back] = x;
-        self.len += 1;
-        self.val[self.head]
-    }
-
-    /// Indices strictly increasing within the window ending at sample `n − 1`, values ordered
-    /// by `ordered(earlier, later)`, every value finite.
-    fn is_consistent(&self, n: u64, width: usize, ordered: impl Fn(f64, f64) -> bool) -> bool {
-        if self.idx.len() != width || self.val.len() != width || self.head >= width {
-            return false;
-        }
-        if self.len > width || (self.len == 0) != (n == 0) {
-            return false;
-        }
-        let slot = |i: usize| (self.head + i) % width;
-        let newest_ok = self.len == 0 || self.idx[slot(self.len - 1)] + 1 == n;
-        let oldest_ok = self.len == 0 || self.idx[self.head] + width as u64 >= n;
-        newest_ok
-            && oldest_ok
-            && (0..self.len).all(|i| self.val[slot(i)].is_finite())
-            && (1..self.len).all(|i| {
-                let (a, b) = (slot(i - 1), slot(i));
-                self.idx[a] < self.idx[b] && ordered(self.val[a], self.val[b])
-            })
-    }
-}
-
 /// Sliding minimum and maximum of `channels` values over the last `width` pushes; see the
 /// module docs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SlidingRange {
     width: usize,
     count: u64,
-    max: Vec<Deque>,
-    min: Vec<Deque>,
+    // Per channel `c`, slots `c·width .. (c + 1)·width`: the values of the current block of
+    // `width` samples (position `n mod width`; positions after the current one still hold
+    // the previous block), and the previous block's suffix maxima and minima.
+    vals: Vec<f64>,
+    suffix_max: Vec<f64>,
+    suffix_min: Vec<f64>,
+    // Per channel: the current block's prefix extremes.
+    prefix: Vec<Interval>,
     ranges: Vec<Interval>,
 }
 
@@ -138,8 +91,10 @@ impl SlidingRange {
         Ok(Self {
             width,
             count: 0,
-            max: (0..channels).map(|_| Deque::new(width)).collect(),
-            min: (0..channels).map(|_| Deque::new(width)).collect(),
+            vals: vec![0.0; channels * width],
+            suffix_max: vec![0.0; channels * width],
+            suffix_min: vec![0.0; channels * width],
+            prefix: vec![Interval::EMPTY; channels],
             ranges: vec![Interval::EMPTY; channels],
         })
     }
@@ -157,17 +112,53 @@ impl SlidingRange {
     }
 
     /// Absorb one sample, the channels' values in order (the first `channels` of `values`
-    /// are read). Amortised `O(1)` per channel, no allocation.
+    /// are read). `O(1)` amortised per channel (the block algorithm of van Herk and
+    /// Gil–Werman: a block's suffix extremes are formed once, when the next block starts),
+    /// no allocation.
     #[inline]
     pub fn push(&mut self, values: impl IntoIterator<Item = f64>) {
-        let (n, width) = (self.count, self.width);
-        for (((x, hi), lo), out) in
-            values.into_iter().zip(&mut self.max).zip(&mut self.min).zip(&mut self.ranges)
-        {
-            out.hi = hi.push(n, x, width, |new, old| new >= old);
-            out.lo = lo.push(n, x, width, |new, old| new <= old);
+        let w = self.width;
+        let i = (self.count % w as u64) as usize;
+        let full = self.count >= w as u64;
+        if i == 0 && self.count > 0 {
+            self.close_block();
+        }
+        for (c, x) in values.into_iter().take(self.ranges.len()).enumerate() {
+            let base = c * w;
+            self.vals[base + i] = x;
+            let p = &mut self.prefix[c];
+            *p = if i == 0 { Interval { lo: x, hi: x } } else { p.hull(Interval { lo: x, hi: x }) };
+            // The window is positions i + 1 .. w of the previous block and 0 ..= i of this one.
+            self.ranges[c] = if full && i + 1 < w {
+                p.hull(Interval {
+                    lo: self.suffix_min[base + i + 1],
+                    hi: self.suffix_max[base + i + 1],
+                })
+            } else {
+                *p
+            };
         }
         self.count += 1;
+    }
+
+    /// The block that just ended becomes the previous block: its suffix extremes.
+    #[cold]
+    fn close_block(&mut self) {
+        let w = self.width;
+        for ((v, hi), lo) in self
+            .vals
+            .chunks_exact(w)
+            .zip(self.suffix_max.chunks_exact_mut(w))
+            .zip(self.suffix_min.chunks_exact_mut(w))
+        {
+            let (mut mx, mut mn) = (f64::NEG_INFINITY, f64::INFINITY);
+            for j in (0..w).rev() {
+                mx = mx.max(v[j]);
+                mn = mn.min(v[j]);
+                hi[j] = mx;
+                lo[j] = mn;
+            }
+        }
     }
 
     /// The range of each channel over the last `min(count, width)` samples
@@ -180,35 +171,62 @@ impl SlidingRange {
     /// Forget every sample.
     pub fn reset(&mut self) {
         self.count = 0;
-        for d in self.max.iter_mut().chain(&mut self.min) {
-            d.head = 0;
-            d.len = 0;
-        }
+        self.prefix.fill(Interval::EMPTY);
         self.ranges.fill(Interval::EMPTY);
     }
 
-    /// Check a deserialised state: `channels` channels of width `width`, deques ordered and
-    /// within the window, and the reported ranges equal to the deques' fronts.
+    /// Check a deserialised state: `channels` channels of width `width`, every value finite,
+    /// and the prefix extremes, the suffix extremes still in use and the reported ranges equal
+    /// to what the stored values give.
     ///
     /// # Errors
     /// [`RegressionError::CorruptState`].
     pub fn check_state(&self, channels: usize, width: usize) -> Result<(), RegressionError> {
-        let shape = self.width == width
-            && self.max.len() == channels
-            && self.min.len() == channels
+        let w = width;
+        let shape = self.width == w
+            && self.vals.len() == channels * w
+            && self.suffix_max.len() == channels * w
+            && self.suffix_min.len() == channels * w
+            && self.prefix.len() == channels
             && self.ranges.len() == channels;
-        let n = self.count;
-        let ok = shape
-            && self.max.iter().all(|d| d.is_consistent(n, width, |a, b| a > b))
-            && self.min.iter().all(|d| d.is_consistent(n, width, |a, b| a < b))
-            && self.max.iter().zip(&self.min).zip(&self.ranges).all(|((hi, lo), r)| {
-                if n == 0 {
-                    *r == Interval::EMPTY
-                } else {
-                    r.hi == hi.val[hi.head] && r.lo == lo.val[lo.head]
+        let bad = || Err(RegressionError::CorruptState("sliding ranges".into()));
+        if !shape {
+            return bad();
+        }
+        if self.count == 0 {
+            let empty = |r: &Interval| *r == Interval::EMPTY;
+            return if self.ranges.iter().all(empty) { Ok(()) } else { bad() };
+        }
+        // The newest sample is at position i of the current block.
+        let i = ((self.count - 1) % w as u64) as usize;
+        let full = self.count > w as u64;
+        for c in 0..channels {
+            let v = &self.vals[c * w..(c + 1) * w];
+            if !v.iter().all(|x| x.is_finite()) {
+                return bad();
+            }
+            let hull = |r: std::ops::Range<usize>| {
+                v[r].iter().fold(Interval::EMPTY, |a, &x| a.hull(Interval { lo: x, hi: x }))
+            };
+            let prefix = hull(0..i + 1);
+            let mut want = prefix;
+            if full && i + 1 < w {
+                // Positions after i still hold the previous block, whose suffix is in use.
+                for j in i + 1..w {
+                    let tail = hull(j..w);
+                    if self.suffix_max[c * w + j] != tail.hi
+                        || self.suffix_min[c * w + j] != tail.lo
+                    {
+                        return bad();
+                    }
                 }
-            });
-        if ok { Ok(()) } else { Err(RegressionError::CorruptState("sliding ranges".into())) }
+                want = want.hull(hull(i + 1..w));
+            }
+            if self.prefix[c] != prefix || self.ranges[c] != want {
+                return bad();
+            }
+        }
+        Ok(())
     }
 }
 
@@ -261,7 +279,10 @@ mod tests {
             r.push([v]);
         }
         let mut bad = r.clone();
-        bad.max[0].head = 9;
+        bad.suffix_max[3] = 9.0;
+        assert!(bad.check_state(1, 4).is_err());
+        let mut bad = r.clone();
+        bad.vals[0] = f64::NAN;
         assert!(bad.check_state(1, 4).is_err());
         let mut bad = r.clone();
         bad.ranges[0].hi = 7.0;

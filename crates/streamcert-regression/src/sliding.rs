@@ -177,9 +177,11 @@ impl SlidingRegression {
             return false;
         }
         let mut slot = next(self.hist_head, cap);
+        let (t, y) = (&mut t[..cap], &mut y[..cap * p]);
         for i in 0..cap {
             t[i] = self.hist_t[slot];
-            y[i * p..(i + 1) * p].copy_from_slice(&self.hist_y[slot * p..(slot + 1) * p]);
+            // Element by element: for the few values of one sample a loop beats `memcpy`.
+            copy(&mut y[i * p..(i + 1) * p], &self.hist_y[slot * p..(slot + 1) * p]);
             slot = next(slot, cap);
         }
         true

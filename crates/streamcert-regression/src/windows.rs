@@ -389,6 +389,10 @@ impl InstrumentedWindows {
         // Literal dimensions for p = m = 1 with one instrument interval.
         if self.p == 1 && self.m == 1 && self.intervals == 1 {
             self.push_column_dims(z, dy, 1, 2, 2)
+        } else if self.p == 1 && self.m == 3 && self.intervals == 1 {
+            // One output with four regressors (the nonlinear certificate's cubic library and
+            // one input).
+            self.push_column_dims(z, dy, 1, 4, 4)
         } else {
             let lay = self.layout();
             self.push_column_dims(z, dy, lay.p, lay.d, lay.k)

@@ -77,7 +77,7 @@ fn t_quantile_halley(nu: f64, risk: f64) -> Option<f64> {
 
 /// The continued fraction of the regularised incomplete beta function `I_x(a, b)` (modified
 /// Lentz, as in Numerical Recipes' `betacf`); `None` if it does not converge.
-fn beta_continued_fraction(a: f64, b: f64, x: f64) -> Option<f64> {
+pub(crate) fn beta_continued_fraction(a: f64, b: f64, x: f64) -> Option<f64> {
     const TINY: f64 = 1e-300;
     let (qab, qap, qam) = (a + b, a + 1.0, a - 1.0);
     let mut c = 1.0;

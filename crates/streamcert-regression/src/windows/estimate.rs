@@ -36,9 +36,12 @@ pub struct WindowEstimate {
     row: Vec<f64>,
     block: Vec<f64>,
     sums: Vec<f64>,
-    // One block's coefficient influence (p × d), for `coefficient_covariance`.
+    // One block's coefficient influence (p × d), and `Q A⁻¹` (k rows of d), for
+    // `coefficient_covariance`.
     #[serde(default)]
     g: Vec<f64>,
+    #[serde(default)]
+    qa: Vec<f64>,
 }
 
 impl WindowEstimate {
@@ -63,6 +66,7 @@ impl WindowEstimate {
             block: vec![0.0; p * p],
             sums: vec![0.0; Layout { p, d, k }.stride()],
             g: vec![0.0; p * d],
+            qa: vec![0.0; k * d],
         }
     }
 
@@ -87,6 +91,7 @@ impl WindowEstimate {
             && self.block.len() == other.block.len()
             && self.sums.len() == other.sums.len()
             && self.g.len() == other.g.len()
+            && self.qa.len() == other.qa.len()
     }
 }
 
@@ -195,10 +200,10 @@ impl InstrumentedWindows {
                 out.x[j * k + b] = v;
             }
         }
-        let (sum_w, sum_w2) = if (p, d, k) == (1, 2, 2) {
-            self.block_scores(w, out, 1, 2, 2)
-        } else {
-            self.block_scores(w, out, p, d, k)
+        let (sum_w, sum_w2) = match (p, d, k) {
+            (1, 2, 2) => self.block_scores(w, out, 1, 2, 2),
+            (1, 4, 4) => self.block_scores(w, out, 1, 4, 4),
+            _ => self.block_scores(w, out, p, d, k),
         };
         out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
         let hf = self.horizon as f64;
@@ -304,43 +309,80 @@ impl InstrumentedWindows {
         out: &mut WindowEstimate,
         cov: &mut [f64],
     ) -> bool {
-        let lay = self.layout();
-        let (p, d, k) = (lay.p, lay.d, lay.k);
         if !out.ready {
             return false;
         }
+        let lay = self.layout();
+        // Literal dimensions for the common shapes let the compiler unroll the kernels.
+        match (lay.p, lay.d, lay.k) {
+            (1, 2, 2) => self.coefficient_covariance_dims(w, out, cov, 1, 2, 2),
+            (1, 4, 4) => self.coefficient_covariance_dims(w, out, cov, 1, 4, 4),
+            (p, d, k) => self.coefficient_covariance_dims(w, out, cov, p, d, k),
+        }
+        true
+    }
+
+    /// [`coefficient_covariance`](Self::coefficient_covariance) with the dimensions passed in.
+    #[inline(always)]
+    fn coefficient_covariance_dims(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+        p: usize,
+        d: usize,
+        k: usize,
+    ) {
+        let lay = Layout { p, d, k };
         let n = p * d;
         let cov = &mut cov[..n * n];
         cov.fill(0.0);
+        // Q A⁻¹ (k × d), once: column a of A⁻¹ is the solve of the unit vector e_a (A is
+        // symmetric, so row and column agree).
+        for a in 0..d {
+            let e = &mut out.g[..d];
+            e.fill(0.0);
+            e[a] = 1.0;
+            linalg::lu_solve_in_place(&out.lu, d, &out.piv, e);
+            for b in 0..k {
+                let mut v = 0.0;
+                for c in 0..d {
+                    v += out.q[c * k + b] * out.g[c];
+                }
+                out.qa[b * d + a] = v;
+            }
+        }
         let blocks = self.windows[w].min(self.block_len);
         let stride = lay.stride();
         let (older, newer) = self.window_blocks(w);
+        let (theta, qa) = (&out.theta[..p * d], &out.qa[..k * d]);
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()]);
             for i in 0..p {
-                let th = &out.theta[i * d..(i + 1) * d];
-                let r = &mut out.row[..k];
-                for b in 0..k {
-                    let mut v = bcw[i * k + b];
-                    for a in 0..d {
-                        v -= th[a] * bn[a * k + b];
-                    }
-                    r[b] = v;
-                }
+                let th = &theta[i * d..(i + 1) * d];
                 let g = &mut out.g[i * d..(i + 1) * d];
-                for a in 0..d {
-                    let mut v = 0.0;
-                    for b in 0..k {
-                        v += out.q[a * k + b] * out.row[b];
+                g.fill(0.0);
+                for b in 0..k {
+                    // r_b = Cw_{j,i,b} − θ_i · N_{j,·,b}, then g += r_b · (Q A⁻¹)_b.
+                    let mut r = bcw[i * k + b];
+                    for a in 0..d {
+                        r -= th[a] * bn[a * k + b];
                     }
-                    g[a] = v;
+                    for (ga, &m) in g.iter_mut().zip(&qa[b * d..(b + 1) * d]) {
+                        *ga += r * m;
+                    }
                 }
-                linalg::lu_solve_in_place(&out.lu, d, &out.piv, g);
             }
+            let g = &out.g[..n];
             for a in 0..n {
-                for b in 0..n {
-                    cov[a * n + b] += out.g[a] * out.g[b];
+                for b in a..n {
+                    cov[a * n + b] += g[a] * g[b];
                 }
+            }
+        }
+        for a in 0..n {
+            for b in 0..a {
+                cov[a * n + b] = cov[b * n + a];
             }
         }
         let hf = self.horizon as f64;
@@ -349,6 +391,5 @@ impl InstrumentedWindows {
         for v in cov.iter_mut() {
             *v *= scale;
         }
-        true
     }
 }

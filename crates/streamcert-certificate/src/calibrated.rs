@@ -297,15 +297,9 @@ impl CalibratedState {
         if built > self.seen {
             self.seen = built;
             let block_done = match reg.newest_column() {
-                Some((z, dy)) if reg.column_samples(&mut self.ts, &mut self.ys) => {
-                    let p = self.col_range.len();
-                    for (i, r) in self.col_range.iter_mut().enumerate() {
-                        *r = Interval::EMPTY;
-                        for v in self.ys.iter().skip(i).step_by(p) {
-                            *r = r.hull(Interval { lo: *v, hi: *v });
-                        }
-                    }
+                Some((z, dy)) if reg.newest_column_ranges(&mut self.col_range) => {
                     if let Some(n) = &mut self.nonlinear {
+                        reg.column_samples(&mut self.ts, &mut self.ys);
                         n.push(z, dy, &self.ts, &self.ys);
                     }
                     self.windows.push_column_ranged(z, dy, &self.col_range)

@@ -65,6 +65,8 @@ impl Interval {
 pub struct SlidingRange {
     width: usize,
     count: u64,
+    // `count mod width`: the position of the next sample in its block.
+    pos: usize,
     // Per channel `c`, slots `c·width .. (c + 1)·width`: the values of the current block of
     // `width` samples (position `n mod width`; positions after the current one still hold
     // the previous block), and the previous block's suffix maxima and minima.
@@ -91,6 +93,7 @@ impl SlidingRange {
         Ok(Self {
             width,
             count: 0,
+            pos: 0,
             vals: vec![0.0; channels * width],
             suffix_max: vec![0.0; channels * width],
             suffix_min: vec![0.0; channels * width],
@@ -117,27 +120,33 @@ impl SlidingRange {
     /// no allocation.
     #[inline]
     pub fn push(&mut self, values: impl IntoIterator<Item = f64>) {
-        let w = self.width;
-        let i = (self.count % w as u64) as usize;
+        let (w, i) = (self.width, self.pos);
         let full = self.count >= w as u64;
         if i == 0 && self.count > 0 {
             self.close_block();
         }
+        // Plain comparisons: the values are finite (the regression checks them first), so the
+        // NaN handling of `f64::min` is not needed on this path.
+        let lt = |a: f64, b: f64| if a < b { a } else { b };
+        let gt = |a: f64, b: f64| if a > b { a } else { b };
         for (c, x) in values.into_iter().take(self.ranges.len()).enumerate() {
             let base = c * w;
             self.vals[base + i] = x;
             let p = &mut self.prefix[c];
-            *p = if i == 0 { Interval { lo: x, hi: x } } else { p.hull(Interval { lo: x, hi: x }) };
+            *p = if i == 0 {
+                Interval { lo: x, hi: x }
+            } else {
+                Interval { lo: lt(x, p.lo), hi: gt(x, p.hi) }
+            };
             // The window is positions i + 1 .. w of the previous block and 0 ..= i of this one.
             self.ranges[c] = if full && i + 1 < w {
-                p.hull(Interval {
-                    lo: self.suffix_min[base + i + 1],
-                    hi: self.suffix_max[base + i + 1],
-                })
+                let (lo, hi) = (self.suffix_min[base + i + 1], self.suffix_max[base + i + 1]);
+                Interval { lo: lt(lo, p.lo), hi: gt(hi, p.hi) }
             } else {
                 *p
             };
         }
+        self.pos = if i + 1 == w { 0 } else { i + 1 };
         self.count += 1;
     }
 
@@ -151,10 +160,9 @@ impl SlidingRange {
             .zip(self.suffix_max.chunks_exact_mut(w))
             .zip(self.suffix_min.chunks_exact_mut(w))
         {
-            let (mut mx, mut mn) = (f64::NEG_INFINITY, f64::INFINITY);
+            let (mut mx, mut mn) = (v[w - 1], v[w - 1]);
             for j in (0..w).rev() {
-                mx = mx.max(v[j]);
-                mn = mn.min(v[j]);
+                (mx, mn) = (if v[j] > mx { v[j] } else { mx }, if v[j] < mn { v[j] } else { mn });
                 hi[j] = mx;
                 lo[j] = mn;
             }
@@ -171,6 +179,7 @@ impl SlidingRange {
     /// Forget every sample.
     pub fn reset(&mut self) {
         self.count = 0;
+        self.pos = 0;
         self.prefix.fill(Interval::EMPTY);
         self.ranges.fill(Interval::EMPTY);
     }
@@ -188,7 +197,8 @@ impl SlidingRange {
             && self.suffix_max.len() == channels * w
             && self.suffix_min.len() == channels * w
             && self.prefix.len() == channels
-            && self.ranges.len() == channels;
+            && self.ranges.len() == channels
+            && self.pos as u64 == self.count % w as u64;
         let bad = || Err(RegressionError::CorruptState("sliding ranges".into()));
         if !shape {
             return bad();
@@ -286,6 +296,9 @@ mod tests {
         assert!(bad.check_state(1, 4).is_err());
         let mut bad = r.clone();
         bad.ranges[0].hi = 7.0;
+        assert!(bad.check_state(1, 4).is_err());
+        let mut bad = r.clone();
+        bad.pos = 3;
         assert!(bad.check_state(1, 4).is_err());
         let mut bad = r.clone();
         bad.count += 10;

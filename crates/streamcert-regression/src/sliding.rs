@@ -187,6 +187,33 @@ impl SlidingRegression {
         true
     }
 
+    /// The range of each output over the `h + 1` samples of the newest column, into `out`
+    /// (`p` values); `false` (untouched) before `h + 1` samples are held. `O(h p)`, no copy.
+    pub fn newest_column_ranges(&self, out: &mut [Interval]) -> bool {
+        let (p, cap) = (self.cfg.outputs, self.cfg.horizon + 1);
+        if self.hist_len < cap {
+            return false;
+        }
+        let ys = &self.hist_y[..cap * p];
+        if let ([r], 1) = (&mut out[..1], p) {
+            let (mut lo, mut hi) = (ys[0], ys[0]);
+            for &v in &ys[1..] {
+                (lo, hi) = (if v < lo { v } else { lo }, if v > hi { v } else { hi });
+            }
+            *r = Interval { lo, hi };
+            return true;
+        }
+        for (i, r) in out[..p].iter_mut().enumerate() {
+            let (mut lo, mut hi) = (ys[i], ys[i]);
+            for s in 1..cap {
+                let v = ys[s * p + i];
+                (lo, hi) = (if v < lo { v } else { lo }, if v > hi { v } else { hi });
+            }
+            *r = Interval { lo, hi };
+        }
+        true
+    }
+
     /// The newest column `(Z_q, ΔY_q)`, if any.
     #[must_use]
     pub fn newest_column(&self) -> Option<(&[f64], &[f64])> {

@@ -11,6 +11,7 @@ use streamcert_certificate::{
     Calibration, CertificateKind, Certifier, CertifierConfig, Interval, NonlinearConfig,
 };
 use streamcert_dynamics::{Process, ScalarDrift, ScalarScenario};
+use streamcert_experiments::{Experiment, G5Dataset};
 use streamcert_regression::{InputIntegral, RegressionConfig};
 
 use crate::common::{markdown, median, progress, write};
@@ -20,10 +21,15 @@ const DELTA: f64 = 0.01;
 const MARGIN: f64 = 0.05;
 const H: usize = 5;
 const WINDOW: usize = 50;
-const DEGREE: usize = 3;
 const PAPER_C: f64 = 0.1;
-const KINDS: [CertificateKind; 3] =
-    [CertificateKind::Gaussian, CertificateKind::Calibrated, CertificateKind::Nonlinear];
+/// The certificates of the table: the kind, and the degree of the certifier that gives it (the
+/// nonlinear certificate twice: the default cubic library and a quadratic one).
+const ROWS: [(CertificateKind, usize, &str); 4] = [
+    (CertificateKind::Gaussian, 3, "paper (Gaussian, c = 0.1)"),
+    (CertificateKind::Calibrated, 3, "linear calibrated"),
+    (CertificateKind::Nonlinear, 3, "nonlinear, degree 3"),
+    (CertificateKind::Nonlinear, 2, "nonlinear, degree 2"),
+];
 
 /// One cell: a loop, the candidate gain, and whether its smallest visited rate is meant to be
 /// below the margin (a validity cell) or at least 3× above it (a power cell).
@@ -32,6 +38,35 @@ struct Cell {
     scenario: ScalarScenario,
     k: f64,
     validity: bool,
+    /// Instead of the scalar scenario: G5's subsystem A (output `x1`, input `u1`) on
+    /// Experiment 2's data (`γ = 0`, candidate `k1`), run 40 s.
+    g5: bool,
+}
+
+impl Cell {
+    /// The true local rate at output `y` under the candidate gain.
+    fn rate(&self, y: f64) -> f64 {
+        if self.g5 {
+            // `β*_A = tanh x1 + x1 sech² x1 − k1` (G5::observed_closed_loop_rates).
+            let th = y.tanh();
+            th + y * (1.0 - th * th) - self.k
+        } else {
+            self.scenario.local_rate(y, self.k)
+        }
+    }
+
+    /// Times, outputs and inputs of run `seed`.
+    fn data(&self, seed: u64) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
+        if self.g5 {
+            let data = G5Dataset { steps: Some(2000), ..G5Dataset::defaults(Experiment::Two) };
+            let traj = data.run_seeded(seed)?;
+            let pick = |v: &[f64], w: usize| v.chunks_exact(w).map(|r| r[0]).collect();
+            Ok((traj.t.clone(), pick(&traj.y, traj.p), pick(&traj.u, traj.m)))
+        } else {
+            let traj = self.scenario.run(seed)?;
+            Ok((traj.t, traj.y, traj.u))
+        }
+    }
 }
 
 fn base() -> ScalarScenario {
@@ -56,6 +91,7 @@ fn cells() -> Vec<Cell> {
             scenario: base(),
             k: -1.1,
             validity: true,
+            g5: false,
         },
         Cell {
             name: "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
@@ -68,6 +104,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -0.53,
             validity: true,
+            g5: false,
         },
         Cell {
             name: "band, rate −0.1 + 1.5 (x − 0.8)² (non-contracting near x = 0.8), K = −1",
@@ -78,6 +115,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -1.0,
             validity: true,
+            g5: false,
         },
         Cell {
             name: "cubic, rate 2 + 0.9 x² (40× the margin), dither ±3",
@@ -89,6 +127,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -1.0,
             validity: false,
+            g5: false,
         },
         Cell {
             name: "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
@@ -101,6 +140,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -0.65,
             validity: false,
+            g5: false,
         },
         Cell {
             name: "same, process noise σ = 0.02",
@@ -114,6 +154,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -0.65,
             validity: false,
+            g5: false,
         },
         Cell {
             name: "same, rate 0.5 + 1.8 x² (10× the margin)",
@@ -126,6 +167,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -1.0,
             validity: false,
+            g5: false,
         },
         Cell {
             name: "−x tanh x, K = −2, process noise σ = 0.02",
@@ -136,24 +178,33 @@ fn cells() -> Vec<Cell> {
             },
             k: -2.0,
             validity: false,
+            g5: false,
         },
         Cell {
             name: "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
             scenario: ScalarScenario { k_explore: -2.0, ..base() },
             k: -2.0,
             validity: false,
+            g5: false,
+        },
+        Cell {
+            name: "G5 subsystem A, Experiment 2 data (rate tanh x1 + x1 sech² x1 + 2.5), 40 s",
+            scenario: base(),
+            k: Experiment::Two.setting().k1,
+            validity: false,
+            g5: true,
         },
     ]
 }
 
-fn config(k: f64) -> CertifierConfig {
+fn config(k: f64, degree: usize) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
         ..RegressionConfig::new(1, 1, WINDOW, H, 1e-4)
     };
     CertifierConfig {
         calibration: Some(Calibration::new(DELTA)),
-        nonlinear: Some(NonlinearConfig::with_degree(DEGREE)),
+        nonlinear: Some(NonlinearConfig::with_degree(degree)),
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
 }
@@ -210,14 +261,17 @@ struct Outcome {
     above_truth: usize,
 }
 
-fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 3]> {
-    let traj = cell.scenario.run(seed)?;
-    let rate = |x: f64| cell.scenario.local_rate(x, cell.k);
-    let mut cert = Certifier::new(config(cell.k))?;
-    let mut out = [Outcome::default(); 3];
-    for i in 0..traj.t.len() {
-        let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i])?;
-        for (o, kind) in out.iter_mut().zip(KINDS) {
+fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 4]> {
+    let (ts, ys, us) = cell.data(seed)?;
+    let rate = |x: f64| cell.rate(x);
+    let (mut cubic, mut quadratic) =
+        (Certifier::new(config(cell.k, 3))?, Certifier::new(config(cell.k, 2))?);
+    let mut out = [Outcome::default(); 4];
+    for i in 0..ts.len() {
+        let ev3 = cubic.push(ts[i], &ys[i..=i], &us[i..=i])?;
+        let ev2 = quadratic.push(ts[i], &ys[i..=i], &us[i..=i])?;
+        for (o, (kind, degree, _)) in out.iter_mut().zip(ROWS) {
+            let (ev, cert) = if degree == 3 { (&ev3, &cubic) } else { (&ev2, &quadratic) };
             let v = ev.verdict(kind);
             let Some(value) = v.value else { continue };
             let region = match kind {
@@ -230,7 +284,7 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 3]> {
             o.valued += 1;
             o.above_truth += usize::from(value > truth);
             if v.open {
-                o.first_open.get_or_insert(traj.t[i]);
+                o.first_open.get_or_insert(ts[i]);
                 o.false_open |= truth < MARGIN;
             }
         }
@@ -246,18 +300,18 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K. Three certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree {DEGREE}, same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1). Four certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, and of degree 2, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {
         let n = if cell.validity { runs } else { power_runs };
-        let table = RateTable::new(|x| cell.scenario.local_rate(x, cell.k));
+        let table = RateTable::new(|x| cell.rate(x));
         let mut results = Vec::with_capacity(n);
         for r in 0..n {
             results.push(one_run(cell, 7_000_000 * (ci as u64 + 1) + r as u64, &table)?);
             bar.inc(1);
         }
-        for (ki, kind) in KINDS.iter().enumerate() {
+        for (ki, (kind, _, label)) in ROWS.iter().enumerate() {
             let outs: Vec<Outcome> = results.iter().map(|o| o[ki]).collect();
             let false_open = outs.iter().filter(|o| o.false_open).count();
             let opened: Vec<f64> = outs.iter().filter_map(|o| o.first_open).collect();
@@ -274,7 +328,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
             rows.push(vec![
                 cell.name.to_string(),
                 if cell.validity { "validity".into() } else { "power".into() },
-                format!("{kind:?}"),
+                (*label).to_string(),
                 n.to_string(),
                 if cell.validity {
                     format!("{false_open} ({:.4}–{:.4})", cp_lo, cp_hi)

@@ -83,7 +83,13 @@
 //!
 //! ## Assumptions (when one fails the guarantee is void)
 //! * The closed-loop Jacobian is constant over each window (linear dynamics, or a nonlinear
-//!   system explored over a region where its Jacobian does not vary; see the nonlinear issue).
+//!   system explored over a region where its Jacobian does not vary). The certificate speaks
+//!   for the averaged linearisation over its window's region
+//!   ([`Certifier::calibrated_region`](crate::Certifier::calibrated_region)). With a
+//!   [`NonlinearConfig`](crate::NonlinearConfig), a window's linear certificate stands only
+//!   where the nonlinearity test of the same window ran and found no variation; the test has
+//!   limited power on short windows, so for a loop whose rate varies over the region the
+//!   nonlinear certificate is the one to deploy on (`cargo xtask nonlinear` measures both).
 //! * Process noise is white; sensor noise, if any, is white beyond `L` samples; both are
 //!   independent of the exploration signal. Heavy tails with finite variance are covered
 //!   through the central limit theorem over the blocks (measured for Laplace and

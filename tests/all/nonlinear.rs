@@ -9,7 +9,7 @@ use proptest::prelude::*;
 use streamcert::certificate::{
     Calibration, Certifier, CertifierConfig, CertifyError, Interval, NonlinearConfig, NotCertified,
 };
-use streamcert::dynamics::{Process, ScalarDrift, ScalarScenario, Trajectory};
+use streamcert::dynamics::{ScalarDrift, ScalarScenario, Trajectory};
 use streamcert::regression::{
     InputIntegral, InstrumentedWindows, RegressionConfig, WindowEstimate,
 };
@@ -33,17 +33,7 @@ pub(crate) fn config(k: f64, margin: f64, window: usize, degree: usize) -> Certi
 /// The loop: `ẋ = −x tanh x + u + w`, `u = −1.1 x + PRBS(±1.5, held 1 s)`, σ = 0.1,
 /// 40 s at dt = 0.01.
 fn tanh_loop() -> ScalarScenario {
-    ScalarScenario {
-        drift: ScalarDrift::NegXTanhX,
-        b: 1.0,
-        noise: Process::Gaussian { sigma: 0.1 },
-        k_explore: -1.1,
-        dither: 1.5,
-        dither_hold: 1.0,
-        dt: 0.01,
-        steps: 4000,
-        x0: 0.0,
-    }
+    ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
 }
 
 /// The smallest true rate over `[lo, hi]` by a dense scan (the rates here are smooth).

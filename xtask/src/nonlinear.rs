@@ -70,16 +70,19 @@ impl Cell {
 }
 
 fn base() -> ScalarScenario {
+    ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
+}
+
+/// The cubic `f = 0.5 x − 0.6 x³` explored by `u = −1.5 y + PRBS(±1, held 0.5 s)` with
+/// process noise `sigma`: under `K` its rate is `−0.5 − K + 1.8 x²`, smallest at `x = 0`.
+fn cubic(sigma: f64) -> ScalarScenario {
     ScalarScenario {
-        drift: ScalarDrift::NegXTanhX,
-        b: 1.0,
-        noise: Process::Gaussian { sigma: 0.1 },
-        k_explore: -1.1,
-        dither: 1.5,
-        dither_hold: 1.0,
-        dt: 0.01,
-        steps: 4000,
-        x0: 0.0,
+        drift: ScalarDrift::Polynomial(vec![0.0, 0.5, 0.0, -0.6]),
+        k_explore: -1.5,
+        dither: 1.0,
+        dither_hold: 0.5,
+        noise: Process::Gaussian { sigma },
+        ..base()
     }
 }
 
@@ -95,13 +98,7 @@ fn cells() -> Vec<Cell> {
         },
         Cell {
             name: "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
-            scenario: ScalarScenario {
-                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
-                k_explore: -1.5,
-                dither: 1.0,
-                dither_hold: 0.5,
-                ..base()
-            },
+            scenario: cubic(0.1),
             k: -0.53,
             validity: true,
             g5: false,
@@ -131,40 +128,21 @@ fn cells() -> Vec<Cell> {
         },
         Cell {
             name: "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
-            scenario: ScalarScenario {
-                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
-                k_explore: -1.5,
-                dither: 1.0,
-                dither_hold: 0.5,
-                ..base()
-            },
+            scenario: cubic(0.1),
             k: -0.65,
             validity: false,
             g5: false,
         },
         Cell {
             name: "same, process noise σ = 0.02",
-            scenario: ScalarScenario {
-                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
-                k_explore: -1.5,
-                dither: 1.0,
-                dither_hold: 0.5,
-                noise: Process::Gaussian { sigma: 0.02 },
-                ..base()
-            },
+            scenario: cubic(0.02),
             k: -0.65,
             validity: false,
             g5: false,
         },
         Cell {
             name: "same, rate 0.5 + 1.8 x² (10× the margin)",
-            scenario: ScalarScenario {
-                drift: poly(vec![0.0, 0.5, 0.0, -0.6]),
-                k_explore: -1.5,
-                dither: 1.0,
-                dither_hold: 0.5,
-                ..base()
-            },
+            scenario: cubic(0.1),
             k: -1.0,
             validity: false,
             g5: false,

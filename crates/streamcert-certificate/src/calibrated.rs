@@ -113,7 +113,7 @@ use streamcert_regression::{
     InstrumentedWindows, Interval, RegressionConfig, SlidingRegression, WindowEstimate, linalg,
 };
 
-use crate::nonlinear::{NonlinearLook, NonlinearState};
+use crate::nonlinear::{LookAt, NonlinearLook, NonlinearState};
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 
 /// One window's latest look.
@@ -158,6 +158,67 @@ pub(crate) struct CalibratedVerdict {
     pub nonlinear: Option<NonlinearLook>,
     /// Why no nonlinear certificate stands (`None` when one does or none is configured).
     pub nonlinear_blocked: Option<NotCertified>,
+}
+
+/// A window's latest look, as the gate logic sees it.
+pub(crate) trait Look: Copy {
+    /// Time of the look.
+    fn time(&self) -> f64;
+    /// Window length in columns.
+    fn window(&self) -> usize;
+    /// The certificate.
+    fn value(&self) -> f64;
+    /// The one-look upper bound, when below the margin.
+    fn upper(&self) -> Option<f64>;
+}
+
+impl Look for WindowLook {
+    fn time(&self) -> f64 {
+        self.t
+    }
+    fn window(&self) -> usize {
+        self.window
+    }
+    fn value(&self) -> f64 {
+        self.certificate()
+    }
+    fn upper(&self) -> Option<f64> {
+        self.upper
+    }
+}
+
+/// The largest *standing* look among `looks` (one per window) that `admit(window index, look)`
+/// lets through, and, when a look was passed over for it, why: a look stops standing when a
+/// look at least as recent has an upper bound below the margin (the loop no longer contracts
+/// enough; closing never costs validity).
+pub(crate) fn standing<L: Look>(
+    looks: &[Option<L>],
+    margin: f64,
+    mut admit: impl FnMut(usize, &L) -> bool,
+) -> (Option<L>, Option<NotCertified>) {
+    let mut best: Option<L> = None;
+    let mut contradicted = None;
+    for (w, look) in looks.iter().enumerate() {
+        let Some(look) = look else { continue };
+        if !admit(w, look) {
+            continue;
+        }
+        let against = looks
+            .iter()
+            .flatten()
+            .find(|s| s.time() >= look.time() && s.upper().is_some_and(|u| u < margin));
+        if let Some(s) = against {
+            contradicted.get_or_insert(NotCertified::RateDropped {
+                window: s.window(),
+                upper: s.upper().unwrap_or(f64::INFINITY),
+            });
+            continue;
+        }
+        if best.is_none_or(|b| look.value() > b.value()) {
+            best = Some(*look);
+        }
+    }
+    (best, contradicted)
 }
 
 /// The streaming state of the calibrated certificate.
@@ -339,7 +400,8 @@ impl CalibratedState {
         let k = self.looks[w];
         if let Some(n) = &mut self.nonlinear {
             let risk = look_risk(self.cal.delta, self.shares[w], k);
-            n.look(w, k, t, risk, self.cal.delta, margin, self.ridge, self.min_pivot);
+            let (delta, ridge, min_pivot) = (self.cal.delta, self.ridge, self.min_pivot);
+            n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot });
         }
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
@@ -387,48 +449,28 @@ impl CalibratedState {
 
     /// The largest standing certificate, and why the gate must stay closed if none stands.
     fn verdict(&self, margin: f64) -> CalibratedVerdict {
-        let mut best: Option<WindowLook> = None;
-        let mut contradicted = None;
         let mut varying = None;
         let nonlinear = self.nonlinear_looks();
-        for (w, look) in self.latest.iter().enumerate() {
-            let Some(look) = look else { continue };
+        let (best, contradicted) = standing(&self.latest, margin, |w, look| {
             // With a nonlinear model, the same window's nonlinearity test must have run and
             // found no variation: a significant test says the linear model does not hold over
             // the region, and a missing one (no feature fit yet) cannot say that it does.
-            if let Some(state) = &self.nonlinear {
-                let look_nl = nonlinear.get(w).copied().flatten();
-                let tested = look_nl.is_some_and(|n| n.test.is_some() || state.degree() == 1);
-                if let Some(test) = look_nl.and_then(|n| n.test).filter(|t| t.significant()) {
-                    varying.get_or_insert(NotCertified::VaryingDynamics {
-                        window: look.window,
-                        statistic: test.statistic,
-                        threshold: test.threshold,
-                    });
-                    continue;
-                }
-                if !tested {
-                    varying.get_or_insert(NotCertified::LinearityUntested { window: look.window });
-                    continue;
-                }
-            }
-            // A newer (or equally recent) look whose upper bound is below the margin.
-            let against = self
-                .latest
-                .iter()
-                .flatten()
-                .find(|s| s.t >= look.t && s.upper.is_some_and(|u| u < margin));
-            if let Some(s) = against {
-                contradicted.get_or_insert(NotCertified::RateDropped {
-                    window: s.window,
-                    upper: s.upper.unwrap_or(f64::INFINITY),
+            let Some(state) = &self.nonlinear else { return true };
+            let look_nl = nonlinear.get(w).copied().flatten();
+            let tested = look_nl.is_some_and(|n| n.test.is_some() || state.degree() == 1);
+            if let Some(test) = look_nl.and_then(|n| n.test).filter(|t| t.significant()) {
+                varying.get_or_insert(NotCertified::VaryingDynamics {
+                    window: look.window,
+                    statistic: test.statistic,
+                    threshold: test.threshold,
                 });
-                continue;
+                return false;
             }
-            if best.is_none_or(|b| look.certificate() > b.certificate()) {
-                best = Some(*look);
+            if !tested {
+                varying.get_or_insert(NotCertified::LinearityUntested { window: look.window });
             }
-        }
+            tested
+        });
         let w0 = self.windows.window(0);
         let columns = self.windows.columns(0);
         let warming = if columns < w0 {

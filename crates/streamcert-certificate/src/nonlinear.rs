@@ -83,6 +83,7 @@ use streamcert_regression::{
     InstrumentedWindows, Interval, RegressionConfig, WindowEstimate, linalg,
 };
 
+use crate::calibrated::{Look, standing};
 use crate::{CertifyError, NotCertified, t_quantile};
 
 /// The Wald test of the terms of degree `>= 2` at one look.
@@ -130,6 +131,40 @@ pub struct NonlinearLook {
     pub upper: Option<f64>,
     /// The nonlinearity test (degree `>= 2`, when `Ω̂_HH` is positive definite).
     pub test: Option<NonlinearityTest>,
+}
+
+/// One look's circumstances, from the calibrated schedule that drives it.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct LookAt {
+    /// Look number `k` of the window.
+    pub k: u64,
+    /// Time of the look.
+    pub t: f64,
+    /// The risk the look spends, `δ_{w,k}`.
+    pub risk: f64,
+    /// The run-level risk `δ` (one look's risk for the closing upper bound).
+    pub delta: f64,
+    /// `β_margin`.
+    pub margin: f64,
+    /// The ridge `λ`.
+    pub ridge: f64,
+    /// The smallest pivot ratio of an instrumented solve.
+    pub min_pivot: f64,
+}
+
+impl Look for NonlinearLook {
+    fn time(&self) -> f64 {
+        self.t
+    }
+    fn window(&self) -> usize {
+        self.window
+    }
+    fn value(&self) -> f64 {
+        self.certificate
+    }
+    fn upper(&self) -> Option<f64> {
+        self.upper
+    }
 }
 
 /// The streaming state of the nonlinear certificate (inside the calibrated state, which drives
@@ -228,35 +263,13 @@ impl NonlinearState {
         self.windows.push_column_ranged(&self.z, dy, &[Interval { lo, hi }])
     }
 
-    /// Window `w`'s look at time `t` with risk `risk` (the calibrated schedule's `δ_{w,k}`),
-    /// run-level risk `delta` and look number `k`.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn look(
-        &mut self,
-        w: usize,
-        k: u64,
-        t: f64,
-        risk: f64,
-        delta: f64,
-        margin: f64,
-        ridge: f64,
-        min_pivot: f64,
-    ) {
-        self.latest[w] = self.compute(w, k, t, risk, delta, margin, ridge, min_pivot);
+    /// Window `w`'s look (see [`LookAt`]); its outcome replaces the window's latest look.
+    pub(crate) fn look(&mut self, w: usize, at: LookAt) {
+        self.latest[w] = self.compute(w, at);
     }
 
-    #[allow(clippy::too_many_arguments)]
-    fn compute(
-        &mut self,
-        w: usize,
-        k: u64,
-        t: f64,
-        risk: f64,
-        delta: f64,
-        margin: f64,
-        ridge: f64,
-        min_pivot: f64,
-    ) -> Option<NonlinearLook> {
+    fn compute(&mut self, w: usize, at: LookAt) -> Option<NonlinearLook> {
+        let LookAt { k, t, risk, delta, margin, ridge, min_pivot } = at;
         let (dg, m) = (self.cfg.degree, self.gain.len());
         let d = dg + m;
         let mut region = [Interval::EMPTY];
@@ -380,25 +393,7 @@ impl NonlinearState {
         margin: f64,
         warming: NotCertified,
     ) -> (Option<NonlinearLook>, Option<NotCertified>) {
-        let mut best: Option<NonlinearLook> = None;
-        let mut contradicted = None;
-        for look in self.latest.iter().flatten() {
-            let against = self
-                .latest
-                .iter()
-                .flatten()
-                .find(|s| s.t >= look.t && s.upper.is_some_and(|u| u < margin));
-            if let Some(s) = against {
-                contradicted.get_or_insert(NotCertified::RateDropped {
-                    window: s.window,
-                    upper: s.upper.unwrap_or(f64::INFINITY),
-                });
-                continue;
-            }
-            if best.is_none_or(|b| look.certificate > b.certificate) {
-                best = Some(*look);
-            }
-        }
+        let (best, contradicted) = standing(&self.latest, margin, |_, _| true);
         let blocked = if best.is_some() { None } else { Some(contradicted.unwrap_or(warming)) };
         (best, blocked)
     }

@@ -102,6 +102,24 @@ impl Dynamics for Plant<'_> {
 }
 
 impl ScalarScenario {
+    /// `drift` explored by `u = k_explore y + PRBS(±1.5, held 1 s)` with Gaussian process noise
+    /// `σ = 0.1`, `b = 1`, 40 s at `dt = 0.01` from `x = 0`: the nonlinear study's loop (with
+    /// `f = −x tanh x` and `k_explore = −1.1`, the nonlinear issue's example).
+    #[must_use]
+    pub fn new(drift: ScalarDrift, k_explore: f64) -> Self {
+        Self {
+            drift,
+            b: 1.0,
+            noise: Process::Gaussian { sigma: 0.1 },
+            k_explore,
+            dither: 1.5,
+            dither_hold: 1.0,
+            dt: 0.01,
+            steps: 4000,
+            x0: 0.0,
+        }
+    }
+
     /// The true local contraction rate at `x` under the candidate gain `k`: `−(f'(x) + b k)`.
     #[must_use]
     pub fn local_rate(&self, x: f64, k: f64) -> f64 {
@@ -154,17 +172,7 @@ mod tests {
 
     #[test]
     fn the_tanh_loop_of_the_issue_has_a_non_contracting_band() {
-        let s = ScalarScenario {
-            drift: ScalarDrift::NegXTanhX,
-            b: 1.0,
-            noise: Process::Gaussian { sigma: 0.1 },
-            k_explore: -1.1,
-            dither: 1.5,
-            dither_hold: 1.0,
-            dt: 0.01,
-            steps: 4000,
-            x0: 0.0,
-        };
+        let s = ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1);
         assert!(s.local_rate(-1.2, -1.1) < 0.0);
         assert!(s.local_rate(0.0, -1.1) > 1.0);
         let traj = s.run(3).unwrap();

@@ -95,6 +95,28 @@ impl WindowEstimate {
     }
 }
 
+/// `Q A⁻¹ v` (`k` values, handed to `put(b, value)`), with `A` given by its LU factors and `Q`
+/// as `d` rows of `k`; `v` (`d` values) is overwritten by `A⁻¹ v`.
+#[inline(always)]
+fn q_ainv(
+    lu: &[f64],
+    piv: &[usize],
+    q: &[f64],
+    d: usize,
+    k: usize,
+    v: &mut [f64],
+    mut put: impl FnMut(usize, f64),
+) {
+    linalg::lu_solve_in_place(lu, d, piv, v);
+    for b in 0..k {
+        let mut acc = 0.0;
+        for a in 0..d {
+            acc += q[a * k + b] * v[a];
+        }
+        put(b, acc);
+    }
+}
+
 impl InstrumentedWindows {
     /// Solve window `w` with ridge `λ` for the candidate directions `t` (`d × p` row-major,
     /// `T = [I_p; K]`) into `out` (built with this structure's `p`, `m`, `J`):
@@ -191,14 +213,7 @@ impl InstrumentedWindows {
             for a in 0..d {
                 row[a] = t[a * p + j];
             }
-            linalg::lu_solve_in_place(&out.lu, d, &out.piv, row);
-            for b in 0..k {
-                let mut v = 0.0;
-                for a in 0..d {
-                    v += out.q[a * k + b] * out.row[a];
-                }
-                out.x[j * k + b] = v;
-            }
+            q_ainv(&out.lu, &out.piv, &out.q, d, k, row, |b, v| out.x[j * k + b] = v);
         }
         let (sum_w, sum_w2) = match (p, d, k) {
             (1, 2, 2) => self.block_scores(w, out, 1, 2, 2),
@@ -343,14 +358,7 @@ impl InstrumentedWindows {
             let e = &mut out.g[..d];
             e.fill(0.0);
             e[a] = 1.0;
-            linalg::lu_solve_in_place(&out.lu, d, &out.piv, e);
-            for b in 0..k {
-                let mut v = 0.0;
-                for c in 0..d {
-                    v += out.q[c * k + b] * out.g[c];
-                }
-                out.qa[b * d + a] = v;
-            }
+            q_ainv(&out.lu, &out.piv, &out.q, d, k, e, |b, v| out.qa[b * d + a] = v);
         }
         let blocks = self.windows[w].min(self.block_len);
         let stride = lay.stride();

@@ -38,29 +38,33 @@ struct Cell {
     scenario: ScalarScenario,
     k: f64,
     validity: bool,
-    /// Instead of the scalar scenario: G5's subsystem A (output `x1`, input `u1`) on
-    /// Experiment 2's data (`γ = 0`, candidate `k1`), run 40 s.
-    g5: bool,
+    /// Instead of the scalar scenario: G5's subsystem A (`Some(0)`: output `x1`, input `u1`,
+    /// candidate `k1`) or B (`Some(1)`: output `x4`, input `u4`, candidate `k4`) on
+    /// Experiment 2's data (`γ = 0`), run 40 s.
+    g5: Option<usize>,
 }
 
 impl Cell {
     /// The true local rate at output `y` under the candidate gain.
     fn rate(&self, y: f64) -> f64 {
-        if self.g5 {
-            // `β*_A = tanh x1 + x1 sech² x1 − k1` (G5::observed_closed_loop_rates).
-            let th = y.tanh();
-            th + y * (1.0 - th * th) - self.k
-        } else {
-            self.scenario.local_rate(y, self.k)
+        match self.g5 {
+            // `β*_A = tanh x1 + x1 sech² x1 − k1`, `β*_B = 1 − k4`
+            // (G5::observed_closed_loop_rates).
+            Some(0) => {
+                let th = y.tanh();
+                th + y * (1.0 - th * th) - self.k
+            }
+            Some(_) => 1.0 - self.k,
+            None => self.scenario.local_rate(y, self.k),
         }
     }
 
     /// Times, outputs and inputs of run `seed`.
     fn data(&self, seed: u64) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
-        if self.g5 {
+        if let Some(which) = self.g5 {
             let data = G5Dataset { steps: Some(2000), ..G5Dataset::defaults(Experiment::Two) };
             let traj = data.run_seeded(seed)?;
-            let pick = |v: &[f64], w: usize| v.chunks_exact(w).map(|r| r[0]).collect();
+            let pick = |v: &[f64], w: usize| v.chunks_exact(w).map(|r| r[which]).collect();
             Ok((traj.t.clone(), pick(&traj.y, traj.p), pick(&traj.u, traj.m)))
         } else {
             let traj = self.scenario.run(seed)?;
@@ -94,14 +98,14 @@ fn cells() -> Vec<Cell> {
             scenario: base(),
             k: -1.1,
             validity: true,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
             scenario: cubic(0.1),
             k: -0.53,
             validity: true,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "band, rate −0.1 + 1.5 (x − 0.8)² (non-contracting near x = 0.8), K = −1",
@@ -112,7 +116,7 @@ fn cells() -> Vec<Cell> {
             },
             k: -1.0,
             validity: true,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "cubic, rate 2 + 0.9 x² (40× the margin), dither ±3",
@@ -124,28 +128,28 @@ fn cells() -> Vec<Cell> {
             },
             k: -1.0,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
             scenario: cubic(0.1),
             k: -0.65,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "same, process noise σ = 0.02",
             scenario: cubic(0.02),
             k: -0.65,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "same, rate 0.5 + 1.8 x² (10× the margin)",
             scenario: cubic(0.1),
             k: -1.0,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "−x tanh x, K = −2, process noise σ = 0.02",
@@ -156,21 +160,28 @@ fn cells() -> Vec<Cell> {
             },
             k: -2.0,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
             scenario: ScalarScenario { k_explore: -2.0, ..base() },
             k: -2.0,
             validity: false,
-            g5: false,
+            g5: None,
         },
         Cell {
             name: "G5 subsystem A, Experiment 2 data (rate tanh x1 + x1 sech² x1 + 2.5), 40 s",
             scenario: base(),
             k: Experiment::Two.setting().k1,
             validity: false,
-            g5: true,
+            g5: Some(0),
+        },
+        Cell {
+            name: "G5 subsystem B, Experiment 2 data (linear: rate 1 − k4 = 4), 40 s",
+            scenario: base(),
+            k: Experiment::Two.setting().k4,
+            validity: false,
+            g5: Some(1),
         },
     ]
 }
@@ -278,7 +289,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1). Four certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, and of degree 2, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Four certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, and of degree 2, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {

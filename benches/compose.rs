@@ -11,7 +11,8 @@ use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::compose::{
-    Network, SparseOptions, certify_sparse, network_rate, symmetric_rate_at_least,
+    DenseMethod, DenseOptions, Network, SparseOptions, certify_sparse, network_rate,
+    network_rate_with, symmetric_rate_at_least,
 };
 
 /// `side × side` grid, 4-neighbour coupling, rates in [2, 3], gains in [0, 0.4], plus
@@ -65,8 +66,16 @@ fn dense(c: &mut Criterion) {
         }
     }
     let net = Network::new(beta, &edges).expect("valid");
-    group.bench_function(BenchmarkId::new("network_rate_full", "N1000"), |b| {
+    // The default path (Perron brackets) against the eigendecomposition it replaces, in the
+    // same run; the Perron path must have closed its brackets for the comparison to hold.
+    let fast = network_rate(&net).expect("solves");
+    assert!(fast.converged && fast.method == DenseMethod::Perron, "{:?}", fast.method);
+    group.bench_function(BenchmarkId::new("network_rate_perron", "N1000"), |b| {
         b.iter(|| black_box(network_rate(&net).expect("solves").rate));
+    });
+    let exact = DenseOptions { exact: true, ..DenseOptions::default() };
+    group.bench_function(BenchmarkId::new("naive_network_rate_eigendecomposition", "N1000"), |b| {
+        b.iter(|| black_box(network_rate_with(&net, &exact).expect("solves").rate));
     });
     group.bench_function(BenchmarkId::new("sparse_certificate", "N1000"), |b| {
         b.iter(|| black_box(certify_sparse(&net, &SparseOptions::default()).expect("valid").rate));
@@ -87,8 +96,9 @@ fn sparse(c: &mut Criterion) {
             black_box(certify_sparse(&small, &SparseOptions::default()).expect("valid").rate)
         });
     });
+    let exact = DenseOptions { exact: true, ..DenseOptions::default() };
     group.bench_function(BenchmarkId::new("naive_dense_network_rate", "grid_N900"), |b| {
-        b.iter(|| black_box(network_rate(&small).expect("solves").rate));
+        b.iter(|| black_box(network_rate_with(&small, &exact).expect("solves").rate));
     });
     for (name, side, long) in
         [("grid_N1e5", 317usize, 0usize), ("grid_N1e6", 1000, 0), ("long_range_N1e5", 317, 10_000)]

@@ -7,8 +7,9 @@ use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::compose::{
-    ComposeError, Method, Network, SparseOptions, certify_sparse, lemma1_rate, metzler_rate,
-    network_rate, symmetric_rate_at_least, two_block_rate, warning_gain,
+    ComposeError, DenseMethod, DenseOptions, Method, Network, SparseOptions, certify_sparse,
+    lemma1_rate, metzler_rate, network_rate, network_rate_with, symmetric_rate_at_least,
+    two_block_rate, warning_gain,
 };
 
 proptest! {
@@ -45,6 +46,64 @@ proptest! {
         prop_assert!((cert.weighted_rate - cert.rate).abs() < 1e-6 + 1e3 * cert.weight_regularization.sqrt());
         prop_assert!(cert.weighted_rate <= cert.rate + 1e-9);
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    /// The Perron brackets against faer's eigendecomposition, on dense and sparse random
+    /// networks, irreducible or not (density 0.15 leaves many reducible ones): every number
+    /// on the safe side of the exact one and within the bracket tolerance of it.
+    #[test]
+    fn perron_brackets_match_the_eigendecomposition(
+        seed in 0u64..10_000, n in 2usize..40, density in 0.05f64..0.9, scale in 0.05f64..3.0,
+    ) {
+        let net = random_network(n, density, scale, seed);
+        let exact = network_rate_with(&net, &DenseOptions { exact: true, ..DenseOptions::default() })
+            .expect("solves");
+        // No fallback: the Perron path's own numbers.
+        let opts = DenseOptions { eigen_limit: 0, ..DenseOptions::default() };
+        let fast = network_rate_with(&net, &opts).expect("solves");
+        prop_assert_eq!(fast.method, DenseMethod::Perron);
+        let tol = 1e-9 * (1.0 + exact.rate.abs());
+        // Safe side: never above the exact rate (up to rounding), and close when converged.
+        prop_assert!(fast.rate <= exact.rate + 1e-12 * (1.0 + exact.rate.abs()));
+        prop_assert!(fast.rate_upper >= exact.rate - 1e-12 * (1.0 + exact.rate.abs()));
+        prop_assert!(fast.symmetric_rate <= exact.symmetric_rate + 1e-12);
+        if exact.critical_scale.is_finite() {
+            prop_assert!(fast.critical_scale <= exact.critical_scale * (1.0 + 1e-12));
+        }
+        if fast.converged {
+            prop_assert!((fast.rate - exact.rate).abs() < tol, "{} vs {}", fast.rate, exact.rate);
+            prop_assert!((fast.symmetric_rate - exact.symmetric_rate).abs() < tol);
+            if exact.critical_scale.is_finite() && exact.critical_scale > 0.0 {
+                prop_assert!((fast.critical_scale / exact.critical_scale - 1.0).abs() < 1e-8);
+            }
+            if exact.weight_regularization == 0.0 && fast.weight_regularization == 0.0 {
+                prop_assert!((fast.weighted_rate - exact.weighted_rate).abs() < 1e-7);
+            }
+        }
+    }
+}
+
+#[test]
+fn an_unclosed_bracket_stays_on_the_safe_side_and_says_so() {
+    // Nearly equal rates and weak coupling: the power iteration converges slowly.
+    let net = random_network(60, 0.2, 0.01, 7);
+    let exact = network_rate_with(&net, &DenseOptions { exact: true, ..DenseOptions::default() })
+        .expect("solves");
+    let opts = DenseOptions { max_iterations: 3, eigen_limit: 0, ..DenseOptions::default() };
+    let rough = network_rate_with(&net, &opts).expect("solves");
+    assert!(!rough.converged);
+    assert!(rough.rate <= exact.rate && rough.rate_upper >= exact.rate - 1e-12);
+    assert!(rough.symmetric_rate <= exact.symmetric_rate + 1e-12);
+    assert!(rough.critical_scale <= exact.critical_scale);
+    // With the fallback the eigendecomposition answers instead.
+    let fallback =
+        network_rate_with(&net, &DenseOptions { max_iterations: 3, ..DenseOptions::default() })
+            .expect("solves");
+    assert_eq!(fallback.method, DenseMethod::Eigendecomposition);
+    assert_eq!(fallback.rate, exact.rate);
 }
 
 /// `n` subsystems with rates in [0.5, 2.5], each edge present with probability `density` and

@@ -17,9 +17,10 @@ pub enum GainsFormat {
 /// Which computation to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Method {
-    /// Dense eigenvalues up to 2000 subsystems, sparse certificates above.
+    /// Dense composition up to 2000 subsystems, sparse certificates above.
     Auto,
-    /// Dense eigenvalues (`O(N³)`).
+    /// Dense composition: the rate, weights, symmetric bound and critical scale (Perron
+    /// brackets; the eigendecomposition where one does not close, up to 256 subsystems).
     Dense,
     /// Sparse certificates (Collatz–Wielandt, optional Cholesky).
     Sparse,

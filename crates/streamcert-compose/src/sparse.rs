@@ -67,13 +67,23 @@ pub struct SparseCertificate {
 /// diagonal, given row by row (`row(i, x) = (B x)_i`): returns `(best upper, best lower, vector
 /// of the best upper, iterations)`. One fused pass per iteration computes `B x`, the ratio
 /// bounds `max/min (Bx)_i / x_i` and the maximum used to renormalise.
-fn collatz_wielandt(
+pub(crate) fn collatz_wielandt(
     n: usize,
     row: impl Fn(usize, &[f64]) -> f64,
     max_iterations: usize,
     tol: f64,
 ) -> (f64, f64, Vec<f64>, usize) {
-    let mut x = vec![1.0; n];
+    collatz_wielandt_from(vec![1.0; n], row, max_iterations, tol)
+}
+
+/// [`collatz_wielandt`] from the positive start vector `x`.
+pub(crate) fn collatz_wielandt_from(
+    mut x: Vec<f64>,
+    row: impl Fn(usize, &[f64]) -> f64,
+    max_iterations: usize,
+    tol: f64,
+) -> (f64, f64, Vec<f64>, usize) {
+    let n = x.len();
     let mut y = vec![0.0; n];
     let mut best_x = x.clone();
     let (mut upper, mut lower) = (f64::INFINITY, f64::NEG_INFINITY);

@@ -48,10 +48,10 @@ pub struct NetworkConfig {
     /// Default 100 000.
     #[serde(default = "default_max_epoch_jump")]
     pub max_epoch_jump: u64,
-    /// Up to this many subsystems the dense composition (exact spectral abscissa, several
-    /// dense eigendecompositions, `O(N³)`: 3.06 s at `N = 1000` in `cargo bench --bench
-    /// network`); beyond it the sparse Collatz–Wielandt certificate (a certified lower bound,
-    /// `O(iterations · edges)`). Default 64.
+    /// Up to this many subsystems the dense composition (`network_rate`: the spectral
+    /// abscissa, weights, symmetric bound and critical scale as Perron brackets, the
+    /// eigendecomposition where one does not close); beyond it the sparse Collatz–Wielandt
+    /// certificate (a certified lower bound, `O(iterations · edges)`). Default 64.
     pub dense_limit: usize,
 }
 

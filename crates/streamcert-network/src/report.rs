@@ -33,7 +33,8 @@ impl std::fmt::Display for NotCertifiedLocal {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ComposeMethod {
-    /// The exact spectral abscissa (`network_rate`, `N <= dense_limit`).
+    /// The dense composition (`network_rate`, `N <= dense_limit`): the safe end of a
+    /// `1e-13` bracket on the spectral abscissa, or the eigendecomposition's value.
     Dense,
     /// The Collatz–Wielandt lower bound (`certify_sparse`).
     Sparse,

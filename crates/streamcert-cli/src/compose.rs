@@ -1,14 +1,16 @@
 //! `streamcert compose`: local rates and coupling bounds in, the network certificate out.
 
 use serde_json::json;
-use streamcert_compose::{Network, SparseOptions, certify_sparse, network_rate};
+use streamcert_compose::{DenseMethod, Network, SparseOptions, certify_sparse, network_rate};
 
 use crate::CliError;
 
 /// How the gains file is laid out.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
 pub enum GainsFormat {
     /// `N` lines of `N` numbers: entry `(i, j)` is `γ_ij` (how `j` drives `i`); zero diagonal.
+    #[default]
     Dense,
     /// Lines `i,j,gamma` (0-based indices), for large sparse networks; an optional header line.
     Triplets,
@@ -57,6 +59,55 @@ fn numbers(text: &str, file: &str) -> Result<Vec<Vec<f64>>, CliError> {
     Ok(rows)
 }
 
+/// The coupling bounds of a gains file for `n` subsystems, as edges `(i, j, γ_ij)` (`j`
+/// drives `i`): a dense `n × n` matrix or `i,j,gamma` triplets (see [`GainsFormat`]). Zero
+/// entries of a dense matrix are dropped; the network's constructor checks the rest (indices
+/// in range, gains finite and non-negative, no self-loop).
+///
+/// # Errors
+/// [`CliError::Row`] for a line that is not numbers, [`CliError::Input`] for a wrong shape or
+/// a triplet that is not `i,j,gamma` with integer indices.
+pub fn gain_edges(
+    text: &str,
+    name: &str,
+    n: usize,
+    format: GainsFormat,
+) -> Result<Vec<(usize, usize, f64)>, CliError> {
+    let rows = numbers(text, name)?;
+    let shape = |message: String| CliError::Input { file: name.into(), message };
+    match format {
+        GainsFormat::Dense => {
+            if rows.len() != n || rows.iter().any(|r| r.len() != n) {
+                return Err(shape(format!("expected {n} rows of {n} gains (one per subsystem)")));
+            }
+            Ok((0..n)
+                .flat_map(|i| (0..n).map(move |j| (i, j)))
+                .filter(|&(i, j)| rows[i][j] != 0.0)
+                .map(|(i, j)| (i, j, rows[i][j]))
+                .collect())
+        }
+        GainsFormat::Triplets => rows
+            .iter()
+            .enumerate()
+            .map(|(k, r)| {
+                let ok = r.len() == 3
+                    && r[0] >= 0.0
+                    && r[1] >= 0.0
+                    && r[0].fract() == 0.0
+                    && r[1].fract() == 0.0;
+                if ok {
+                    Ok((r[0] as usize, r[1] as usize, r[2]))
+                } else {
+                    Err(shape(format!(
+                        "entry {}: expected `i,j,gamma` with integer indices, found {r:?}",
+                        k + 1
+                    )))
+                }
+            })
+            .collect(),
+    }
+}
+
 /// Run the composition and render the result (text or JSON).
 ///
 /// # Errors
@@ -72,46 +123,12 @@ pub fn run(
     json_out: bool,
 ) -> Result<String, CliError> {
     let rates: Vec<f64> = numbers(rates_text, rates_name)?.concat();
-    let rows = numbers(gains_text, gains_name)?;
+    let edges = gain_edges(gains_text, gains_name, rates.len(), format)?;
     let invalid = |e: streamcert_compose::ComposeError| CliError::Input {
         file: gains_name.into(),
         message: e.to_string(),
     };
-    let net = match format {
-        GainsFormat::Dense => {
-            let n = rates.len();
-            if rows.len() != n || rows.iter().any(|r| r.len() != n) {
-                return Err(CliError::Input {
-                    file: gains_name.into(),
-                    message: format!(
-                        "expected {n} rows of {n} gains (one per local rate in {rates_name})"
-                    ),
-                });
-            }
-            Network::from_dense(&rates, &rows.concat()).map_err(invalid)?
-        }
-        GainsFormat::Triplets => {
-            let mut edges = Vec::with_capacity(rows.len());
-            for (k, r) in rows.iter().enumerate() {
-                let ok = r.len() == 3
-                    && r[0] >= 0.0
-                    && r[1] >= 0.0
-                    && r[0].fract() == 0.0
-                    && r[1].fract() == 0.0;
-                if !ok {
-                    return Err(CliError::Input {
-                        file: gains_name.into(),
-                        message: format!(
-                            "entry {}: expected `i,j,gamma` with integer indices, found {r:?}",
-                            k + 1
-                        ),
-                    });
-                }
-                edges.push((r[0] as usize, r[1] as usize, r[2]));
-            }
-            Network::new(rates.clone(), &edges).map_err(invalid)?
-        }
-    };
+    let net = Network::new(rates.clone(), &edges).map_err(invalid)?;
     let dense = match method {
         Method::Dense => true,
         Method::Sparse => false,
@@ -124,8 +141,17 @@ pub fn run(
             c.weights,
             Some(c.symmetric_rate),
             c.critical_scale,
-            "dense spectral abscissa (Perron weights)".to_string(),
-            json!({"weighted_rate": c.weighted_rate, "weight_regularization": c.weight_regularization}),
+            match c.method {
+                DenseMethod::Perron => "dense: Perron brackets (Collatz-Wielandt), Perron weights",
+                DenseMethod::Eigendecomposition => "dense: eigendecomposition, Perron weights",
+            }
+            .to_string(),
+            json!({
+                "weighted_rate": c.weighted_rate,
+                "weight_regularization": c.weight_regularization,
+                "rate_upper": c.rate_upper,
+                "converged": c.converged,
+            }),
         )
     } else {
         let c = certify_sparse(&net, &SparseOptions::default()).map_err(invalid)?;

@@ -7,6 +7,7 @@ use streamcert_certificate::CertificateKind;
 use streamcert_network::{NetworkCertifier, NetworkConfig, SubsystemSpec};
 
 use crate::CliError;
+use crate::compose::{self, GainsFormat};
 use crate::config::{self, Columns};
 
 /// The commented example printed by `streamcert network --print-config`: G5's two observed
@@ -41,7 +42,9 @@ outputs = ["y_b"]
 inputs = ["u_b"]
 gain = [[-3.0]]
 
-# Coupling bounds: how `from` drives `to` (gamma >= 0).
+# Coupling bounds: how `from` drives `to` (gamma >= 0). For many subsystems, a file instead:
+# `gains = "gains.txt"` and `gains_format = "dense"` (N rows of N, entry (i, j) = how j drives
+# i) or "triplets" (lines `i,j,gamma`) in [network], indices in [[subsystem]] order.
 [[coupling]]
 from = "B"
 to = "A"
@@ -84,6 +87,11 @@ struct NetworkSection {
     max_epoch_jump: Option<u64>,
     #[serde(default)]
     input: InputLayout,
+    /// A gains file instead of (not beside) `[[coupling]]`: indices are the `[[subsystem]]`
+    /// order; a relative path is relative to the configuration file's folder.
+    gains: Option<String>,
+    #[serde(default)]
+    gains_format: GainsFormat,
 }
 
 /// How the input rows carry the subsystems' samples.
@@ -200,10 +208,28 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
             .position(|s| s.name == name)
             .ok_or_else(|| bad(format!("[[coupling]] names `{name}`, which is no [[subsystem]]")))
     };
-    let edges = couplings
-        .iter()
-        .map(|c| Ok((index(&c.to)?, index(&c.from)?, c.gamma)))
-        .collect::<Result<Vec<_>, CliError>>()?;
+    let edges = match &section.gains {
+        Some(_) if !couplings.is_empty() => {
+            return Err(bad(
+                "[network] gains and [[coupling]] both give coupling bounds: keep one".into(),
+            ));
+        }
+        Some(file) => {
+            let file = std::path::Path::new(path)
+                .parent()
+                .filter(|_| std::path::Path::new(file).is_relative())
+                .map_or_else(|| std::path::PathBuf::from(file), |dir| dir.join(file));
+            let shown = file.display().to_string();
+            let text = std::fs::read_to_string(&file)
+                .map_err(|e| bad(format!("[network] gains: cannot read {shown}: {e}")))?;
+            compose::gain_edges(&text, &shown, subsystems.len(), section.gains_format)
+                .map_err(|e| bad(format!("[network] gains: {e}")))?
+        }
+        None => couplings
+            .iter()
+            .map(|c| Ok((index(&c.to)?, index(&c.from)?, c.gamma)))
+            .collect::<Result<Vec<_>, CliError>>()?,
+    };
     let mut network = NetworkConfig::new(specs, edges, section.epoch);
     network.certificate = section.certificate;
     network.margin = section.margin;
@@ -273,5 +299,62 @@ mod tests {
         for s in &cfg.network.subsystems {
             assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.005));
         }
+    }
+
+    #[test]
+    fn coupling_bounds_from_a_gains_file_in_either_layout() {
+        let dir = std::env::temp_dir().join(format!("streamcert-gains-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let cfg_path = dir.join("net.toml");
+        let without = |text: &str| {
+            let start = text.find("[[coupling]]").expect("couplings");
+            let end = text.find("# Every subsystem's certifier").expect("end");
+            format!("{}{}", &text[..start], &text[end..])
+        };
+        let base = without(EXAMPLE_CONFIG);
+        let want = parse(EXAMPLE_CONFIG, "example").expect("valid").network.couplings;
+        for (file, layout, body) in [
+            ("dense.txt", "dense", "0 0.4\n0.4 0\n"),
+            ("triplets.txt", "triplets", "i,j,gamma\n0,1,0.4\n1,0,0.4\n"),
+        ] {
+            std::fs::write(dir.join(file), body).expect("write");
+            let text = base.replacen(
+                "[network]",
+                &format!("[network]\ngains = \"{file}\"\ngains_format = \"{layout}\""),
+                1,
+            );
+            // A relative path is read next to the configuration file.
+            let cfg = parse(&text, cfg_path.to_str().expect("utf8")).expect(layout);
+            let mut got = cfg.network.couplings.clone();
+            got.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+            let mut expected = want.clone();
+            expected.sort_by(|a, b| a.partial_cmp(b).expect("finite"));
+            assert_eq!(got, expected, "{layout}");
+        }
+        let path = cfg_path.to_str().expect("utf8");
+        let with =
+            |extra: &str| EXAMPLE_CONFIG.replacen("[network]", &format!("[network]\n{extra}"), 1);
+        let message = |text: &str| parse(text, path).expect_err("refused").to_string();
+        assert!(message(&with("gains = \"dense.txt\"")).contains("keep one"));
+        let missing = base.replacen("[network]", "[network]\ngains = \"nowhere.txt\"", 1);
+        assert!(message(&missing).contains("cannot read"));
+        std::fs::write(dir.join("bad.txt"), "0 0.4 1\n0.4 0\n").expect("write");
+        let shape = base.replacen("[network]", "[network]\ngains = \"bad.txt\"", 1);
+        assert!(message(&shape).contains("2 rows of 2"));
+        std::fs::write(dir.join("neg.txt"), "0,1,-0.4\n").expect("write");
+        let negative = base.replacen(
+            "[network]",
+            "[network]\ngains = \"neg.txt\"\ngains_format = \"triplets\"",
+            1,
+        );
+        assert!(message(&negative).contains("γ must be finite and >= 0"));
+        std::fs::write(dir.join("far.txt"), "0,7,0.4\n").expect("write");
+        let far = base.replacen(
+            "[network]",
+            "[network]\ngains = \"far.txt\"\ngains_format = \"triplets\"",
+            1,
+        );
+        assert!(parse(&far, path).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

@@ -71,6 +71,12 @@ pub struct Summary {
     /// First time the calibrated gate opened.
     #[serde(default)]
     pub first_deploy_calibrated: Option<f64>,
+    /// Rows with the nonlinear gate open (0 unless `[nonlinear]` is enabled).
+    #[serde(default)]
+    pub nonlinear_open: u64,
+    /// First time the nonlinear gate opened.
+    #[serde(default)]
+    pub first_deploy_nonlinear: Option<f64>,
     /// Time of the last accepted row.
     pub last_time: Option<f64>,
 }
@@ -90,6 +96,12 @@ impl Summary {
     #[must_use]
     pub fn share_calibrated(&self) -> f64 {
         if self.rows == 0 { 0.0 } else { self.calibrated_open as f64 / self.rows as f64 }
+    }
+
+    /// Share of rows with the nonlinear gate open.
+    #[must_use]
+    pub fn share_nonlinear(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.nonlinear_open as f64 / self.rows as f64 }
     }
 }
 
@@ -346,6 +358,8 @@ impl<W: Write> Run<'_, W> {
         summary.first_deploy_wass = first(ev.wasserstein.open, summary.first_deploy_wass);
         summary.first_deploy_calibrated =
             first(ev.calibrated.open, summary.first_deploy_calibrated);
+        summary.nonlinear_open += u64::from(ev.nonlinear.open);
+        summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
         summary.last_time = Some(s.t);
         self.region.clear();
         self.region.extend_from_slice(self.cert.region());

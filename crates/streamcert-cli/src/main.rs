@@ -225,6 +225,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
                         "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
                         "share_calibrated_gate_open": s.share_calibrated(),
                         "first_deploy_calibrated": s.first_deploy_calibrated,
+                        "share_nonlinear_gate_open": s.share_nonlinear(),
+                        "first_deploy_nonlinear": s.first_deploy_nonlinear,
                         "last_time": s.last_time,
                     });
                     std::fs::write(&file, format!("{v}\n"))
@@ -247,6 +249,13 @@ fn run(cli: Cli) -> Result<(), CliError> {
                             100.0 * s.share_calibrated(),
                             s.first_deploy_calibrated
                                 .map_or("never".into(), |t| format!("t = {t}")),
+                        );
+                    }
+                    if cfg.certifier.nonlinear.is_some() {
+                        eprintln!(
+                            "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % (first at {})",
+                            100.0 * s.share_nonlinear(),
+                            s.first_deploy_nonlinear.map_or("never".into(), |t| format!("t = {t}")),
                         );
                     }
                 }

@@ -86,6 +86,36 @@ fn calibration_section_adds_the_calibrated_certificate() {
 }
 
 #[test]
+fn nonlinear_section_adds_the_nonlinear_certificate_and_its_region() {
+    let cfg = config("nonlinear");
+    let on = std::fs::read_to_string(&cfg)
+        .expect("config")
+        .replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.01")
+        .replace("enabled = false\nfeatures", "enabled = true\nfeatures");
+    std::fs::write(&cfg, on).expect("write config");
+    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &simulate("6"));
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
+    let header: Vec<&str> = lines[0].split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
+    assert_eq!(last.len(), header.len());
+    // A nonlinear certificate with its region, inside the paper window's region or wider.
+    let (lo, hi): (f64, f64) = (
+        last[col("nonlinear_y_lo")].parse().expect("lo"),
+        last[col("nonlinear_y_hi")].parse().expect("hi"),
+    );
+    assert!(lo <= hi && last[col("cert_nonlinear")].parse::<f64>().is_ok(), "{last:?}");
+    let (plo, phi): (f64, f64) = (
+        last[col("region_lo_y_b")].parse().expect("lo"),
+        last[col("region_hi_y_b")].parse().expect("hi"),
+    );
+    assert!(plo <= phi);
+    assert_eq!(last[col("nonlinear_open")] == "1", last[col("reason_nonlinear")].is_empty());
+    assert!(text(&out.stderr).contains("nonlinear gate (risk delta over the run"));
+}
+
+#[test]
 fn split_and_resume_equals_one_run() {
     let cfg = config("resume");
     let c = cfg.to_str().expect("utf8");

@@ -10,6 +10,7 @@ use streamcert::certificate::{
     Calibration, Certifier, CertifierConfig, CertifyError, Interval, NonlinearConfig, NotCertified,
 };
 use streamcert::dynamics::{ScalarDrift, ScalarScenario, Trajectory};
+use streamcert::experiments::{Experiment, G5Dataset};
 use streamcert::regression::{
     InputIntegral, InstrumentedWindows, RegressionConfig, WindowEstimate,
 };
@@ -92,6 +93,35 @@ fn the_nonlinear_certificate_stays_below_the_true_rate_over_its_region() {
         }
         assert!(steps > 1000, "{name}: only {steps} certified samples");
     }
+}
+
+#[test]
+fn on_g5_subsystem_a_the_certificate_stays_below_the_true_rate_over_its_region() {
+    // Experiment 2's data (γ = 0), 40 s; subsystem A is output x1, input u1, candidate k1,
+    // and the dynamics crate gives its true rate at every x1.
+    let data = G5Dataset { steps: Some(2000), ..G5Dataset::defaults(Experiment::Two) };
+    let g5 = data.system().expect("valid");
+    let k1 = Experiment::Two.setting().k1;
+    let truth = |x1: f64| g5.observed_closed_loop_rates(&[x1, 0.0, 0.0, 0.0, 0.0]).a;
+    let mut valued = 0;
+    for seed in 0..4 {
+        let traj = data.run_seeded(seed).expect("valid");
+        let (n, p, m) = (traj.t.len(), traj.p, traj.m);
+        let mut cert = Certifier::new(config(k1, 0.05, 50, 3)).expect("valid");
+        for i in 0..n {
+            let ev = cert
+                .push(traj.t[i], &traj.y[i * p..=i * p], &traj.u[i * m..=i * m])
+                .expect("finite");
+            if let (Some(v), Some(r)) = (ev.nonlinear.value, ev.nonlinear_region) {
+                let lowest = (0..=400)
+                    .map(|j| truth(r.lo + (r.hi - r.lo) * f64::from(j) / 400.0))
+                    .fold(f64::INFINITY, f64::min);
+                assert!(v <= lowest, "seed {seed} t = {}: {v} above {lowest}", traj.t[i]);
+                valued += 1;
+            }
+        }
+    }
+    assert!(valued > 1000, "only {valued} samples with a certificate");
 }
 
 #[test]

@@ -10,7 +10,7 @@ use anyhow::Result;
 use streamcert_certificate::{
     Calibration, CertificateKind, Certifier, CertifierConfig, Interval, NonlinearConfig,
 };
-use streamcert_dynamics::{Process, ScalarDrift, ScalarScenario};
+use streamcert_dynamics::{G5, Process, ScalarDrift, ScalarScenario};
 use streamcert_experiments::{Experiment, G5Dataset};
 use streamcert_regression::{InputIntegral, RegressionConfig};
 
@@ -48,15 +48,19 @@ impl Cell {
     /// The true local rate at output `y` under the candidate gain.
     fn rate(&self, y: f64) -> f64 {
         match self.g5 {
-            // `β*_A = tanh x1 + x1 sech² x1 − k1`, `β*_B = 1 − k4`
-            // (G5::observed_closed_loop_rates).
-            Some(0) => {
-                let th = y.tanh();
-                th + y * (1.0 - th * th) - self.k
+            // The dynamics crate's truth: A's rate depends on x1 = y only, B's on nothing.
+            Some(which) => {
+                let x = if which == 0 { [y, 0.0, 0.0, 0.0, 0.0] } else { [0.0, 0.0, 0.0, y, 0.0] };
+                let rates = self.g5_system().map(|g| g.observed_closed_loop_rates(&x));
+                rates.map_or(f64::NAN, |r| if which == 0 { r.a } else { r.b })
             }
-            Some(_) => 1.0 - self.k,
             None => self.scenario.local_rate(y, self.k),
         }
+    }
+
+    /// Experiment 2's G5 (for its true local rates).
+    fn g5_system(&self) -> Option<G5> {
+        G5Dataset::defaults(Experiment::Two).system().ok()
     }
 
     /// Times, outputs and inputs of run `seed`.

@@ -7,7 +7,8 @@
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, CertifyError, Interval, NonlinearConfig, NotCertified,
+    Calibration, CertificateKind, Certifier, CertifierConfig, CertifyError, FeatureSet, Interval,
+    NonlinearConfig, NotCertified,
 };
 use streamcert::dynamics::{ScalarDrift, ScalarScenario, Trajectory};
 use streamcert::experiments::{Experiment, G5Dataset};
@@ -122,6 +123,29 @@ fn on_g5_subsystem_a_the_certificate_stays_below_the_true_rate_over_its_region()
         }
     }
     assert!(valued > 1000, "only {valued} samples with a certificate");
+}
+
+#[test]
+fn a_named_library_that_holds_the_drift_certifies_the_tanh_loop_and_stays_below_truth() {
+    let library = FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("valid");
+    let named = |k: f64| CertifierConfig {
+        nonlinear: Some(NonlinearConfig::with_features(library)),
+        ..config(k, 0.05, 50, 3)
+    };
+    // The loop (a non-contracting band) and a contracting one (K = −2, rate >= 0.8).
+    let mut opened = 0;
+    for (k, seeds) in [(-1.1, 0..6), (-2.0, 0..6)] {
+        let s = ScalarScenario::new(ScalarDrift::NegXTanhX, k);
+        for seed in seeds {
+            let (_, out, cert) = trace(&s, &named(k), seed);
+            assert!(out.iter().all(|(v, truth)| v <= truth), "K = {k}, seed {seed}");
+            if k == -2.0 {
+                opened +=
+                    usize::from(cert.gate(CertificateKind::Nonlinear).first_opened_at.is_some());
+            }
+        }
+    }
+    assert!(opened >= 5, "the contracting tanh loop opened in {opened} of 6 runs");
 }
 
 #[test]

@@ -8,7 +8,7 @@ use std::path::Path;
 
 use anyhow::Result;
 use streamcert_certificate::{
-    Calibration, CertificateKind, Certifier, CertifierConfig, Interval, NonlinearConfig,
+    Calibration, CertificateKind, Certifier, CertifierConfig, FeatureSet, Interval, NonlinearConfig,
 };
 use streamcert_dynamics::{G5, Process, ScalarDrift, ScalarScenario};
 use streamcert_experiments::{Experiment, G5Dataset};
@@ -24,11 +24,12 @@ const WINDOW: usize = 50;
 const PAPER_C: f64 = 0.1;
 /// The certificates of the table: the kind, and the degree of the certifier that gives it (the
 /// nonlinear certificate twice: the default cubic library and a quadratic one).
-const ROWS: [(CertificateKind, usize, &str); 4] = [
+const ROWS: [(CertificateKind, usize, &str); 5] = [
     (CertificateKind::Gaussian, 3, "paper (Gaussian, c = 0.1)"),
     (CertificateKind::Calibrated, 3, "linear calibrated"),
     (CertificateKind::Nonlinear, 3, "nonlinear, degree 3"),
     (CertificateKind::Nonlinear, 2, "nonlinear, degree 2"),
+    (CertificateKind::Nonlinear, 0, "nonlinear, features y, y·tanh y"),
 ];
 
 /// One cell: a loop, the candidate gain, and whether its smallest visited rate is meant to be
@@ -190,6 +191,8 @@ fn cells() -> Vec<Cell> {
     ]
 }
 
+/// The study's certifier: `degree` 2 or 3 for the polynomial library, 0 for the named
+/// library `y, y·tanh y`.
 fn config(k: f64, degree: usize) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
@@ -197,7 +200,13 @@ fn config(k: f64, degree: usize) -> CertifierConfig {
     };
     CertifierConfig {
         calibration: Some(Calibration::new(DELTA)),
-        nonlinear: Some(NonlinearConfig::with_degree(degree)),
+        nonlinear: Some(if degree == 0 {
+            NonlinearConfig::with_features(
+                FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
+            )
+        } else {
+            NonlinearConfig::with_degree(degree)
+        }),
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
 }
@@ -232,7 +241,12 @@ impl RateTable {
         let i = ((r.lo - self.lo) / self.step).ceil().max(0.0) as usize;
         let j = (((r.hi - self.lo) / self.step).floor().max(0.0) as usize).min(n - 1);
         if !(r.lo >= self.lo && r.hi <= self.lo + self.step * (n - 1) as f64) {
-            return f64::NEG_INFINITY;
+            // Outside the table (the tanh loop wanders to x = −9): a direct scan at the
+            // table's resolution or finer.
+            let steps = (((r.hi - r.lo) / self.step).ceil() as usize).clamp(1, 1 << 20);
+            return (0..=steps)
+                .map(|k| rate(r.lo + (r.hi - r.lo) * k as f64 / steps as f64))
+                .fold(ends, f64::min);
         }
         if i > j {
             return ends;
@@ -254,17 +268,27 @@ struct Outcome {
     above_truth: usize,
 }
 
-fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 4]> {
+fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
     let (ts, ys, us) = cell.data(seed)?;
     let rate = |x: f64| cell.rate(x);
-    let (mut cubic, mut quadratic) =
-        (Certifier::new(config(cell.k, 3))?, Certifier::new(config(cell.k, 2))?);
-    let mut out = [Outcome::default(); 4];
+    let mut certs = [
+        Certifier::new(config(cell.k, 3))?,
+        Certifier::new(config(cell.k, 2))?,
+        Certifier::new(config(cell.k, 0))?,
+    ];
+    let slot = |degree: usize| match degree {
+        3 => 0,
+        2 => 1,
+        _ => 2,
+    };
+    let mut out = [Outcome::default(); 5];
     for i in 0..ts.len() {
-        let ev3 = cubic.push(ts[i], &ys[i..=i], &us[i..=i])?;
-        let ev2 = quadratic.push(ts[i], &ys[i..=i], &us[i..=i])?;
+        let mut evs = Vec::with_capacity(3);
+        for c in &mut certs {
+            evs.push(c.push(ts[i], &ys[i..=i], &us[i..=i])?);
+        }
         for (o, (kind, degree, _)) in out.iter_mut().zip(ROWS) {
-            let (ev, cert) = if degree == 3 { (&ev3, &cubic) } else { (&ev2, &quadratic) };
+            let (ev, cert) = (&evs[slot(degree)], &certs[slot(degree)]);
             let v = ev.verdict(kind);
             let Some(value) = v.value else { continue };
             let region = match kind {
@@ -293,7 +317,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Four certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, and of degree 2, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW}, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {
@@ -389,6 +413,11 @@ mod tests {
             let got = t.min_over(Interval { lo, hi }, &rate);
             assert!((got - scan).abs() < 1e-5, "[{lo}, {hi}]: {got} vs {scan}");
         }
-        assert_eq!(t.min_over(Interval { lo: -7.0, hi: 0.0 }, &rate), f64::NEG_INFINITY);
+        // Beyond the table: a direct scan.
+        let far = t.min_over(Interval { lo: -9.0, hi: 0.0 }, &rate);
+        let scan = (0..=90000)
+            .map(|i| rate(-9.0 + 9.0 * f64::from(i) / 90000.0))
+            .fold(f64::INFINITY, f64::min);
+        assert!((far - scan).abs() < 1e-5, "{far} vs {scan}");
     }
 }

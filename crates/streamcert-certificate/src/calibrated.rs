@@ -457,7 +457,7 @@ impl CalibratedState {
             // the region, and a missing one (no feature fit yet) cannot say that it does.
             let Some(state) = &self.nonlinear else { return true };
             let look_nl = nonlinear.get(w).copied().flatten();
-            let tested = look_nl.is_some_and(|n| n.test.is_some() || state.degree() == 1);
+            let tested = look_nl.is_some_and(|n| n.test.is_some() || state.features() == 1);
             if let Some(test) = look_nl.and_then(|n| n.test).filter(|t| t.significant()) {
                 varying.get_or_insert(NotCertified::VaryingDynamics {
                     window: look.window,

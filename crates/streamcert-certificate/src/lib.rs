@@ -71,7 +71,7 @@ pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use gate::{Gate, GateState};
-pub use nonlinear::{NonlinearConfig, NonlinearLook, NonlinearityTest};
+pub use nonlinear::{Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest};
 pub use radius::{certificate_surface, certificate_value};
 pub use row::{EVIDENCE_COLUMNS, EvidenceRow, ReasonText};
 pub use streamcert_regression::Interval;

@@ -12,8 +12,9 @@
 //!
 //! ## Model
 //!
-//! The drift is linear in the feature library `φ(y) = (y, y², …, y^D)` and in the input:
-//! `ẏ = Σ_k θ_k y^k + B u + noise`. The integral form of the paper is kept: column `q`
+//! The drift is linear in the feature library `φ(y) = (y, y², …, y^D)` (or a named library
+//! starting with `y`, [`FeatureSet`]: `y, y·tanh y` holds G5's node 1 exactly) and in the
+//! input: `ẏ = Σ_k θ_k φ_k(y) + B u + noise`. The integral form of the paper is kept: column `q`
 //! regresses `ΔY_q = y(t_q + h) − y(t_q)` on
 //!
 //! ```text
@@ -47,8 +48,10 @@
 //! the one the data chose, with probability `1 − δ_{w,k}` per look. The minimum is bounded,
 //! not sampled: the region is cut into `cells` intervals and on each `β̂(y)` is bounded below
 //! and `s(y)²` above by their Taylor expansions at the cell's midpoint
-//! ([`polynomial_bounds`]); the certificate is the smallest cell bound (so it holds between
-//! grid points too). `ν` and the risk schedule are the calibrated certificate's: the effective
+//! ([`polynomial_bounds`]); for a named library every slope `φ_k'` is bounded on the cell
+//! ([`Feature::slope_bounds`]), `β̂` by interval arithmetic and `s²`, convex in `a`, at the
+//! corners of the box of slopes. The certificate is the smallest cell bound (so it holds
+//! between grid points too). `ν` and the risk schedule are the calibrated certificate's: the effective
 //! number of blocks (weights in the direction `a` at the region's midpoint) less `D + m`, and
 //! `δ_{w,k} = δ (M_w/ΣM) / (k (k+1))`. With `D = 1` the certificate equals the linear
 //! calibrated certificate (up to rounding; a property test).
@@ -62,10 +65,10 @@
 //! model does not describe the region. Closing a gate never costs validity.
 //!
 //! ## Assumptions (when one fails the guarantee is void)
-//! * One output (`p = 1`) whose drift is a polynomial of degree at most `D` in `y` over the
-//!   region, plus `B u`; a drift that is not (`tanh`) is covered only as far as its best
-//!   polynomial of degree `D` is close over the region (`cargo xtask nonlinear` measures it
-//!   on `−y tanh y`).
+//! * One output (`p = 1`) whose drift lies in the span of the feature library over the
+//!   region, plus `B u`; a drift that does not is covered only as far as the library's best
+//!   fit is close over the region (`cargo xtask nonlinear` measures a library that misses the
+//!   drift: degree 2 and `y, y·tanh y` on a cubic band).
 //! * Every assumption of the calibrated certificate (white process noise, exogenous
 //!   exploration, instruments relevant, negligible ridge), with the features as regressors.
 //! * The output is the state (or the feature model holds for the measured output); sensor
@@ -74,9 +77,11 @@
 
 mod bounds;
 mod config;
+mod features;
 
 pub use bounds::{f_quantile, polynomial_bounds, simultaneous_multiplier};
 pub use config::NonlinearConfig;
+pub use features::{Feature, FeatureSet};
 
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{
@@ -133,6 +138,32 @@ pub struct NonlinearLook {
     pub test: Option<NonlinearityTest>,
 }
 
+/// The running result of the cell bounds of one look.
+struct Bounds {
+    cert: f64,
+    worst: f64,
+    beta_min: f64,
+    upper: f64,
+}
+
+impl Bounds {
+    fn start(region: Interval) -> Self {
+        let mid = 0.5 * (region.lo + region.hi);
+        Self { cert: f64::INFINITY, worst: mid, beta_min: f64::INFINITY, upper: f64::INFINITY }
+    }
+
+    /// Cell `[a, b]` with `β̂ ∈ [f.0, f.1]` and `s <= s_hi` on it, multipliers `(c, c_upper)`.
+    fn cell(&mut self, a: f64, b: f64, f: (f64, f64), s_hi: f64, (c, c_upper): (f64, f64)) {
+        let value = f.0 - c * s_hi;
+        if value < self.cert {
+            self.cert = value;
+            self.worst = 0.5 * (a + b);
+        }
+        self.beta_min = self.beta_min.min(f.0);
+        self.upper = self.upper.min(f.1 + c_upper * s_hi);
+    }
+}
+
 /// One look's circumstances, from the calibrated schedule that drives it.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct LookAt {
@@ -172,6 +203,7 @@ impl Look for NonlinearLook {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct NonlinearState {
     cfg: NonlinearConfig,
+    library: FeatureSet,
     horizon: usize,
     windows: InstrumentedWindows,
     est: WindowEstimate,
@@ -199,13 +231,15 @@ impl NonlinearState {
         lag: usize,
         intervals: usize,
     ) -> Result<Self, CertifyError> {
-        let (dg, m) = (cfg.degree, reg.inputs);
+        let library = cfg.library();
+        let (dg, m) = (library.len(), reg.inputs);
         let d = dg + m;
         let windows =
             InstrumentedWindows::with_regressors(1, d, reg.horizon, lag, intervals, lengths)?
                 .with_ranges(1);
         Ok(Self {
             cfg,
+            library,
             horizon: reg.horizon,
             windows,
             est: WindowEstimate::with_regressors(1, d, intervals),
@@ -216,15 +250,15 @@ impl NonlinearState {
             cov: vec![0.0; d * d],
             poly_f: vec![0.0; dg],
             poly_s: vec![0.0; 2 * dg - 1],
-            work: vec![0.0; 2 * dg - 1],
+            work: vec![0.0; (2 * dg - 1).max(d)],
             sub: vec![0.0; (dg - 1) * (dg - 1)],
             rhs: vec![0.0; dg - 1],
         })
     }
 
-    /// The polynomial degree `D`.
-    pub(crate) fn degree(&self) -> usize {
-        self.cfg.degree
+    /// The number of features `D`.
+    pub(crate) fn features(&self) -> usize {
+        self.library.len()
     }
 
     pub(crate) fn looks(&self) -> &[Option<NonlinearLook>] {
@@ -240,7 +274,7 @@ impl NonlinearState {
     /// `h + 1` samples (`ts`, `ys`, oldest first) for the higher powers and the region.
     /// `O(h D + (D + m)²)`, no allocation.
     pub(crate) fn push(&mut self, z_lin: &[f64], dy: &[f64], ts: &[f64], ys: &[f64]) -> bool {
-        let dg = self.cfg.degree;
+        let dg = self.library.len();
         let m = self.gain.len();
         self.z[0] = z_lin[0];
         self.z[dg..dg + m].copy_from_slice(&z_lin[1..=m]);
@@ -253,11 +287,17 @@ impl NonlinearState {
             let (ya, yb) = (ys[i - 1], ys[i]);
             lo = lo.min(yb);
             hi = hi.max(yb);
-            let (mut pa, mut pb) = (ya, yb);
-            for v in &mut self.z[1..dg] {
-                pa *= ya;
-                pb *= yb;
-                *v += half * (pa + pb);
+            if self.library.is_polynomial() {
+                let (mut pa, mut pb) = (ya, yb);
+                for v in &mut self.z[1..dg] {
+                    pa *= ya;
+                    pb *= yb;
+                    *v += half * (pa + pb);
+                }
+            } else {
+                for (v, f) in self.z[1..dg].iter_mut().zip(self.library.iter().skip(1)) {
+                    *v += half * (f.value(ya) + f.value(yb));
+                }
             }
         }
         self.windows.push_column_ranged(&self.z, dy, &[Interval { lo, hi }])
@@ -270,7 +310,7 @@ impl NonlinearState {
 
     fn compute(&mut self, w: usize, at: LookAt) -> Option<NonlinearLook> {
         let LookAt { k, t, risk, delta, margin, ridge, min_pivot } = at;
-        let (dg, m) = (self.cfg.degree, self.gain.len());
+        let (dg, m) = (self.library.len(), self.gain.len());
         let d = dg + m;
         let mut region = [Interval::EMPTY];
         self.windows.window_range(w, &mut region);
@@ -279,12 +319,9 @@ impl NonlinearState {
             return None;
         }
         let mid = 0.5 * (region.lo + region.hi);
-        // a(y_mid): the direction whose weights give ν.
-        self.dir[0] = 1.0;
-        let mut power = 1.0;
-        for i in 1..dg {
-            power *= mid;
-            self.dir[i] = (i + 1) as f64 * power;
+        // a(y_mid) = (φ'(y_mid), K): the direction whose weights give ν.
+        for (a, f) in self.dir[..dg].iter_mut().zip(self.library.iter()) {
+            *a = f.slope(mid);
         }
         self.dir[dg..d].copy_from_slice(&self.gain);
         self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
@@ -297,6 +334,33 @@ impl NonlinearState {
         let rank = if dg == 1 || region.hi == region.lo { 1 } else { dg };
         let c = crate::nonlinear::simultaneous_multiplier(rank, nu, risk);
         let c_upper = t_quantile(nu, delta);
+        let cells = if region.hi > region.lo { self.cfg.cells } else { 1 };
+        let bounds = if self.library.is_polynomial() {
+            self.cells_polynomial(region, cells, c, c_upper)
+        } else {
+            self.cells_named(region, cells, c, c_upper)
+        };
+        let Bounds { cert, worst, beta_min, upper } = bounds;
+        let test = self.wald_test(dg, d, nu, delta);
+        (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
+            window: self.windows.window(w),
+            look: k,
+            t,
+            certificate: cert,
+            beta_hat_min: beta_min,
+            multiplier: c,
+            nu,
+            region,
+            worst,
+            upper: (upper < margin).then_some(upper),
+            test,
+        })
+    }
+
+    /// The polynomial library: `β̂(y)` and `s(y)²` are polynomials, bounded on each cell by
+    /// their Taylor expansions at its midpoint ([`polynomial_bounds`]).
+    fn cells_polynomial(&mut self, region: Interval, cells: usize, c: f64, c_upper: f64) -> Bounds {
+        let (dg, d) = (self.library.len(), self.dir.len());
         let th = &self.est.theta;
         // β̂(y) = Σ_i f_i y^i, f_0 = −(θ_1 + B K), f_i = −(i + 1) θ_{i+1}.
         let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
@@ -329,41 +393,63 @@ impl NonlinearState {
                 self.poly_s[i + j] += a_om_a(i, j);
             }
         }
-        let cells = if region.hi > region.lo { self.cfg.cells } else { 1 };
+        let mut out = Bounds::start(region);
         let width = (region.hi - region.lo) / cells as f64;
-        let (mut cert, mut worst, mut beta_min, mut upper) =
-            (f64::INFINITY, mid, f64::INFINITY, f64::INFINITY);
         for cell in 0..cells {
             let a = region.lo + width * cell as f64;
             let b = if cell + 1 == cells { region.hi } else { a + width };
             let (f_lo, f_hi) = polynomial_bounds(&self.poly_f, a, b, &mut self.work);
             let (_, s2_hi) = polynomial_bounds(&self.poly_s, a, b, &mut self.work);
-            let s_hi = s2_hi.max(0.0).sqrt();
-            let value = f_lo - c * s_hi;
-            if value < cert {
-                cert = value;
-                worst = 0.5 * (a + b);
-            }
-            beta_min = beta_min.min(f_lo);
-            upper = upper.min(f_hi + c_upper * s_hi);
+            out.cell(a, b, (f_lo, f_hi), s2_hi.max(0.0).sqrt(), (c, c_upper));
         }
-        let test = self.wald_test(dg, d, nu, delta);
-        (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
-            window: self.windows.window(w),
-            look: k,
-            t,
-            certificate: cert,
-            beta_hat_min: beta_min,
-            multiplier: c,
-            nu,
-            region,
-            worst,
-            upper: (upper < margin).then_some(upper),
-            test,
-        })
+        out
     }
 
-    /// The Wald test of `θ_2 … θ_D` (the coefficients of `y², …, y^D`).
+    /// A named library: on each cell every slope `φ_k'` lies in an interval
+    /// ([`Feature::slope_bounds`]), so `β̂(y) = −(Σ_k θ_k φ_k'(y) + B K)` is bounded by interval
+    /// arithmetic, and `s(y)² = a(y)ᵀ Ω̂ a(y)`, convex in `a`, is at most its largest value at
+    /// the `2^D` corners of the box of slopes.
+    fn cells_named(&mut self, region: Interval, cells: usize, c: f64, c_upper: f64) -> Bounds {
+        let (dg, d) = (self.library.len(), self.dir.len());
+        let th = &self.est.theta;
+        let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
+        let mut out = Bounds::start(region);
+        let width = (region.hi - region.lo) / cells as f64;
+        let mut slopes = [(0.0, 0.0); FeatureSet::CAPACITY];
+        for cell in 0..cells {
+            let a = region.lo + width * cell as f64;
+            let b = if cell + 1 == cells { region.hi } else { a + width };
+            let (mut sum_lo, mut sum_hi) = (bk, bk);
+            for (k, f) in self.library.iter().enumerate() {
+                let (lo, hi) = f.slope_bounds(a, b);
+                slopes[k] = (lo, hi);
+                let (p, q) = (th[k] * lo, th[k] * hi);
+                sum_lo += p.min(q);
+                sum_hi += p.max(q);
+            }
+            let mut s2_hi = 0.0f64;
+            let v = &mut self.work[..d];
+            for corner in 0..1usize << dg {
+                for k in 0..dg {
+                    v[k] = if corner >> k & 1 == 0 { slopes[k].0 } else { slopes[k].1 };
+                }
+                v[dg..d].copy_from_slice(&self.gain);
+                let mut q = 0.0;
+                for r in 0..d {
+                    let mut row = 0.0;
+                    for col in 0..d {
+                        row += self.cov[r * d + col] * v[col];
+                    }
+                    q += v[r] * row;
+                }
+                s2_hi = s2_hi.max(q);
+            }
+            out.cell(a, b, (-sum_hi, -sum_lo), s2_hi.max(0.0).sqrt(), (c, c_upper));
+        }
+        out
+    }
+
+    /// The Wald test of `θ_2 … θ_D` (the coefficients of the features after `y`).
     fn wald_test(&mut self, dg: usize, d: usize, nu: f64, delta: f64) -> Option<NonlinearityTest> {
         let q = dg - 1;
         if q == 0 {
@@ -402,6 +488,7 @@ impl NonlinearState {
     pub(crate) fn check(&self, fresh: &Self) -> Result<(), CertifyError> {
         self.windows.check_state()?;
         let ok = self.cfg == fresh.cfg
+            && self.library == fresh.library
             && self.horizon == fresh.horizon
             && self.gain == fresh.gain
             && self.windows.count() == fresh.windows.count()

@@ -3,7 +3,7 @@
 use serde::Deserialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
-    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource,
+    Calibration, Certifier, CertifierConfig, FeatureSet, NonlinearConfig, ResidualSource,
 };
 use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
 
@@ -75,7 +75,8 @@ delta = 0.01
 # windows and delta), and a test that closes the linear calibrated gate when the dynamics
 # vary over the region ("dynamics vary over the explored region"). Needs [calibration].
 enabled = false
-features = "polynomial"  # y, y^2, ..., y^degree (the feature library built so far)
+features = "polynomial"  # y, y^2, ..., y^degree; or a list such as ["y", "y*tanh(y)"]
+                         # (known: y, y^2 .. y^5, tanh(y), y*tanh(y); starts with "y")
 degree = 3
 region = "bounding_box"  # the range of y over the window's samples (the rule built so far)
 # cells = 32             # grid cells on which the minimum over the region is bounded
@@ -98,12 +99,21 @@ struct File {
     nonlinear: NonlinearSection,
 }
 
-/// The feature libraries of `[nonlinear]` (one so far).
-#[derive(Debug, Default, Clone, Copy, Deserialize, PartialEq)]
-#[serde(rename_all = "snake_case")]
+/// The feature library of `[nonlinear]`: `"polynomial"` (with `degree`) or a list of named
+/// features starting with `"y"`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(untagged)]
 enum Features {
-    #[default]
-    Polynomial,
+    /// `"polynomial"`.
+    Library(String),
+    /// Named features, for example `["y", "y*tanh(y)"]`.
+    Named(Vec<String>),
+}
+
+impl Default for Features {
+    fn default() -> Self {
+        Self::Library("polynomial".into())
+    }
 }
 
 /// The region rules of `[nonlinear]` (one so far).
@@ -120,7 +130,6 @@ struct NonlinearSection {
     #[serde(default)]
     enabled: bool,
     #[serde(default)]
-    #[allow(dead_code)]
     features: Features,
     #[serde(default)]
     degree: Option<usize>,
@@ -365,8 +374,22 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     let nl = &f.nonlinear;
     if nl.enabled {
         let d = NonlinearConfig::default();
+        let features = match &nl.features {
+            Features::Library(name) if name == "polynomial" => None,
+            Features::Library(name) => {
+                return Err(bad(format!(
+                    "[nonlinear] features: `{name}` is no library: use \"polynomial\" (with \
+                     degree) or a list of features such as [\"y\", \"y*tanh(y)\"]"
+                )));
+            }
+            Features::Named(names) => Some(
+                FeatureSet::from_names(names)
+                    .map_err(|e| bad(format!("[nonlinear] features: {e}")))?,
+            ),
+        };
         certifier.nonlinear = Some(NonlinearConfig {
             degree: nl.degree.unwrap_or(d.degree),
+            features,
             cells: nl.cells.unwrap_or(d.cells),
             test_risk: nl.test_risk,
         });
@@ -450,5 +473,10 @@ mod tests {
         assert_eq!((c.degree, c.cells), (2, 8));
         let unknown = both.replace("features = \"polynomial\"", "features = \"splines\"");
         assert!(parse(&unknown, "x").unwrap_err().to_string().contains("splines"));
+        let named = both.replace("features = \"polynomial\"", "features = [\"y\", \"y*tanh(y)\"]");
+        let c = parse(&named, "x").unwrap().certifier.nonlinear.unwrap();
+        assert_eq!(c.library(), FeatureSet::from_names(&["y", "y*tanh(y)"]).unwrap());
+        let first = both.replace("features = \"polynomial\"", "features = [\"tanh(y)\"]");
+        assert!(parse(&first, "x").unwrap_err().to_string().contains("start with `y`"));
     }
 }

@@ -4,6 +4,7 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::RegressionConfig;
 
+use super::FeatureSet;
 use crate::CertifyError;
 
 /// Settings of the nonlinear certificate (an addition to the paper; see the
@@ -12,10 +13,15 @@ use crate::CertifyError;
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NonlinearConfig {
-    /// Degree `D >= 1` of the polynomial feature library `φ(y) = (y, y², …, y^D)` (default 3).
-    /// `D = 1` is the linear model: the certificate then equals the calibrated one.
+    /// Degree `D >= 1` of the polynomial feature library `φ(y) = (y, y², …, y^D)` (default 3,
+    /// at most 5). `D = 1` is the linear model: the certificate then equals the calibrated one.
     #[serde(default = "default_degree")]
     pub degree: usize,
+    /// A named feature library instead of the polynomial one (default none): for example
+    /// `y, y*tanh(y)` for G5's node 1, whose drift is `−x1 tanh x1`. Starts with `y`; at most
+    /// [`FeatureSet::CAPACITY`] features.
+    #[serde(default)]
+    pub features: Option<FeatureSet>,
     /// Cells of the grid over the region on which the certificate's minimum is bounded
     /// (default 32; `1..=4096`). The bound holds between grid points too (interval bounds of
     /// the polynomials on each cell), so more cells only tighten it.
@@ -40,7 +46,7 @@ fn default_cells() -> usize {
 
 impl Default for NonlinearConfig {
     fn default() -> Self {
-        Self { degree: default_degree(), cells: default_cells(), test_risk: None }
+        Self { degree: default_degree(), features: None, cells: default_cells(), test_risk: None }
     }
 }
 
@@ -51,10 +57,26 @@ impl NonlinearConfig {
         Self { degree, ..Self::default() }
     }
 
+    /// Features `library` with every other setting at its default.
+    #[must_use]
+    pub fn with_features(library: FeatureSet) -> Self {
+        Self { features: Some(library), ..Self::default() }
+    }
+
+    /// The feature library: the named one, or `y, …, y^degree` (a degree out of range gives
+    /// the linear library; `validate` refuses it first).
+    #[must_use]
+    pub fn library(&self) -> FeatureSet {
+        self.features
+            .or_else(|| FeatureSet::polynomial(self.degree))
+            .or_else(|| FeatureSet::polynomial(1))
+            .unwrap_or_else(unreachable_library)
+    }
+
     /// Regressors per column: `D` features and `m` inputs.
     #[must_use]
     pub fn regressors(&self, inputs: usize) -> usize {
-        self.degree + inputs
+        self.library().len() + inputs
     }
 
     /// Check the settings against the regression (one output) and the calibration's smallest
@@ -86,8 +108,11 @@ impl NonlinearConfig {
                 ),
             );
         }
-        if !(1..=8).contains(&self.degree) {
-            return bad("nonlinear.degree", format!("must lie in 1..=8, got {}", self.degree));
+        if self.features.is_none() && !(1..=FeatureSet::CAPACITY).contains(&self.degree) {
+            return bad(
+                "nonlinear.degree",
+                format!("must lie in 1..={}, got {}", FeatureSet::CAPACITY, self.degree),
+            );
         }
         if !(1..=4096).contains(&self.cells) {
             return bad("nonlinear.cells", format!("must lie in 1..=4096, got {}", self.cells));
@@ -103,12 +128,23 @@ impl NonlinearConfig {
             return bad(
                 "window",
                 format!(
-                    "M = {} is too short for the nonlinear certificate of degree {} with h = {} \
+                    "M = {} is too short for the nonlinear certificate with {} features, h = {} \
                      and m = {}: the smallest valid window is {min} columns (h · (D + m + 2))",
-                    reg.window, self.degree, reg.horizon, reg.inputs
+                    reg.window,
+                    self.library().len(),
+                    reg.horizon,
+                    reg.inputs
                 ),
             );
         }
         Ok(())
+    }
+}
+
+/// `y` alone, which always parses.
+fn unreachable_library() -> FeatureSet {
+    match FeatureSet::from_names(&["y"]) {
+        Ok(set) => set,
+        Err(_) => unreachable!("`y` is a valid library"),
     }
 }

@@ -63,14 +63,10 @@ impl NonlinearConfig {
         Self { features: Some(library), ..Self::default() }
     }
 
-    /// The feature library: the named one, or `y, …, y^degree` (a degree out of range gives
-    /// the linear library; `validate` refuses it first).
+    /// The feature library: the named one, or `y, …, y^degree` ([`FeatureSet::polynomial`]).
     #[must_use]
     pub fn library(&self) -> FeatureSet {
-        self.features
-            .or_else(|| FeatureSet::polynomial(self.degree))
-            .or_else(|| FeatureSet::polynomial(1))
-            .unwrap_or_else(unreachable_library)
+        self.features.unwrap_or_else(|| FeatureSet::polynomial(self.degree))
     }
 
     /// Regressors per column: `D` features and `m` inputs.
@@ -138,13 +134,5 @@ impl NonlinearConfig {
             );
         }
         Ok(())
-    }
-}
-
-/// `y` alone, which always parses.
-fn unreachable_library() -> FeatureSet {
-    match FeatureSet::from_names(&["y"]) {
-        Ok(set) => set,
-        Err(_) => unreachable!("`y` is a valid library"),
     }
 }

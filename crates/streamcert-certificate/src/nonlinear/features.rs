@@ -104,11 +104,19 @@ impl FeatureSet {
     /// Most features in a library (the bound over a cell visits `2^D` corners).
     pub const CAPACITY: usize = 5;
 
-    /// The polynomial library `y, y², …, y^degree` (`1 <= degree <= CAPACITY`).
+    /// The polynomial library `y, y², …, y^D` with `D = degree` clamped to
+    /// `1..=CAPACITY` ([`NonlinearConfig::validate`](super::NonlinearConfig::validate) refuses a
+    /// degree outside it before any library is built).
     #[must_use]
-    pub fn polynomial(degree: usize) -> Option<Self> {
-        let names: Vec<String> = (1..=degree).map(|k| Feature::Power(k as u8).name()).collect();
-        Self::from_names(&names).ok()
+    pub fn polynomial(degree: usize) -> Self {
+        let len = degree.clamp(1, Self::CAPACITY);
+        let mut items = [Feature::Power(1); Self::CAPACITY];
+        // Slots past `len` stay `y`, as in every other library, so that equality is equality
+        // of the lists.
+        for (k, item) in items.iter_mut().enumerate().take(len) {
+            *item = Feature::Power(k as u8 + 1);
+        }
+        Self { len: len as u8, items }
     }
 
     /// A library from names; the message says what is valid.
@@ -213,7 +221,9 @@ mod tests {
         let set = FeatureSet::from_names(&["y", "y * tanh(y)"]).unwrap();
         assert_eq!(set.len(), 2);
         assert!(!set.is_polynomial());
-        assert!(FeatureSet::polynomial(3).unwrap().is_polynomial());
+        let cubic = FeatureSet::polynomial(3);
+        assert!(cubic.is_polynomial() && cubic.len() == 3);
+        assert_eq!(cubic, FeatureSet::from_names(&["y", "y^2", "y^3"]).unwrap());
         assert!(FeatureSet::from_names(&["tanh(y)"]).unwrap_err().contains("start with `y`"));
         assert!(FeatureSet::from_names(&["y", "y"]).unwrap_err().contains("twice"));
         assert!(FeatureSet::from_names(&["y", "exp(y)"]).unwrap_err().contains("unknown"));

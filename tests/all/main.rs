@@ -6,6 +6,7 @@ mod certificate;
 mod compose;
 mod dynamics;
 mod network;
+mod network_coupling;
 mod nonlinear;
 mod regression;
 mod reliability;

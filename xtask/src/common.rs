@@ -92,6 +92,7 @@ impl Params {
             noise_scaling: self.noise_scaling,
             noise_on_a: self.exp2_noise_on_a,
             steps: None,
+            gamma: None,
         }
     }
 

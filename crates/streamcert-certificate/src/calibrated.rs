@@ -102,10 +102,13 @@
 //!   `cargo xtask validity` measures the false-opening rate down to it.
 
 mod config;
+mod coupling;
 pub(crate) mod quantile;
 mod standing;
 
 pub use config::Calibration;
+pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
+use coupling::{CouplingLook, CouplingState};
 pub(crate) use standing::{Look, standing};
 
 pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quantile};
@@ -191,6 +194,9 @@ pub(crate) struct CalibratedState {
     regions: Vec<Interval>,
     /// The nonlinear certificate on the same columns and looks, when configured.
     nonlinear: Option<NonlinearState>,
+    /// The estimated coupling bounds on the same looks, when configured.
+    #[serde(default)]
+    coupling: Option<CouplingState>,
     // Scratch: the newest column's samples (times, outputs) and output ranges.
     ts: Vec<f64>,
     ys: Vec<f64>,
@@ -201,6 +207,7 @@ impl CalibratedState {
     pub(crate) fn new(
         cal: Calibration,
         nonlinear: Option<NonlinearConfig>,
+        coupling: Option<&CouplingConfig>,
         reg: &RegressionConfig,
         gain: &[f64],
     ) -> Result<Self, CertifyError> {
@@ -252,6 +259,7 @@ impl CalibratedState {
             eig_work: vec![0.0; linalg::eig_work_len(p * p)],
             regions: vec![Interval::EMPTY; p * lengths.len()],
             nonlinear,
+            coupling: coupling.map(|c| CouplingState::new(c.clone(), p, m, lengths.len())),
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],
@@ -286,6 +294,14 @@ impl CalibratedState {
         if let Some(n) = &mut self.nonlinear {
             n.reset();
         }
+        if let Some(c) = &mut self.coupling {
+            c.reset();
+        }
+    }
+
+    /// The current coupling bound per block (empty without a coupling configuration).
+    pub(crate) fn coupling_bounds(&self) -> &[Option<CouplingBound>] {
+        self.coupling.as_ref().map_or(&[], |c| c.bounds())
     }
 
     /// Absorb the regression's newest column if it is new, look where due (at block
@@ -349,6 +365,11 @@ impl CalibratedState {
         self.windows.estimate(w, self.ridge, &self.tmat, self.min_pivot, &mut self.est);
         if !self.est.ready {
             self.latest[w] = None;
+            if let Some(c) = &mut self.coupling {
+                let window = self.windows.window(w);
+                let look = CouplingLook { w, k, t, share: self.shares[w], nu: 0.0, window };
+                c.look(&look, &self.windows, &mut self.est, p);
+            }
             return;
         }
         // sym(Θ̂ T).
@@ -373,6 +394,11 @@ impl CalibratedState {
         let risk = look_risk(self.cal.delta, self.shares[w], k);
         let pp = self.col_range.len();
         self.windows.window_range(w, &mut self.regions[w * pp..(w + 1) * pp]);
+        if let Some(c) = &mut self.coupling {
+            let window = self.windows.window(w);
+            let look = CouplingLook { w, k, t, share: self.shares[w], nu, window };
+            c.look(&look, &self.windows, &mut self.est, p);
+        }
         let radius = calibrated_radius(variance, nu, risk);
         let upper =
             (beta_hat < margin).then(|| beta_hat + calibrated_radius(variance, nu, self.cal.delta));
@@ -432,10 +458,16 @@ impl CalibratedState {
     pub(crate) fn check(
         &self,
         nonlinear: Option<NonlinearConfig>,
+        coupling: Option<&CouplingConfig>,
         reg: &RegressionConfig,
         gain: &[f64],
     ) -> Result<(), CertifyError> {
-        let fresh = Self::new(self.cal, nonlinear, reg, gain)?;
+        let fresh = Self::new(self.cal, nonlinear, coupling, reg, gain)?;
+        let coupling_ok = match (&self.coupling, &fresh.coupling) {
+            (Some(a), Some(b)) => a.matches(b),
+            (None, None) => true,
+            _ => false,
+        };
         match (&self.nonlinear, &fresh.nonlinear) {
             (Some(a), Some(b)) => a.check(b)?,
             (None, None) => {}
@@ -446,7 +478,8 @@ impl CalibratedState {
             }
         }
         self.windows.check_state()?;
-        let ok = self.horizon == fresh.horizon
+        let ok = coupling_ok
+            && self.horizon == fresh.horizon
             && self.ridge == fresh.ridge
             && self.min_pivot == fresh.min_pivot
             && self.windows.count() == fresh.windows.count()

@@ -11,8 +11,9 @@ use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, l
 use crate::calibrated::{CalibratedState, CalibratedVerdict};
 use crate::gap::GapDetector;
 use crate::{
-    AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, Evidence, Fit,
-    Gate, GateState, Interval, NonlinearLook, NotCertified, Verdict, WindowLook, certificate_value,
+    AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, CouplingBound,
+    Evidence, Fit, Gate, GateState, Interval, NonlinearLook, NotCertified, Verdict, WindowLook,
+    certificate_value,
 };
 
 /// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
@@ -78,7 +79,10 @@ impl Certifier {
             calibrated_window: None,
             calibrated: cfg
                 .calibration
-                .map(|c| CalibratedState::new(c, cfg.nonlinear, &cfg.regression, &cfg.gain))
+                .map(|c| {
+                    let coupling = cfg.couplings.as_ref();
+                    CalibratedState::new(c, cfg.nonlinear, coupling, &cfg.regression, &cfg.gain)
+                })
                 .transpose()?,
             gap: GapDetector::new(cfg.gap_factor),
             ambiguity: match &cfg.ambiguity {
@@ -141,6 +145,14 @@ impl Certifier {
     #[must_use]
     pub fn region(&self) -> &[Interval] {
         self.regression.ranges()
+    }
+
+    /// The current upper bound on each coupling block's gain `‖C_ij‖₂`
+    /// ([`CertifierConfig::couplings`], in its block order; `None` for a block with no bound
+    /// yet; empty without couplings). See [`CouplingConfig`](crate::CouplingConfig).
+    #[must_use]
+    pub fn coupling_bounds(&self) -> &[Option<CouplingBound>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.coupling_bounds())
     }
 
     /// The region of the standing calibrated certificate: the range of each output over the

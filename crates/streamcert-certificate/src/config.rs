@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityConfig;
 use streamcert_regression::{RegressionConfig, ResidualSource};
 
-use crate::{Calibration, CertifyError, NonlinearConfig};
+use crate::{Calibration, CertifyError, CouplingConfig, NonlinearConfig};
 
 /// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
 /// wrong number of values.
@@ -55,6 +55,11 @@ pub struct CertifierConfig {
     /// the linear calibrated gate (`None`: not computed; needs a calibration and one output).
     #[serde(default)]
     pub nonlinear: Option<NonlinearConfig>,
+    /// Input channels that are neighbours' measured outputs, whose coefficient blocks are
+    /// bounded as coupling gains (`None`: no coupling estimated; needs a calibration). See
+    /// [`CouplingConfig`].
+    #[serde(default)]
+    pub couplings: Option<CouplingConfig>,
 }
 
 fn default_gap_factor() -> f64 {
@@ -85,6 +90,7 @@ impl CertifierConfig {
             gap_factor: default_gap_factor(),
             calibration: None,
             nonlinear: None,
+            couplings: None,
         }
     }
 
@@ -130,6 +136,9 @@ impl CertifierConfig {
         }
         if let Some(n) = &self.nonlinear {
             n.validate(&self.regression, self.calibration.is_some())?;
+        }
+        if let Some(c) = &self.couplings {
+            c.validate(&self.regression, &self.gain, self.calibration.is_some())?;
         }
         Ok(())
     }

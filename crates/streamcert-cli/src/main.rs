@@ -156,6 +156,9 @@ enum SimSystem {
         /// Number of steps instead of the experiment's (for long test files).
         #[arg(long)]
         steps: Option<usize>,
+        /// Coupling gain γ instead of the experiment's (1: 0.15, 2: 0).
+        #[arg(long)]
+        gamma: Option<f64>,
     },
 }
 
@@ -304,7 +307,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
             print!("{text}");
             Ok(())
         }
-        Command::Simulate { system: SimSystem::G5 { experiment, seed, coupling, steps } } => {
+        Command::Simulate {
+            system: SimSystem::G5 { experiment, seed, coupling, steps, gamma },
+        } => {
             let experiment = if experiment == 1 { Experiment::One } else { Experiment::Two };
             let coupling = match coupling {
                 CouplingArg::Cascade => Coupling::Cascade,
@@ -312,7 +317,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             };
             let stdout = std::io::stdout();
             let mut out = BufWriter::new(stdout.lock());
-            simulate::run(experiment, coupling, seed, steps, &mut out)
+            simulate::run(experiment, coupling, seed, steps, gamma, &mut out)
         }
     }
 }

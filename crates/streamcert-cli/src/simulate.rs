@@ -9,7 +9,7 @@ use crate::CliError;
 
 /// Write `t,y_a,u_a,y_b,u_b` (and the states and the true local rates) for run `seed` of the
 /// experiment, exactly the data of `cargo xtask reproduce` run `seed` (the seed rule is
-/// `G5Dataset::seeds`), optionally with another number of steps.
+/// `G5Dataset::seeds`), optionally with another number of steps or another coupling gain.
 ///
 /// # Errors
 /// [`CliError::Io`] on a write error.
@@ -18,9 +18,16 @@ pub fn run<W: Write>(
     coupling: Coupling,
     seed: u64,
     steps: Option<usize>,
+    gamma: Option<f64>,
     out: &mut W,
 ) -> Result<(), CliError> {
-    let ds = G5Dataset { coupling, steps, ..G5Dataset::defaults(experiment) };
+    if let Some(g) = gamma.filter(|g| !(*g >= 0.0 && g.is_finite())) {
+        return Err(CliError::Input {
+            file: "simulate".into(),
+            message: format!("--gamma must be finite and >= 0, got {g}"),
+        });
+    }
+    let ds = G5Dataset { coupling, steps, gamma, ..G5Dataset::defaults(experiment) };
     let traj = ds
         .run_seeded(seed)
         .map_err(|e| CliError::Input { file: "simulate".into(), message: e.to_string() })?;

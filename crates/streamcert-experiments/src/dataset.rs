@@ -120,6 +120,10 @@ pub struct G5Dataset {
     /// after 30 s Experiment 1's schedule has no random part left.
     #[serde(default)]
     pub steps: Option<usize>,
+    /// Coupling gain `γ` instead of the experiment's (Experiment 1: 0.15, Experiment 2: 0),
+    /// for example to estimate the couplings of a bidirectional network.
+    #[serde(default)]
+    pub gamma: Option<f64>,
 }
 
 impl G5Dataset {
@@ -136,6 +140,7 @@ impl G5Dataset {
             noise_scaling: NoiseScaling::Sde,
             noise_on_a: true,
             steps: None,
+            gamma: None,
         }
     }
 
@@ -145,6 +150,7 @@ impl G5Dataset {
     /// None for the built-in parameters; kept fallible for the validated constructor.
     pub fn system(&self) -> Result<G5, DynamicsError> {
         let Setting { gamma, k1, k4, .. } = self.experiment.setting();
+        let gamma = self.gamma.unwrap_or(gamma);
         G5::new(G5Config { gamma, k1, k4, ..G5Config::paper(self.coupling) })
     }
 

@@ -1,28 +1,18 @@
 //! [`NetworkCertifier`]: `N` local certifiers and the composition at every epoch.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Evidence, Verdict};
-use streamcert_compose::{Network, SparseOptions, certify_sparse, network_rate};
+use streamcert_certificate::{Certifier, Evidence};
 
-use crate::report::ComposeMethod;
-use crate::{EpochReport, NetworkConfig, NetworkError, NotCertifiedLocal, perron_sensitivity};
-
-/// A subsystem's newest sample time and composing verdict.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-struct Last {
-    t: f64,
-    verdict: Verdict,
-}
+use crate::composer::record;
+use crate::{Composer, EpochReport, LocalSnapshot, NetworkConfig, NetworkError};
 
 /// The live network certifier. Serde-serialisable as a whole (checkpoint and resume).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NetworkCertifier {
-    cfg: NetworkConfig,
-    certifiers: Vec<Certifier>,
-    last: Vec<Option<Last>>,
-    /// Index `k` of the next epoch to compose (at `k · epoch`); `None` before any sample.
-    next: Option<u64>,
-    streak: usize,
+    pub(crate) cfg: NetworkConfig,
+    pub(crate) certifiers: Vec<Certifier>,
+    pub(crate) last: Vec<Option<LocalSnapshot>>,
+    pub(crate) composer: Composer,
 }
 
 impl NetworkCertifier {
@@ -45,7 +35,7 @@ impl NetworkCertifier {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { last: vec![None; certifiers.len()], certifiers, next: None, streak: 0, cfg })
+        Ok(Self { last: vec![None; certifiers.len()], certifiers, composer: Composer::new(), cfg })
     }
 
     /// Check a state read back from a checkpoint: the configuration is valid, there is one
@@ -79,13 +69,15 @@ impl NetworkCertifier {
             }
             certifiers.push(c);
         }
-        for l in self.last.iter().flatten() {
-            let finite = |v: Option<f64>| v.is_none_or(f64::is_finite);
-            if !(l.t.is_finite() && finite(l.verdict.value) && finite(l.verdict.radius)) {
-                return bad("a stored time or certificate is not finite".into());
+        for (l, c) in self.last.iter().zip(&certifiers) {
+            let Some(l) = l else { continue };
+            if !l.is_valid() {
+                return bad("a stored time, certificate or coupling bound is not finite, or a \
+                            verdict is open with a reason"
+                    .into());
             }
-            if l.verdict.open != l.verdict.reason.is_none() {
-                return bad("a stored verdict is open with a reason, or closed without one".into());
+            if l.couplings.len() != c.coupling_bounds().len() {
+                return bad("a stored snapshot has another number of coupling bounds".into());
             }
         }
         Ok(Self { certifiers, ..self })
@@ -142,7 +134,7 @@ impl NetworkCertifier {
             name: self.cfg.subsystems[i].name.clone(),
             source,
         })?;
-        self.last[i] = Some(Last { t, verdict: *ev.verdict(self.cfg.certificate) });
+        record(&mut self.last[i], t, self.cfg.certificate, &self.certifiers[i], &ev);
         Ok(ev)
     }
 
@@ -156,88 +148,16 @@ impl NetworkCertifier {
         t: f64,
         mut on_epoch: impl FnMut(&EpochReport),
     ) -> Result<(), NetworkError> {
-        if !t.is_finite() {
-            return Ok(());
-        }
-        let epoch = self.cfg.epoch;
-        let first = (t / epoch).floor().max(0.0) + 1.0;
-        let mut k = match self.next {
-            Some(k) => k,
-            None if first < u64::MAX as f64 => first as u64,
-            None => return Err(NetworkError::TimeJump { t, epochs: first, max: 0 }),
-        };
-        // Refuse before composing anything: the state stays as it was.
-        let epochs = (t / epoch).floor() - k as f64 + 1.0;
-        if epochs > self.cfg.max_epoch_jump as f64 {
-            return Err(NetworkError::TimeJump { t, epochs, max: self.cfg.max_epoch_jump });
-        }
-        self.next = Some(k);
-        while k as f64 * epoch <= t {
-            let report = self.compose(k)?;
+        for k in self.composer.due(&self.cfg, t)? {
+            let report = self.composer.compose(&self.cfg, k, &self.last)?;
             on_epoch(&report);
-            k += 1;
-            self.next = Some(k);
         }
         Ok(())
     }
 
-    /// Compose epoch `k` from the subsystems' newest verdicts.
-    fn compose(&mut self, k: u64) -> Result<EpochReport, NetworkError> {
-        let at = k as f64 * self.cfg.epoch;
-        let n = self.certifiers.len();
-        let mut local = Vec::with_capacity(n);
-        let mut not_certified = Vec::new();
-        for (i, last) in self.last.iter().enumerate() {
-            let value = match last {
-                None => {
-                    not_certified.push((i, NotCertifiedLocal::NoSample));
-                    None
-                }
-                Some(l) if at - l.t > self.cfg.stale_after => {
-                    not_certified.push((i, NotCertifiedLocal::Stale { last: l.t }));
-                    None
-                }
-                Some(l) => {
-                    if let Some(r) = l.verdict.reason {
-                        not_certified.push((i, NotCertifiedLocal::Local(r)));
-                    }
-                    l.verdict.value
-                }
-            };
-            local.push(value);
-        }
-        let mut report = EpochReport {
-            t: at,
-            epoch: k,
-            local,
-            rate: None,
-            method: None,
-            certified: false,
-            open: false,
-            critical_scale: None,
-            limiting_subsystem: None,
-            limiting_coupling: None,
-            not_certified,
-        };
-        if let Some(beta) = report.local.iter().copied().collect::<Option<Vec<f64>>>() {
-            let net = Network::new(beta, &self.cfg.couplings)?;
-            let (rate, scale, method) = if n <= self.cfg.dense_limit {
-                let c = network_rate(&net)?;
-                (c.rate, c.critical_scale, ComposeMethod::Dense)
-            } else {
-                let c = certify_sparse(&net, &SparseOptions::default())?;
-                (c.rate, c.critical_scale, ComposeMethod::Sparse)
-            };
-            let s = perron_sensitivity(&net, 1000, 1e-12);
-            report.rate = Some(rate);
-            report.method = Some(method);
-            report.critical_scale = Some(scale);
-            report.limiting_subsystem = Some(s.limiting_subsystem);
-            report.limiting_coupling = s.limiting_coupling;
-            report.certified = report.not_certified.is_empty() && rate >= self.cfg.margin;
-        }
-        self.streak = if report.certified { self.streak + 1 } else { 0 };
-        report.open = self.streak >= self.cfg.consecutive;
-        Ok(report)
+    /// The newest snapshot of every subsystem (`None` before its first sample).
+    #[must_use]
+    pub fn snapshots(&self) -> &[Option<LocalSnapshot>] {
+        &self.last
     }
 }

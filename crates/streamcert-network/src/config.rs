@@ -23,6 +23,21 @@ impl SubsystemSpec {
     }
 }
 
+/// A coupling whose gain is estimated from the data: subsystem `to`'s regression takes
+/// subsystem `from`'s outputs as the input channels of its coupling block `block` (see
+/// [`CouplingConfig`](streamcert_certificate::CouplingConfig)), and the composition uses that
+/// block's current upper confidence bound `γ̄` as `γ_to,from`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EstimatedCoupling {
+    /// The driven subsystem (whose regression holds the block).
+    pub to: usize,
+    /// The driving subsystem (whose outputs are the block's channels).
+    pub from: usize,
+    /// The block's index in `to`'s `couplings.blocks`.
+    pub block: usize,
+}
+
 /// The network's configuration.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -31,6 +46,11 @@ pub struct NetworkConfig {
     pub subsystems: Vec<SubsystemSpec>,
     /// Coupling bounds `(i, j, γ_ij)`: how subsystem `j` drives subsystem `i` (`γ_ij >= 0`).
     pub couplings: Vec<(usize, usize, f64)>,
+    /// Couplings whose gains are estimated by the driven subsystem's regression (default
+    /// none). The caller feeds the driving subsystem's outputs to the driven one as the
+    /// block's input channels.
+    #[serde(default)]
+    pub estimated: Vec<EstimatedCoupling>,
     /// Epoch period in seconds: the network is composed at `t = k · epoch`.
     pub epoch: f64,
     /// A subsystem whose newest sample is older than this (seconds) at an epoch is not
@@ -72,6 +92,7 @@ impl NetworkConfig {
         Self {
             subsystems,
             couplings,
+            estimated: Vec::new(),
             epoch,
             stale_after: 5.0 * epoch,
             certificate: if calibrated {
@@ -86,17 +107,24 @@ impl NetworkConfig {
         }
     }
 
-    /// Spend the run-level risk `δ` over the network: every subsystem gets a calibration
-    /// with risk `δ/N` (other calibration settings kept, or the defaults), and the calibrated
-    /// certificate composes. By the union bound the probability that any local certificate
-    /// overstates its subsystem's rate during the run is at most `δ`.
+    /// Spend the run-level risk `δ` over the network: with `N` subsystems and `E` estimated
+    /// couplings, every subsystem gets a calibration with risk `δ/(N + E)` (other calibration
+    /// settings kept, or the defaults), every subsystem with `E_i` estimated couplings gives
+    /// its coupling bounds the risk `E_i δ/(N + E)`, and the calibrated certificate composes.
+    /// By the union bound the probability that any local certificate overstates its
+    /// subsystem's rate, or any coupling bound understates its gain, during the run is at
+    /// most `δ`.
     #[must_use]
     pub fn split_risk(mut self, delta: f64) -> Self {
-        let n = self.subsystems.len().max(1) as f64;
-        for s in &mut self.subsystems {
+        let share = delta / (self.subsystems.len() + self.estimated.len()).max(1) as f64;
+        for (i, s) in self.subsystems.iter_mut().enumerate() {
             let mut cal = s.certifier.calibration.take().unwrap_or_else(|| Calibration::new(delta));
-            cal.delta = delta / n;
+            cal.delta = share;
             s.certifier.calibration = Some(cal);
+            let e = self.estimated.iter().filter(|e| e.to == i).count();
+            if let (Some(c), true) = (&mut s.certifier.couplings, e > 0) {
+                c.delta = share * e as f64;
+            }
         }
         self.certificate = CertificateKind::Calibrated;
         self
@@ -141,6 +169,39 @@ impl NetworkConfig {
             }
             if !(g >= 0.0 && g.is_finite()) {
                 return bad("couplings", format!("({i}, {j}): γ must be finite and >= 0, got {g}"));
+            }
+        }
+        for e in &self.estimated {
+            if e.to >= n || e.from >= n || e.to == e.from {
+                return bad(
+                    "estimated",
+                    format!("({}, {}): indices must differ and be below {n}", e.to, e.from),
+                );
+            }
+            let blocks =
+                self.subsystems[e.to].certifier.couplings.as_ref().map_or(0, |c| c.blocks.len());
+            if e.block >= blocks {
+                return bad(
+                    "estimated",
+                    format!(
+                        "({}, {}): subsystem `{}` has {blocks} coupling blocks, no block {}",
+                        e.to, e.from, self.subsystems[e.to].name, e.block
+                    ),
+                );
+            }
+            let twice = self.estimated.iter().filter(|f| (f.to, f.from) == (e.to, e.from)).count()
+                > 1
+                || self.estimated.iter().filter(|f| (f.to, f.block) == (e.to, e.block)).count() > 1
+                || self.couplings.iter().any(|&(i, j, _)| (i, j) == (e.to, e.from));
+            if twice {
+                return bad(
+                    "estimated",
+                    format!(
+                        "({}, {}): a coupling or block is given twice (estimated and given, or \
+                         estimated twice)",
+                        e.to, e.from
+                    ),
+                );
             }
         }
         if self.certificate == CertificateKind::Calibrated {

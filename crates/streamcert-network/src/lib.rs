@@ -49,13 +49,17 @@
 //! # Ok::<(), streamcert_network::NetworkError>(())
 //! ```
 
+mod batch;
 mod certifier;
+mod composer;
 mod config;
 mod perron;
 mod report;
 
+pub use batch::SampleBatch;
 pub use certifier::NetworkCertifier;
-pub use config::{NetworkConfig, SubsystemSpec};
+pub use composer::{Composer, LocalSnapshot};
+pub use config::{EstimatedCoupling, NetworkConfig, SubsystemSpec};
 pub use perron::{Sensitivity, perron_sensitivity};
 pub use report::{EpochReport, NotCertifiedLocal};
 

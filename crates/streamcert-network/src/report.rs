@@ -17,6 +17,11 @@ pub enum NotCertifiedLocal {
     },
     /// The local gate is closed, for this reason.
     Local(NotCertified),
+    /// An estimated coupling into this subsystem has no upper bound yet.
+    CouplingUnbounded {
+        /// The driving subsystem.
+        from: usize,
+    },
 }
 
 impl std::fmt::Display for NotCertifiedLocal {
@@ -25,6 +30,9 @@ impl std::fmt::Display for NotCertifiedLocal {
             Self::NoSample => f.write_str("no sample yet"),
             Self::Stale { last } => write!(f, "stale: last sample at t = {last}"),
             Self::Local(r) => write!(f, "{r}"),
+            Self::CouplingUnbounded { from } => {
+                write!(f, "the coupling from subsystem {from} has no upper bound yet")
+            }
         }
     }
 }
@@ -50,6 +58,10 @@ pub struct EpochReport {
     /// Each subsystem's composing certificate `β_cert,i` (`None` without a sample, when stale,
     /// or while it has no certificate value).
     pub local: Vec<Option<f64>>,
+    /// The estimated couplings' upper bounds `(i, j, γ̄_ij)` the composition used, in the
+    /// order of [`NetworkConfig::estimated`](crate::NetworkConfig::estimated) (those with a
+    /// bound).
+    pub couplings: Vec<(usize, usize, f64)>,
     /// `β_net` from the local certificates and the coupling bounds, when every subsystem has
     /// a value.
     pub rate: Option<f64>,

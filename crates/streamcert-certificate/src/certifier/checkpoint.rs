@@ -181,7 +181,12 @@ impl Certifier {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }
         if let Some(state) = &c.calibrated {
-            state.check(c.cfg.nonlinear, &c.cfg.regression, &c.cfg.gain)?;
+            state.check(
+                c.cfg.nonlinear,
+                c.cfg.couplings.as_ref(),
+                &c.cfg.regression,
+                &c.cfg.gain,
+            )?;
         }
         Ok(c)
     }

@@ -167,3 +167,94 @@ fn network_long_rows_equal_the_wide_file() {
         text(&short.stderr)
     );
 }
+
+/// `streamcert network` with both couplings of bidirectional G5 (γ = 0.3) estimated: the
+/// local calibrated certificates are those of `certify` runs whose inputs include the other
+/// subsystem's output (risk δ/(N + E) each), every estimated upper bound contains the true γ,
+/// and the network rate is `compose` on the local rates and the bounds.
+#[test]
+fn network_estimates_the_couplings_of_bidirectional_g5() {
+    let data = run(
+        &[
+            "simulate",
+            "g5",
+            "--experiment",
+            "2",
+            "--coupling",
+            "bidirectional",
+            "--seed",
+            "2",
+            "--gamma",
+            "0.3",
+            "--steps",
+            "3000",
+        ],
+        b"",
+    );
+    assert!(data.status.success(), "{}", text(&data.stderr));
+    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let body = example
+        .replace("gamma = 0.4", "estimate = true")
+        .replace("certificate = \"gaussian\"", "certificate = \"calibrated\"")
+        .replace("# risk = 0.01", "risk = 0.04")
+        .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+    let net_cfg = tmp("network-estimated.toml");
+    std::fs::write(&net_cfg, body).expect("write");
+    let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);
+    assert!(net.status.success(), "{}", text(&net.stderr));
+    let certify = |tag: &str, y: &str, u: &str, other: &str, k: f64| -> Vec<(f64, String)> {
+        let path = tmp(&format!("network-estimated-{tag}.toml"));
+        let body = format!(
+            "[columns]\ntime = \"t\"\noutputs = [\"{y}\"]\ninputs = [\"{u}\", \"{other}\"]\n\
+             [controller]\ngain = [[{k}], [0.0]]\n\
+             [certificate]\nconservatism = 0.3\nmargin = 0.1\nconsecutive = 10\n\
+             [regression]\nwindow = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\
+             [calibration]\nenabled = true\ndelta = 0.01\n[ambiguity]\nenabled = false\n"
+        );
+        std::fs::write(&path, body).expect("write");
+        let out = run(&["certify", "--config", path.to_str().expect("utf8")], &data.stdout);
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let mut r = csv::Reader::from_reader(out.stdout.as_slice());
+        let h = r.headers().expect("header").clone();
+        let col = |name: &str| h.iter().position(|x| x == name).expect("column");
+        let (t, c) = (col("t"), col("cert_calibrated"));
+        r.records()
+            .map(|x| x.expect("row"))
+            .map(|x| (x[t].parse().expect("t"), x[c].to_string()))
+            .collect()
+    };
+    let a = certify("a", "y_a", "u_a", "y_b", -2.5);
+    let b = certify("b", "y_b", "u_b", "y_a", -3.0);
+    let mut r = csv::Reader::from_reader(net.stdout.as_slice());
+    let h = r.headers().expect("header").clone();
+    let col = |name: &str| h.iter().position(|x| x == name).expect("column");
+    let (mut bounded, mut composed) = (0, 0);
+    for row in r.records().map(|x| x.expect("row")) {
+        let t: f64 = row[col("t")].parse().expect("t");
+        let before =
+            |v: &[(f64, String)]| v.iter().rev().find(|(s, _)| *s < t).map(|(_, c)| c.clone());
+        let (ca, cb) = (before(&a).expect("a row"), before(&b).expect("b row"));
+        assert_eq!(&row[col("cert_A")], ca, "A at t = {t}");
+        assert_eq!(&row[col("cert_B")], cb, "B at t = {t}");
+        let (gba, gab) = (&row[col("gamma_B_A")], &row[col("gamma_A_B")]);
+        for g in [gba, gab].into_iter().filter(|g| !g.is_empty()) {
+            bounded += 1;
+            let g: f64 = g.parse().expect("gamma");
+            assert!(g >= 0.3, "an upper bound {g} below the true γ = 0.3 at t = {t}");
+        }
+        if row[col("rate")].is_empty() {
+            continue;
+        }
+        composed += 1;
+        let rates = tmp("network-estimated-rates.txt");
+        let gains = tmp("network-estimated-gains.txt");
+        std::fs::write(&rates, format!("{ca} {cb}\n")).expect("write");
+        std::fs::write(&gains, format!("0 {gba}\n{gab} 0\n")).expect("write");
+        let c = compose(&rates, &gains, &["--json"]);
+        assert!(c.status.success(), "{}", text(&c.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&c.stdout).expect("json");
+        let rate: f64 = row[col("rate")].parse().expect("rate");
+        assert_eq!(v["rate"].as_f64().map(f64::to_bits), Some(rate.to_bits()), "t = {t}");
+    }
+    assert!(bounded >= 100 && composed >= 30, "{bounded} bounds, {composed} rates");
+}

@@ -169,8 +169,10 @@ impl Composer {
         }
         // Estimated couplings: the subsystem's current upper bound, or not certified.
         let mut couplings = cfg.couplings.clone();
+        let mut estimated = Vec::with_capacity(cfg.estimated.len());
         for e in &cfg.estimated {
             let bound = snapshots[e.to].as_ref().and_then(|s| s.couplings.get(e.block).copied());
+            estimated.push(bound.flatten());
             match bound.flatten() {
                 Some(g) => couplings.push((e.to, e.from, g)),
                 None => {
@@ -186,7 +188,7 @@ impl Composer {
             t: at,
             epoch: k,
             local,
-            couplings: Vec::new(),
+            estimated,
             rate: None,
             method: None,
             certified: false,
@@ -216,7 +218,6 @@ impl Composer {
             report.limiting_coupling = s.limiting_coupling;
             report.certified = report.not_certified.is_empty() && rate >= cfg.margin;
         }
-        report.couplings = couplings[cfg.couplings.len()..].to_vec();
         self.streak = if report.certified { self.streak + 1 } else { 0 };
         report.open = self.streak >= cfg.consecutive;
         Ok(report)

@@ -58,10 +58,10 @@ pub struct EpochReport {
     /// Each subsystem's composing certificate `β_cert,i` (`None` without a sample, when stale,
     /// or while it has no certificate value).
     pub local: Vec<Option<f64>>,
-    /// The estimated couplings' upper bounds `(i, j, γ̄_ij)` the composition used, in the
-    /// order of [`NetworkConfig::estimated`](crate::NetworkConfig::estimated) (those with a
-    /// bound).
-    pub couplings: Vec<(usize, usize, f64)>,
+    /// The estimated couplings' upper bounds `γ̄` the composition used, one per entry of
+    /// [`NetworkConfig::estimated`](crate::NetworkConfig::estimated) (`None` while a coupling
+    /// has no bound: the network is then not certified).
+    pub estimated: Vec<Option<f64>>,
     /// `β_net` from the local certificates and the coupling bounds, when every subsystem has
     /// a value.
     pub rate: Option<f64>,

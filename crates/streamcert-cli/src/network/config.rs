@@ -3,8 +3,8 @@
 //! `certify` parser).
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::CertificateKind;
-use streamcert_network::{NetworkCertifier, NetworkConfig, SubsystemSpec};
+use streamcert_certificate::{CertificateKind, CouplingBlock, CouplingConfig};
+use streamcert_network::{EstimatedCoupling, NetworkCertifier, NetworkConfig, SubsystemSpec};
 
 use crate::CliError;
 use crate::compose::{self, GainsFormat};
@@ -45,6 +45,9 @@ gain = [[-3.0]]
 # Coupling bounds: how `from` drives `to` (gamma >= 0). For many subsystems, a file instead:
 # `gains = "gains.txt"` and `gains_format = "dense"` (N rows of N, entry (i, j) = how j drives
 # i) or "triplets" (lines `i,j,gamma`) in [network], indices in [[subsystem]] order.
+# Or measure a coupling: `estimate = true` instead of `gamma` puts `from`'s outputs among
+# `to`'s regressors and composes with a calibrated upper bound on the gain (needs
+# [network] risk and [calibration] enabled = true; output column gamma_<from>_<to>).
 [[coupling]]
 from = "B"
 to = "A"
@@ -130,7 +133,11 @@ struct SubsystemEntry {
 struct CouplingEntry {
     from: String,
     to: String,
-    gamma: f64,
+    /// A given bound `γ >= 0`.
+    gamma: Option<f64>,
+    /// Estimate the gain instead: `to`'s regression takes `from`'s outputs as inputs.
+    #[serde(default)]
+    estimate: bool,
 }
 
 /// A validated network configuration: the combined input columns and the network.
@@ -167,6 +174,40 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
         Some(v) => v.try_into().map_err(|e: toml::de::Error| bad(format!("[[coupling]]: {e}")))?,
         None => Vec::new(),
     };
+    let index = |name: &str| {
+        subsystems
+            .iter()
+            .position(|s| s.name == name)
+            .ok_or_else(|| bad(format!("[[coupling]] names `{name}`, which is no [[subsystem]]")))
+    };
+    // Estimated couplings: (to, from) in file order; each adds `from`'s outputs to `to`'s
+    // inputs (one coupling block, a zero row of the gain per channel).
+    let mut estimated = Vec::new();
+    for c in &couplings {
+        match (c.gamma, c.estimate) {
+            (Some(_), true) => {
+                return Err(bad(format!(
+                    "[[coupling]] {} -> {}: give `gamma` or `estimate = true`, not both",
+                    c.from, c.to
+                )));
+            }
+            (None, false) => {
+                return Err(bad(format!(
+                    "[[coupling]] {} -> {}: needs `gamma` (a given bound) or `estimate = true`",
+                    c.from, c.to
+                )));
+            }
+            (None, true) => estimated.push((index(&c.to)?, index(&c.from)?)),
+            (Some(_), false) => {}
+        }
+    }
+    if !estimated.is_empty() && section.risk.is_none() {
+        return Err(bad(
+            "estimated couplings spend part of the run-level risk: set [network] risk = δ (and \
+             [calibration] enabled = true)"
+                .into(),
+        ));
+    }
     let columns_table = match table.get("columns") {
         Some(toml::Value::Table(t)) => t.clone(),
         _ => return Err(bad("missing [columns] (the time column)".into())),
@@ -176,8 +217,26 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     let (mut outputs, mut inputs) = (Vec::new(), Vec::new());
     let mut time = String::new();
     let mut delimiter = ",".to_string();
-    for s in &subsystems {
-        // The subsystem as a `certify` configuration: its columns and gain, the shared rest.
+    let mut blocks = Vec::new();
+    for (i, s) in subsystems.iter().enumerate() {
+        // The subsystem as a `certify` configuration: its columns and gain, the shared rest;
+        // the outputs of the subsystems whose couplings into it are estimated join its inputs.
+        let (mut s_inputs, mut s_gain) = (s.inputs.clone(), s.gain.clone());
+        let p = s.outputs.len();
+        let mut own = Vec::new();
+        for &(_, from) in estimated.iter().filter(|&&(to, _)| to == i) {
+            let first = s_inputs.len();
+            s_inputs.extend(subsystems[from].outputs.iter().cloned());
+            s_gain.extend(subsystems[from].outputs.iter().map(|_| vec![0.0; p]));
+            own.push(CouplingBlock { first, len: subsystems[from].outputs.len() });
+        }
+        blocks.push(own);
+        let s = &SubsystemEntry {
+            name: s.name.clone(),
+            outputs: s.outputs.clone(),
+            inputs: s_inputs,
+            gain: s_gain,
+        };
         let mut t = table.clone();
         let mut cols = columns_table.clone();
         cols.insert(
@@ -200,14 +259,14 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
         outputs.extend(c.columns.outputs.iter().cloned());
         inputs.extend(c.columns.inputs.iter().cloned());
         dims.push((c.columns.outputs.len(), c.columns.inputs.len()));
-        specs.push(SubsystemSpec::new(&s.name, c.certifier));
+        let mut certifier = c.certifier;
+        if !blocks[i].is_empty() {
+            // The risk is set by `split_risk` below.
+            let blocks = std::mem::take(&mut blocks[i]);
+            certifier.couplings = Some(CouplingConfig { blocks, delta: 0.5 });
+        }
+        specs.push(SubsystemSpec::new(&s.name, certifier));
     }
-    let index = |name: &str| {
-        subsystems
-            .iter()
-            .position(|s| s.name == name)
-            .ok_or_else(|| bad(format!("[[coupling]] names `{name}`, which is no [[subsystem]]")))
-    };
     let edges = match &section.gains {
         Some(_) if !couplings.is_empty() => {
             return Err(bad(
@@ -227,10 +286,18 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
         }
         None => couplings
             .iter()
-            .map(|c| Ok((index(&c.to)?, index(&c.from)?, c.gamma)))
+            .filter_map(|c| c.gamma.map(|g| Ok((index(&c.to)?, index(&c.from)?, g))))
             .collect::<Result<Vec<_>, CliError>>()?,
     };
     let mut network = NetworkConfig::new(specs, edges, section.epoch);
+    let mut seen = vec![0; subsystems.len()];
+    network.estimated = estimated
+        .iter()
+        .map(|&(to, from)| {
+            seen[to] += 1;
+            EstimatedCoupling { to, from, block: seen[to] - 1 }
+        })
+        .collect();
     network.certificate = section.certificate;
     network.margin = section.margin;
     network.consecutive = section.consecutive;
@@ -290,6 +357,24 @@ mod tests {
             "subsystem `B`",
         );
         refused(&EXAMPLE_CONFIG.replace("epoch = 0.5", "epoch = 0.0"), "epoch");
+        // Estimated couplings: one of gamma and estimate, and a run-level risk.
+        refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", "estimate = true"), "[network] risk");
+        refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", "gamma = 0.4\nestimate = true"), "not both");
+        refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", ""), "needs `gamma`");
+        let text = EXAMPLE_CONFIG
+            .replacen("gamma = 0.4", "estimate = true", 1)
+            .replace("# risk = 0.01", "risk = 0.03")
+            .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+        let cfg = parse(&text, "estimated").expect("valid");
+        // B -> A estimated: A's inputs gain B's output, a zero gain row and one block.
+        assert_eq!(cfg.dims, vec![(1, 2), (1, 1)]);
+        assert_eq!(cfg.columns.inputs, ["u_a", "y_b", "u_b"]);
+        let a = &cfg.network.subsystems[0].certifier;
+        assert_eq!(a.gain, vec![-2.5, 0.0]);
+        let blocks = a.couplings.as_ref().map(|c| (c.blocks.clone(), c.delta));
+        assert_eq!(blocks, Some((vec![CouplingBlock { first: 1, len: 1 }], 0.01)));
+        assert_eq!(cfg.network.estimated, vec![EstimatedCoupling { to: 0, from: 1, block: 0 }]);
+        assert_eq!(cfg.network.couplings, vec![(1, 0, 0.4)]);
         // With a run-level risk the calibrated certificate composes, delta/N per subsystem.
         let text = EXAMPLE_CONFIG
             .replace("# risk = 0.01", "risk = 0.01")

@@ -114,7 +114,14 @@ pub fn run<R: Read, W: Write>(
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
     let mut rows = Rows::new(cfg, input, input_name)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
-    let mut writer = EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none());
+    let estimated = cfg
+        .network
+        .estimated
+        .iter()
+        .map(|e| format!("gamma_{}_{}", names[e.from], names[e.to]))
+        .collect();
+    let mut writer =
+        EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none(), estimated);
     // Resuming: rows at the start of the input whose samples every subsystem in them already
     // holds (time not after its newest) are a replay and are passed over, counted.
     let mut replaying = opts.resume.is_some();

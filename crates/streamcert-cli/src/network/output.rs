@@ -23,6 +23,9 @@ struct EpochRow<'a> {
     limiting_coupling: Option<String>,
     not_certified: String,
     local: std::collections::BTreeMap<&'a str, Option<f64>>,
+    /// Upper bounds of the estimated couplings, keyed `gamma_<from>_<to>`.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    estimated: std::collections::BTreeMap<&'a str, Option<f64>>,
 }
 
 /// Epoch rows as CSV (csv crate) or JSON lines.
@@ -31,9 +34,12 @@ pub(super) struct EpochWriter<W: Write> {
     json: Option<std::io::BufWriter<W>>,
     flush_each_row: bool,
     header: bool,
+    /// `gamma_<from>_<to>` per estimated coupling.
+    estimated: Vec<String>,
 }
 
-/// The fixed CSV columns before the per-subsystem `cert_<name>` columns.
+/// The fixed CSV columns before the per-subsystem `cert_<name>` columns (and the
+/// `gamma_<from>_<to>` columns of the estimated couplings after them).
 const CSV_COLUMNS: [&str; 9] = [
     "t",
     "epoch",
@@ -47,12 +53,18 @@ const CSV_COLUMNS: [&str; 9] = [
 ];
 
 impl<W: Write> EpochWriter<W> {
-    pub(super) fn new(out: W, format: Format, flush_each_row: bool, header: bool) -> Self {
+    pub(super) fn new(
+        out: W,
+        format: Format,
+        flush_each_row: bool,
+        header: bool,
+        estimated: Vec<String>,
+    ) -> Self {
         let (csv, json) = match format {
             Format::Csv => (Some(csv::Writer::from_writer(out)), None),
             Format::Jsonl => (None, Some(std::io::BufWriter::new(out))),
         };
-        Self { csv, json, flush_each_row, header }
+        Self { csv, json, flush_each_row, header, estimated }
     }
 
     pub(super) fn write(
@@ -86,12 +98,19 @@ impl<W: Write> EpochWriter<W> {
                 .map(|(i, j)| format!("{}->{}", names[j], names[i])),
             not_certified,
             local: names.iter().map(String::as_str).zip(r.local.iter().copied()).collect(),
+            estimated: self
+                .estimated
+                .iter()
+                .map(String::as_str)
+                .zip(r.estimated.iter().copied())
+                .collect(),
         };
         if let Some(w) = &mut self.csv {
             if std::mem::take(&mut self.header) {
                 let mut header: Vec<String> =
                     CSV_COLUMNS.iter().map(|c| (*c).to_string()).collect();
                 header.extend(names.iter().map(|n| format!("cert_{n}")));
+                header.extend(self.estimated.iter().cloned());
                 w.write_record(&header)?;
             }
             let num = |v: Option<f64>| {
@@ -109,6 +128,7 @@ impl<W: Write> EpochWriter<W> {
                 row.not_certified.clone(),
             ];
             record.extend(r.local.iter().map(|v| num(*v)));
+            record.extend(r.estimated.iter().map(|v| num(*v)));
             w.write_record(&record)?;
         }
         if let Some(w) = &mut self.json {

@@ -153,7 +153,7 @@ fn batches_over_threads_equal_pushes_one_by_one() {
     let edges = (0..n).map(|i| ((i + 1) % n, i, 0.05)).collect();
     let mut cfg = NetworkConfig::new(locals, edges, 5.0).split_risk(0.05);
     cfg.dense_limit = 4; // the sparse composition
-    for (batch, threads) in [(10_000, 2), (7_001, 3), (24_000, 8), (333, 2)] {
+    for (batch, threads) in [(10_000, 2), (7_001, 3), (24_000, 8), (333, 2), (10, 2)] {
         let (one, many, serial, fleet) = one_by_one_and_batched(&cfg, &samples, batch, threads);
         assert!(one.len() >= 5 && one.iter().any(|r| r.rate.is_some()), "{} epochs", one.len());
         assert_eq!(one, many, "batch {batch}, {threads} threads");

@@ -77,7 +77,12 @@ impl SampleBatch {
 const MIN_PARALLEL: usize = 2048;
 
 /// Push samples `range` of `batch` into the subsystems `first..first + certifiers.len()`;
-/// the first error with its batch position.
+/// the first error with its batch position. When the range holds at least two samples per
+/// subsystem they are taken subsystem by subsystem (a counting sort of their positions into
+/// `order`, stable, so each subsystem still sees its samples in arrival order): one
+/// certifier's state stays in cache for all of its samples of the segment, instead of every
+/// sample touching another certifier. The subsystems are independent within a segment, so
+/// the states and snapshots are those of arrival order.
 fn run_shard(
     batch: &SampleBatch,
     range: std::ops::Range<usize>,
@@ -85,24 +90,68 @@ fn run_shard(
     certifiers: &mut [Certifier],
     last: &mut [Option<LocalSnapshot>],
     net: &crate::NetworkConfig,
+    order: &mut Vec<u32>,
 ) -> Option<(usize, NetworkError)> {
-    let end = first + certifiers.len();
-    for j in range {
+    let n = certifiers.len();
+    let end = first + n;
+    let mut one = |j: usize| -> Option<(usize, NetworkError)> {
         let (i, t, v) = batch.get(j);
-        if i < first || i >= end {
-            continue;
-        }
         let c = &mut certifiers[i - first];
         let (y, u) = v.split_at(c.config().regression.outputs.min(v.len()));
         match c.push(t, y, u) {
-            Ok(ev) => record(&mut last[i - first], t, net.certificate, c, &ev),
+            Ok(ev) => {
+                record(&mut last[i - first], t, net.certificate, c, &ev);
+                None
+            }
             Err(source) => {
                 let name = net.subsystems[i].name.clone();
-                return Some((j, NetworkError::Subsystem { index: i, name, source }));
+                Some((j, NetworkError::Subsystem { index: i, name, source }))
+            }
+        }
+    };
+    if range.len() < 2 * n {
+        return range
+            .filter(|&j| (first..end).contains(&(batch.index[j] as usize)))
+            .find_map(&mut one);
+    }
+    // Counting sort of the positions by subsystem: `order` holds n + 1 bucket starts, then
+    // the positions.
+    order.clear();
+    order.resize(n + 1, 0);
+    for j in range.clone() {
+        let i = batch.index[j] as usize;
+        if (first..end).contains(&i) {
+            order[i - first + 1] += 1;
+        }
+    }
+    for s in 0..n {
+        order[s + 1] += order[s];
+    }
+    let total = order[n] as usize;
+    order.resize(n + 1 + total, 0);
+    let (starts, positions) = order.split_at_mut(n + 1);
+    // Place each position at its bucket's cursor; afterwards `starts[s]` is the end of bucket
+    // `s` (the start of `s + 1`).
+    for j in range {
+        let i = batch.index[j] as usize;
+        if (first..end).contains(&i) {
+            positions[starts[i - first] as usize] = j as u32;
+            starts[i - first] += 1;
+        }
+    }
+    let mut first_error: Option<(usize, NetworkError)> = None;
+    for s in 0..n {
+        let lo = if s == 0 { 0 } else { starts[s - 1] as usize };
+        for &j in &positions[lo..starts[s] as usize] {
+            if let Some((j, e)) = one(j as usize) {
+                if first_error.as_ref().is_none_or(|&(f, _)| j < f) {
+                    first_error = Some((j, e));
+                }
+                break; // this subsystem stops at its first error; the others go on
             }
         }
     }
-    None
+    first_error
 }
 
 impl NetworkCertifier {
@@ -158,9 +207,21 @@ impl NetworkCertifier {
     ) -> Result<(), NetworkError> {
         let n = self.certifiers.len();
         let threads = threads.clamp(1, n.max(1));
+        if self.scratch.0.len() < threads {
+            self.scratch.0.resize_with(threads, Vec::new);
+        }
         let cfg = &self.cfg;
         if threads == 1 || range.len() < MIN_PARALLEL {
-            return match run_shard(batch, range, 0, &mut self.certifiers, &mut self.last, cfg) {
+            let order = self.scratch.0.first_mut().expect("one scratch per thread");
+            return match run_shard(
+                batch,
+                range,
+                0,
+                &mut self.certifiers,
+                &mut self.last,
+                cfg,
+                order,
+            ) {
                 Some((_, e)) => Err(e),
                 None => Ok(()),
             };
@@ -171,10 +232,13 @@ impl NetworkCertifier {
                 .certifiers
                 .chunks_mut(chunk)
                 .zip(self.last.chunks_mut(chunk))
+                .zip(self.scratch.0.iter_mut())
                 .enumerate()
-                .map(|(s, (certifiers, last))| {
+                .map(|(s, ((certifiers, last), order))| {
                     let range = range.clone();
-                    scope.spawn(move || run_shard(batch, range, s * chunk, certifiers, last, cfg))
+                    scope.spawn(move || {
+                        run_shard(batch, range, s * chunk, certifiers, last, cfg, order)
+                    })
                 })
                 .collect();
             handles
@@ -186,5 +250,16 @@ impl NetworkCertifier {
             Some((_, e)) => Err(e),
             None => Ok(()),
         }
+    }
+}
+
+/// Per-thread scratch of [`NetworkCertifier::push_batch`]: positions sorted by subsystem. Not
+/// part of the state (never serialised, equal to any other).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Scratch(pub(crate) Vec<Vec<u32>>);
+
+impl PartialEq for Scratch {
+    fn eq(&self, _: &Self) -> bool {
+        true
     }
 }

@@ -13,6 +13,9 @@ pub struct NetworkCertifier {
     pub(crate) certifiers: Vec<Certifier>,
     pub(crate) last: Vec<Option<LocalSnapshot>>,
     pub(crate) composer: Composer,
+    /// Per-thread scratch of [`push_batch`](Self::push_batch) (positions sorted by subsystem).
+    #[serde(skip)]
+    pub(crate) scratch: crate::batch::Scratch,
 }
 
 impl NetworkCertifier {
@@ -35,7 +38,13 @@ impl NetworkCertifier {
                 })
             })
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { last: vec![None; certifiers.len()], certifiers, composer: Composer::new(), cfg })
+        Ok(Self {
+            last: vec![None; certifiers.len()],
+            certifiers,
+            composer: Composer::new(),
+            scratch: crate::batch::Scratch::default(),
+            cfg,
+        })
     }
 
     /// Check a state read back from a checkpoint: the configuration is valid, there is one

@@ -71,12 +71,34 @@ enum Command {
         io: Stream,
         #[command(flatten)]
         persist: Persist,
+        #[command(flatten)]
+        cluster: ClusterArgs,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
         #[command(subcommand)]
         system: SimSystem,
     },
+}
+
+/// Run `network` on timely-dataflow with timely's process configuration: the subsystems are
+/// sharded over the workers of every process; process 0 reads the input and writes the output
+/// (the same rows as a one-process run). Every process is started with the same configuration.
+#[derive(clap::Args)]
+struct ClusterArgs {
+    /// Worker threads per process (timely's -w).
+    #[arg(long)]
+    workers: Option<usize>,
+    /// Number of processes (timely's -n).
+    #[arg(long)]
+    processes: Option<usize>,
+    /// This process's index, 0 to processes - 1 (timely's -p).
+    #[arg(long)]
+    process: Option<usize>,
+    /// A file of one host:port per process, in process order (timely's -h; default
+    /// localhost:2101, localhost:2102, ...).
+    #[arg(long)]
+    hostfile: Option<PathBuf>,
 }
 
 /// Checkpoint and resume of the streaming commands.
@@ -265,7 +287,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
             }
             Ok(())
         }
-        Command::Network { io, persist } => {
+        Command::Network { io, persist, cluster } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
@@ -281,7 +303,20 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 checkpoint_every,
                 resume,
             };
-            let s = network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
+            let ClusterArgs { workers, processes, process, hostfile } = cluster;
+            let cluster = network::Cluster { workers, processes, process, hostfile };
+            let s = if !cluster.is_set() {
+                network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?
+            } else if cluster.index() == 0 {
+                let input: Box<dyn std::io::Read + Send> = Box::new(open_input(&io.input)?);
+                network::run_timely(&cfg, input, &io.input, &mut out, &opts, &cluster)?
+            } else {
+                // Another process: it certifies its shards; process 0 reads and writes.
+                let empty: Box<dyn std::io::Read + Send> = Box::new(std::io::empty());
+                network::run_timely(&cfg, empty, "-", std::io::sink(), &opts, &cluster)?;
+                eprintln!("process {}: done", cluster.index());
+                return Ok(());
+            };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(
                 "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} (first at {})",

@@ -258,3 +258,110 @@ fn network_estimates_the_couplings_of_bidirectional_g5() {
     }
     assert!(bounded >= 100 && composed >= 30, "{bounded} bounds, {composed} rates");
 }
+
+/// Wait for `child` at most `secs` seconds; kill it and fail after that.
+fn wait_bounded(mut child: std::process::Child, secs: u64, what: &str) -> std::process::Output {
+    let start = std::time::Instant::now();
+    loop {
+        match child.try_wait().expect("try_wait") {
+            Some(_) => return child.wait_with_output().expect("output"),
+            None if start.elapsed().as_secs() >= secs => {
+                let _ = child.kill();
+                let out = child.wait_with_output().expect("output");
+                panic!("{what} did not finish in {secs} s: {}", text(&out.stderr));
+            }
+            None => std::thread::sleep(std::time::Duration::from_millis(20)),
+        }
+    }
+}
+
+/// Two free ports on localhost (bound, read and released; a race with another program
+/// taking them in between is possible but unlikely).
+fn free_ports() -> [u16; 2] {
+    let a = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let b = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    [a.local_addr().expect("addr").port(), b.local_addr().expect("addr").port()]
+}
+
+/// `streamcert network` over two timely processes on localhost (one worker each, the two
+/// subsystems on different processes) writes the rows of the one-process run byte for byte,
+/// with given and with estimated couplings; and a run on two worker threads of one process too.
+#[test]
+fn two_timely_processes_write_the_one_process_rows() {
+    let data = run(
+        &[
+            "simulate",
+            "g5",
+            "--experiment",
+            "2",
+            "--coupling",
+            "bidirectional",
+            "--seed",
+            "3",
+            "--gamma",
+            "0.3",
+            "--steps",
+            "1500",
+        ],
+        b"",
+    );
+    assert!(data.status.success(), "{}", text(&data.stderr));
+    let input = tmp("timely-g5.csv");
+    std::fs::write(&input, &data.stdout).expect("write");
+    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let estimated = example
+        .replacen("gamma = 0.4", "estimate = true", 1)
+        .replace("# risk = 0.01", "risk = 0.04")
+        .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+    for (tag, body) in [("given", example.clone()), ("estimated", estimated)] {
+        let cfg = tmp(&format!("timely-{tag}.toml"));
+        std::fs::write(&cfg, body).expect("write");
+        let cfg = cfg.to_str().expect("utf8");
+        let one = run(&["network", "--config", cfg, "--input", input.to_str().expect("utf8")], b"");
+        assert!(one.status.success(), "{}", text(&one.stderr));
+        assert!(one.stdout.len() > 1000, "{tag}: {} bytes", one.stdout.len());
+        // Two worker threads in one process.
+        let threads = run(
+            &[
+                "network",
+                "--config",
+                cfg,
+                "--input",
+                input.to_str().expect("utf8"),
+                "--workers",
+                "2",
+            ],
+            b"",
+        );
+        assert!(threads.status.success(), "{}", text(&threads.stderr));
+        assert_eq!(text(&threads.stdout), text(&one.stdout), "{tag}: two threads");
+        // Two processes.
+        let [p0, p1] = free_ports();
+        let hosts = tmp(&format!("timely-hosts-{tag}.txt"));
+        std::fs::write(&hosts, format!("127.0.0.1:{p0}\n127.0.0.1:{p1}\n")).expect("write");
+        let output = tmp(&format!("timely-out-{tag}.csv"));
+        let _ = std::fs::remove_file(&output);
+        let process = |index: &str, extra: &[&str]| {
+            common::bin()
+                .args(["network", "--config", cfg, "--processes", "2", "--process", index])
+                .args(["--hostfile", hosts.to_str().expect("utf8")])
+                .args(extra)
+                .stdin(std::process::Stdio::null())
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("spawn")
+        };
+        let second = process("1", &[]);
+        let first = process(
+            "0",
+            &["--input", input.to_str().expect("utf8"), "--output", output.to_str().expect("utf8")],
+        );
+        let first = wait_bounded(first, 120, "process 0");
+        let second = wait_bounded(second, 120, "process 1");
+        assert!(first.status.success(), "process 0: {}", text(&first.stderr));
+        assert!(second.status.success(), "process 1: {}", text(&second.stderr));
+        let got = std::fs::read(&output).expect("process 0's output");
+        assert_eq!(text(&got), text(&one.stdout), "{tag}: two processes");
+    }
+}

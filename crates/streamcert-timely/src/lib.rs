@@ -28,6 +28,8 @@
 //! one-process run: the epochs due before that row are composed and reported, no later one,
 //! and the first failure (in row order) is returned.
 
+mod wire;
+
 use std::cell::RefCell;
 use std::collections::{BTreeMap, VecDeque};
 use std::ops::Range;
@@ -42,6 +44,7 @@ use timely::dataflow::channels::pact::Exchange;
 use timely::dataflow::operators::generic::operator::Operator;
 use timely::dataflow::operators::{Capability, Input, Probe};
 use timely::dataflow::{InputHandle, ProbeHandle};
+use wire::WireSnapshot;
 
 /// One input row: its time and the samples it carries, `(subsystem, outputs then inputs)`.
 #[derive(Debug, Clone, PartialEq)]
@@ -116,7 +119,7 @@ struct Sample {
 /// What a worker tells worker 0 about one segment.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 enum ShardMsg {
-    Snapshot { index: u32, snapshot: LocalSnapshot },
+    Snapshot { index: u32, snapshot: WireSnapshot },
     Failed { row: u64, line: u64, index: u32, message: String },
 }
 
@@ -409,7 +412,7 @@ fn merge_until<E>(
             match m {
                 ShardMsg::Snapshot { index, snapshot } => {
                     if let Some(slot) = last.get_mut(index as usize) {
-                        *slot = Some(snapshot);
+                        *slot = Some(snapshot.into());
                     }
                 }
                 ShardMsg::Failed { row, line, index, message } => {
@@ -493,7 +496,7 @@ impl Shard {
         for &i in &self.touched {
             if let Some(Some(Owned { snapshot: Some(snapshot), .. })) = self.owned.get(i) {
                 let index = u32::try_from(i).unwrap_or(u32::MAX);
-                give(ShardMsg::Snapshot { index, snapshot: snapshot.clone() });
+                give(ShardMsg::Snapshot { index, snapshot: snapshot.into() });
             }
         }
     }

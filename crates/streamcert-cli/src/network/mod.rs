@@ -9,6 +9,7 @@
 //! the two commands read the same keys the same way.
 
 mod config;
+mod distributed;
 mod input;
 mod output;
 
@@ -19,6 +20,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_network::NetworkCertifier;
 
 pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse};
+pub use distributed::{Cluster, run_timely};
 use input::Rows;
 use output::EpochWriter;
 
@@ -89,6 +91,11 @@ fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), 
     Ok((net, cp.summary))
 }
 
+/// The output columns `gamma_<from>_<to>` of the estimated couplings.
+fn estimated_columns(net: &streamcert_network::NetworkConfig, names: &[String]) -> Vec<String> {
+    net.estimated.iter().map(|e| format!("gamma_{}_{}", names[e.from], names[e.to])).collect()
+}
+
 /// Run the network over a wide CSV stream.
 ///
 /// # Errors
@@ -114,12 +121,7 @@ pub fn run<R: Read, W: Write>(
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
     let mut rows = Rows::new(cfg, input, input_name)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
-    let estimated = cfg
-        .network
-        .estimated
-        .iter()
-        .map(|e| format!("gamma_{}_{}", names[e.from], names[e.to]))
-        .collect();
+    let estimated = estimated_columns(&cfg.network, &names);
     let mut writer =
         EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none(), estimated);
     // Resuming: rows at the start of the input whose samples every subsystem in them already

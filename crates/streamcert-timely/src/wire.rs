@@ -1,0 +1,66 @@
+//! The snapshots as they cross processes. Timely serialises with bincode, which cannot read
+//! the internally tagged `NotCertified` of the certificate crate's serde form; the wire form
+//! is the same data with an externally tagged reason (serde's remote derive, so the compiler
+//! checks every variant and field against the certificate crate).
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::{NotCertified, Verdict};
+use streamcert_network::LocalSnapshot;
+
+#[derive(Serialize, Deserialize)]
+#[serde(remote = "NotCertified")]
+enum ReasonDef {
+    WarmingUp { columns: usize, needed: usize },
+    InsufficientExcitation,
+    WeakInstruments,
+    BelowMargin { certificate: f64, margin: f64 },
+    Accumulating { streak: usize, needed: usize },
+    SkippedSample,
+    NoAmbiguityModel,
+    NoCalibration,
+    Gap { dt: f64, reference: f64 },
+    RateDropped { window: usize, upper: f64 },
+    VaryingDynamics { window: usize, statistic: f64, threshold: f64 },
+    LinearityUntested { window: usize },
+    NoNonlinearModel,
+}
+
+#[derive(Debug, Clone, Copy, Serialize, Deserialize)]
+struct Reason(#[serde(with = "ReasonDef")] NotCertified);
+
+/// A [`LocalSnapshot`] in bincode-friendly form.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) struct WireSnapshot {
+    t: f64,
+    value: Option<f64>,
+    radius: Option<f64>,
+    open: bool,
+    reason: Option<Reason>,
+    couplings: Vec<Option<f64>>,
+}
+
+impl From<&LocalSnapshot> for WireSnapshot {
+    fn from(s: &LocalSnapshot) -> Self {
+        let v = s.verdict;
+        Self {
+            t: s.t,
+            value: v.value,
+            radius: v.radius,
+            open: v.open,
+            reason: v.reason.map(Reason),
+            couplings: s.couplings.clone(),
+        }
+    }
+}
+
+impl From<WireSnapshot> for LocalSnapshot {
+    fn from(w: WireSnapshot) -> Self {
+        let verdict = Verdict {
+            value: w.value,
+            radius: w.radius,
+            open: w.open,
+            reason: w.reason.map(|r| r.0),
+        };
+        Self { t: w.t, verdict, couplings: w.couplings }
+    }
+}

@@ -9,6 +9,8 @@
 //! * `validity`: the calibrated certificate at the boundary (VALIDITY.md).
 //! * `nonlinear`: the paper's, the linear calibrated and the nonlinear certificates against
 //!   the true rate over their regions on scalar nonlinear loops (NONLINEAR.md).
+//! * `network`: the live network certificate of up to 10⁴ subsystems against the true
+//!   network rate (NETWORK.md).
 //! * `reliability`: bad inputs through the binary (RELIABILITY.md).
 //!
 //! The command line is clap's: `cargo xtask --help`, `cargo xtask reproduce --help`. Every
@@ -19,6 +21,7 @@ mod common;
 mod dither;
 mod exp1;
 mod exp2;
+mod network;
 mod nonlinear;
 mod plot;
 mod reliability;
@@ -70,6 +73,22 @@ enum Command {
         runs: usize,
         /// Output folder.
         #[arg(long, default_value = "target/nonlinear")]
+        out: PathBuf,
+    },
+    /// The live network certificate of many scalar subsystems on a sparse random graph
+    /// against the true network rate, just below and well above the margin (NETWORK.md).
+    Network {
+        /// Subsystems per run.
+        #[arg(long, default_value_t = 10_000)]
+        subsystems: usize,
+        /// Runs per target.
+        #[arg(long, default_value_t = 10)]
+        runs: usize,
+        /// Threads of `push_batch`.
+        #[arg(long, default_value_t = 2)]
+        threads: usize,
+        /// Output folder.
+        #[arg(long, default_value = "target/network")]
         out: PathBuf,
     },
     /// Every bad input through the streamcert binary: exit code and message per case
@@ -195,6 +214,9 @@ fn main() -> Result<()> {
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { runs, out } => validity::run(runs, &out),
         Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
+        Command::Network { subsystems, runs, threads, out } => {
+            network::run(subsystems, runs, threads, &out)
+        }
         Command::Reliability { out } => reliability::run_all(&out),
     }
 }

@@ -71,6 +71,12 @@ fn g5_bidirectional_equals_two_certifiers_and_lemma_1() {
                 0.5 * (a + b) - (0.25 * (a - b).powi(2) + gamma * gamma).sqrt()
             };
             assert!((rate - lemma).abs() <= 1e-10 * (1.0 + lemma.abs()), "{rate} vs {lemma}");
+            // The Perron weights of the symmetric 2 × 2 gain matrix in closed form: the top
+            // eigenvector of [[−a, γ], [γ, −b]] at λ = −rate is (γ, λ + a).
+            let (l, total) = (-rate, r.participation.iter().sum::<f64>());
+            let p0 = gamma * gamma / (gamma * gamma + (l + a) * (l + a));
+            assert!((total - 1.0).abs() <= 1e-9, "participation sums to {total}");
+            assert!((r.participation[0] - p0).abs() <= 1e-6, "{:?} vs {p0}", r.participation);
             if a > 0.0 && b > 0.0 {
                 let scale = r.critical_scale.expect("scale");
                 let warn = warning_gain(a, b).expect("positive");

@@ -18,6 +18,7 @@
 //! place it is set. Without a command it prints the help.
 
 mod common;
+mod coupling;
 mod dither;
 mod exp1;
 mod exp2;
@@ -84,6 +85,9 @@ enum Command {
         /// Runs per target.
         #[arg(long, default_value_t = 10)]
         runs: usize,
+        /// Runs per cell of the coupling-bound coverage study.
+        #[arg(long, default_value_t = 1000)]
+        coupling_runs: usize,
         /// Threads of `push_batch`.
         #[arg(long, default_value_t = 2)]
         threads: usize,
@@ -214,8 +218,8 @@ fn main() -> Result<()> {
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { runs, out } => validity::run(runs, &out),
         Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
-        Command::Network { subsystems, runs, threads, out } => {
-            network::run(subsystems, runs, threads, &out)
+        Command::Network { subsystems, runs, coupling_runs, threads, out } => {
+            network::run(subsystems, runs, coupling_runs, threads, &out)
         }
         Command::Reliability { out } => reliability::run_all(&out),
     }

@@ -19,7 +19,7 @@ use anyhow::{Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use streamcert_certificate::{CertifierConfig, CertificateKind};
+use streamcert_certificate::{CertificateKind, CertifierConfig};
 use streamcert_compose::{Network, SparseOptions, certify_sparse};
 use streamcert_network::{NetworkCertifier, NetworkConfig, SampleBatch, SubsystemSpec};
 use streamcert_regression::{InputIntegral, RegressionConfig};
@@ -150,7 +150,13 @@ fn one_run(n: usize, target: Target, run: usize, threads: usize) -> Result<Outco
 }
 
 /// Run the study and write NETWORK.md.
-pub(crate) fn run(n: usize, runs: usize, threads: usize, out: &Path) -> Result<()> {
+pub(crate) fn run(
+    n: usize,
+    runs: usize,
+    coupling_runs: usize,
+    threads: usize,
+    out: &Path,
+) -> Result<()> {
     std::fs::create_dir_all(out)?;
     let bar = progress(TARGETS.len() * runs, "network runs");
     let mut rows = Vec::new();
@@ -175,7 +181,11 @@ pub(crate) fn run(n: usize, runs: usize, threads: usize, out: &Path) -> Result<(
             target.name.to_string(),
             format!("{runs}"),
             format!("{below} / {above}"),
-            if below > 0 { format!("{false_open} / {below} (CP upper {cp_hi:.3})") } else { "—".into() },
+            if below > 0 {
+                format!("{false_open} / {below} (CP upper {cp_hi:.3})")
+            } else {
+                "—".into()
+            },
             if above > 0 { format!("{true_open} / {above}") } else { "—".into() },
             if times.is_empty() { "never".into() } else { format!("{:.1}", median(&times)) },
             format!("{:.1} %", 100.0 * median(&share)),
@@ -240,6 +250,7 @@ pub(crate) fn run(n: usize, runs: usize, threads: usize, out: &Path) -> Result<(
     if !notes.is_empty() {
         let _ = writeln!(md, "\n{notes}");
     }
+    let _ = writeln!(md, "\n{}", crate::coupling::study(coupling_runs)?);
     write(&out.join("NETWORK.md"), &md)?;
     println!("wrote {}", out.join("NETWORK.md").display());
     Ok(())

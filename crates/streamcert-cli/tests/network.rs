@@ -168,30 +168,24 @@ fn network_long_rows_equal_the_wide_file() {
     );
 }
 
+/// `simulate g5` for Experiment 2 with bidirectional coupling `γ = 0.3`, run `seed`, `steps`
+/// steps.
+fn g5_bidirectional(seed: u32, steps: u32) -> std::process::Output {
+    let (seed, steps) = (seed.to_string(), steps.to_string());
+    let args = ["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional"];
+    let data =
+        run(&[&args[..], &["--seed", &seed, "--gamma", "0.3", "--steps", &steps]].concat(), b"");
+    assert!(data.status.success(), "{}", text(&data.stderr));
+    data
+}
+
 /// `streamcert network` with both couplings of bidirectional G5 (γ = 0.3) estimated: the
 /// local calibrated certificates are those of `certify` runs whose inputs include the other
 /// subsystem's output (risk δ/(N + E) each), every estimated upper bound contains the true γ,
 /// and the network rate is `compose` on the local rates and the bounds.
 #[test]
 fn network_estimates_the_couplings_of_bidirectional_g5() {
-    let data = run(
-        &[
-            "simulate",
-            "g5",
-            "--experiment",
-            "2",
-            "--coupling",
-            "bidirectional",
-            "--seed",
-            "2",
-            "--gamma",
-            "0.3",
-            "--steps",
-            "3000",
-        ],
-        b"",
-    );
-    assert!(data.status.success(), "{}", text(&data.stderr));
+    let data = g5_bidirectional(2, 3000);
     let example = text(&run(&["network", "--print-config"], b"").stdout);
     let body = example
         .replace("gamma = 0.4", "estimate = true")
@@ -288,24 +282,7 @@ fn free_ports() -> [u16; 2] {
 /// with given and with estimated couplings; and a run on two worker threads of one process too.
 #[test]
 fn two_timely_processes_write_the_one_process_rows() {
-    let data = run(
-        &[
-            "simulate",
-            "g5",
-            "--experiment",
-            "2",
-            "--coupling",
-            "bidirectional",
-            "--seed",
-            "3",
-            "--gamma",
-            "0.3",
-            "--steps",
-            "1500",
-        ],
-        b"",
-    );
-    assert!(data.status.success(), "{}", text(&data.stderr));
+    let data = g5_bidirectional(3, 1500);
     let input = tmp("timely-g5.csv");
     std::fs::write(&input, &data.stdout).expect("write");
     let example = text(&run(&["network", "--print-config"], b"").stdout);

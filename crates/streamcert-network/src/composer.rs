@@ -194,6 +194,7 @@ impl Composer {
             certified: false,
             open: false,
             critical_scale: None,
+            participation: Vec::new(),
             limiting_subsystem: None,
             limiting_coupling: None,
             not_certified,
@@ -216,6 +217,7 @@ impl Composer {
             report.critical_scale = Some(scale);
             report.limiting_subsystem = Some(s.limiting_subsystem);
             report.limiting_coupling = s.limiting_coupling;
+            report.participation = s.participation;
             report.certified = report.not_certified.is_empty() && rate >= cfg.margin;
         }
         self.streak = if report.certified { self.streak + 1 } else { 0 };

@@ -15,10 +15,21 @@
 //! The network is certified at an epoch when every subsystem's local gate is open (with a
 //! sample no older than `stale_after`) and `β_net >= margin`; the network gate opens after
 //! `consecutive` certified epochs. Each epoch's [`EpochReport`] names the subsystems that are
-//! not certified and why, the subsystem and the coupling that limit the rate (largest
-//! sensitivity of `α(Γ)`: participation `w_i v_i` and `γ_ij w_i v_j` with the left and right
-//! Perron vectors), and the critical coupling scale (how much every coupling may grow before
-//! contraction is lost).
+//! not certified and why, the Perron weights (participation `w_i v_i / (wᵀv)` with the left
+//! and right Perron vectors), the subsystem and the coupling that limit the rate (largest
+//! sensitivity of `α(Γ)`: participation, and `γ_ij w_i v_j`), and the critical coupling scale
+//! (how much every coupling may grow before contraction is lost).
+//!
+//! **Couplings, given or measured.** `couplings` are given bounds; [`EstimatedCoupling`]s are
+//! measured: the driven subsystem's regression takes the driving outputs as inputs (a zero row
+//! of its gain, a [`CouplingConfig`](streamcert_certificate::CouplingConfig) block) and the
+//! composition uses the block's calibrated upper bound `γ̄` (a subsystem whose bound is not
+//! there yet is not certified).
+//!
+//! **Many subsystems.** [`NetworkCertifier::push_batch`] takes a [`SampleBatch`] and shards
+//! the subsystems over threads between the epochs it makes due, with the reports of pushing
+//! the samples one by one (tested); the crate `streamcert-timely` runs the same composition
+//! across processes and machines.
 //!
 //! **Risk over the network.** With the calibrated certificate as the local one,
 //! [`NetworkConfig::split_risk`] gives each of the `N` subsystems the risk `δ/N`. By the union
@@ -26,8 +37,10 @@
 //! (some `β_i < β_cert,i`) is at most `δ`; on the complementary event every `β_cert,i` is a
 //! lower bound of the true local rate, and the composition is monotone in the local rates
 //! (`α(Γ)` of a Metzler matrix does not decrease when a diagonal entry grows), so the network
-//! rate is a lower bound of the rate the coupling bounds certify. The coupling bounds `γ_ij`
-//! themselves are taken as given (exact upper bounds).
+//! rate is a lower bound of the rate the coupling bounds certify. Given coupling bounds are
+//! taken as exact upper bounds; with `E` estimated couplings the split is `δ/(N + E)` per
+//! local certificate and per coupling, and the composition is also monotone in each `γ_ij`,
+//! so on the event that every bound holds the network rate is a lower bound of the true one.
 //!
 //! ```
 //! use streamcert_certificate::{CertifierConfig, CertificateKind};

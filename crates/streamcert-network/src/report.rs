@@ -74,6 +74,10 @@ pub struct EpochReport {
     /// The largest `s` such that the network with every coupling scaled by `s` still
     /// contracts (`s* = 1/ρ(D⁻¹ Γ_off)`, `D = diag β_cert`; needs every `β_cert,i > 0`).
     pub critical_scale: Option<f64>,
+    /// The Perron weights of the composition: each subsystem's participation
+    /// `p_i = w_i v_i / (wᵀ v)` (left and right Perron vectors of `Γ`, summing to 1), how much
+    /// the network rate gains per unit of its local rate (empty without a network rate).
+    pub participation: Vec<f64>,
     /// The subsystem whose local rate the network rate depends on most.
     pub limiting_subsystem: Option<usize>,
     /// The coupling `(i, j)` (j drives i) with the largest share in the network rate.

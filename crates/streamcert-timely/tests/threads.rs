@@ -131,3 +131,28 @@ fn a_bad_row_and_a_time_jump_stop_the_run() {
     assert!(matches!(result, Err(TimelyError::Network { line: 999, .. })), "{result:?}");
     assert_eq!(out, want);
 }
+
+#[test]
+fn unaligned_subsystem_rows_give_the_one_process_reports() {
+    // One sample per row, each subsystem at its own times (offset by 1 ms per subsystem), and
+    // a silent stretch for subsystem 1 (it turns stale, then resumes).
+    let cfg = network(4);
+    let data: Vec<Row> = rows(4, 1500, 11)
+        .into_iter()
+        .flat_map(|r| {
+            let (t, line) = (r.t, r.line);
+            r.samples.into_iter().filter_map(move |(i, v)| {
+                let silent = i == 1 && (6.0..9.0).contains(&t);
+                (!silent).then(|| Row { line, t: t + 0.001 * i as f64, samples: vec![(i, v)] })
+            })
+        })
+        .collect();
+    let (want, none) = serial(&cfg, &data);
+    assert!(none.is_none());
+    assert!(want.iter().any(|r| r.not_certified.iter().any(|(i, _)| *i == 1)));
+    for workers in [2, 3] {
+        let (got, err) = timely(&cfg, data.clone(), workers);
+        assert!(err.is_none(), "{err:?}");
+        assert_eq!(got, want, "{workers} workers");
+    }
+}

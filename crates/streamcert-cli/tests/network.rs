@@ -342,3 +342,26 @@ fn two_timely_processes_write_the_one_process_rows() {
         assert_eq!(text(&got), text(&one.stdout), "{tag}: two processes");
     }
 }
+
+/// The timely path refuses checkpoints (one-process runs only) with a configuration error.
+#[test]
+fn timely_runs_refuse_checkpoints() {
+    let example = run(&["network", "--print-config"], b"");
+    let cfg = tmp("timely-checkpoint.toml");
+    std::fs::write(&cfg, &example.stdout).expect("write");
+    let ckpt = tmp("timely-checkpoint.ckpt");
+    let out = run(
+        &[
+            "network",
+            "--config",
+            cfg.to_str().expect("utf8"),
+            "--workers",
+            "2",
+            "--checkpoint",
+            ckpt.to_str().expect("utf8"),
+        ],
+        b"t,y_a,u_a,y_b,u_b\n0,0,0,0,0\n",
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("one-process run"), "{}", text(&out.stderr));
+}

@@ -208,3 +208,40 @@ fn estimated_couplings_are_checked() {
         assert_eq!(spec.certifier.couplings.as_ref().map(|c| c.delta), Some(0.02));
     }
 }
+
+#[test]
+fn a_rejected_sample_in_a_batch_reports_the_epochs_before_it() {
+    let data = g5(0.3, 6);
+    let mut samples: Vec<_> = (0..data.len())
+        .flat_map(|j| {
+            let data = &data;
+            (0..2).map(move |i| {
+                let (y, u) = sample(data, i, j);
+                (i, data.t[j], y.to_vec(), u.to_vec())
+            })
+        })
+        .collect();
+    let bad = 2 * 2500 + 1; // subsystem B's sample at step 2500
+    samples[bad].2[0] = f64::NAN;
+    let cfg = network(0.05);
+    let mut serial = NetworkCertifier::new(cfg.clone()).expect("valid");
+    let mut want = Vec::new();
+    let mut serial_err = None;
+    for (i, t, y, u) in &samples {
+        if let Err(e) = serial.push(*i, *t, y, u, |r| want.push(r.clone())) {
+            serial_err = Some(e.to_string());
+            break;
+        }
+    }
+    for threads in [1, 2] {
+        let mut fleet = NetworkCertifier::new(cfg.clone()).expect("valid");
+        let mut b = SampleBatch::new();
+        for (i, t, y, u) in &samples {
+            b.push(*i, *t, y, u);
+        }
+        let mut got = Vec::new();
+        let err = fleet.push_batch(&b, threads, |r| got.push(r.clone())).expect_err("NaN");
+        assert_eq!(Some(err.to_string()), serial_err, "{threads} threads");
+        assert_eq!(got, want, "{threads} threads: the epochs before the bad sample");
+    }
+}

@@ -31,6 +31,12 @@
 //! experiments report it as a discrepancy.
 //!
 //! The radius `ρ` is the paper's heuristic with a tuned constant `c`, not a confidence bound.
+//! The calibrated certificate ([`CertifierConfig::calibration`], [`Calibration`]) is one, over
+//! the whole run; the nonlinear certificate ([`CertifierConfig::nonlinear`]) bounds the rate
+//! over the explored region; and with [`CertifierConfig::couplings`] the same calibrated
+//! windows give upper confidence bounds on the gains of input channels that are neighbours'
+//! outputs ([`CouplingConfig`], [`Certifier::coupling_bounds`]), for network composition
+//! without given gains.
 //!
 //! Which residuals feed `ε` is not said by the paper ([`ResidualSource`]). The default is the
 //! one-step residual: the `h`-step column residual is a sum of `h` per-step noise increments,

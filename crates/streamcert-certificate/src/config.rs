@@ -15,12 +15,12 @@ pub enum BadSamplePolicy {
     /// Return the error; the sample is not absorbed (default).
     #[default]
     Reject,
-    /// Count it, close the gates, and return evidence with [`NotCertified::SkippedSample`];
+    /// Count it, close the gates, and return evidence with [`NotCertified::SkippedSample`](crate::NotCertified::SkippedSample);
     /// the sample is not absorbed (integrals then span the gap, using the actual times).
     Skip,
 }
 
-/// Configuration of a [`Certifier`].
+/// Configuration of a [`Certifier`](crate::Certifier).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CertifierConfig {

@@ -33,7 +33,7 @@ pub enum NotCertified {
         /// Needed.
         needed: usize,
     },
-    /// The sample was bad and skipped ([`BadSamplePolicy::Skip`]).
+    /// The sample was bad and skipped ([`BadSamplePolicy::Skip`](crate::BadSamplePolicy::Skip)).
     SkippedSample,
     /// No ambiguity model is configured, so there is no Wasserstein certificate.
     NoAmbiguityModel,

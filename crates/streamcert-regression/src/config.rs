@@ -28,7 +28,7 @@ pub enum Estimator {
     Instrumented,
 }
 
-/// The interval over which [`SlidingRegression::residual`] evaluates `ΔY − Θ̂ Z`.
+/// The interval over which [`SlidingRegression::residual`](crate::SlidingRegression::residual) evaluates `ΔY − Θ̂ Z`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ResidualSource {
@@ -40,7 +40,7 @@ pub enum ResidualSource {
     Horizon,
 }
 
-/// Configuration of a [`SlidingRegression`]. Build with [`RegressionConfig::new`] for the
+/// Configuration of a [`SlidingRegression`](crate::SlidingRegression). Build with [`RegressionConfig::new`] for the
 /// documented defaults, then adjust public fields.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-/// Outcome of [`SlidingRegression::estimate`].
+/// Outcome of [`SlidingRegression::estimate`](crate::SlidingRegression::estimate).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "status", rename_all = "snake_case")]
 pub enum EstimateStatus {

@@ -81,6 +81,33 @@ fn regression_update(c: &mut Criterion) {
                 black_box(reg.estimate().rms_residual);
             });
         });
+        if d >= 8 {
+            // Naive baseline of the estimate: the same statistics, solved with nalgebra (all
+            // eigenvalues of G, a Cholesky solve, RSS from the quadratic form).
+            let mut t = 0.0;
+            let mut reg = warm(cfg, &data, &mut t);
+            group.bench_function(
+                BenchmarkId::new("incremental_plus_nalgebra_estimate", &id),
+                |b| {
+                    b.iter(|| {
+                        k = (k + 1) % len;
+                        t += 0.01;
+                        let s = &data[k * d..(k + 1) * d];
+                        reg.push(black_box(t), &s[..p], &s[p..]).expect("valid");
+                        let (g, c, sm) = reg.statistics();
+                        let g = nalgebra::DMatrix::from_fn(d, d, |i, j| g[i.min(j) * d + i.max(j)]);
+                        let c = nalgebra::DMatrix::from_row_slice(p, d, c);
+                        let eig = g.clone().symmetric_eigen().eigenvalues;
+                        let a = &g + nalgebra::DMatrix::identity(d, d) * cfg.ridge;
+                        let theta = a.cholesky().expect("spd").solve(&c.transpose()).transpose();
+                        let rss = (0..p).map(|i| sm[i * p + i]).sum::<f64>()
+                            - 2.0 * (&theta * c.transpose()).trace()
+                            + (&theta * &g * theta.transpose()).trace();
+                        black_box((eig.min(), eig.max(), rss));
+                    });
+                },
+            );
+        }
     }
     group.finish();
 }

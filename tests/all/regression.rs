@@ -36,6 +36,7 @@ struct Batch {
     theta: DMatrix<f64>,
     rms: f64,
     lambda_min: f64,
+    lambda_max: f64,
     /// `Z Zᵀ`, `ΔY Zᵀ`, `ΔY ΔYᵀ`.
     g: DMatrix<f64>,
     c: DMatrix<f64>,
@@ -113,9 +114,10 @@ fn batch(samples: &[Sample], cfg: &RegressionConfig) -> Option<Batch> {
     let theta = rhs * a.try_inverse()?;
     let r = &dy - &theta * &z;
     let rms = (r.norm_squared() / (p * n) as f64).sqrt();
-    let lambda_min = ((&z * z.transpose()) / n as f64).symmetric_eigen().eigenvalues.min();
+    let eig = ((&z * z.transpose()) / n as f64).symmetric_eigen().eigenvalues;
+    let (lambda_min, lambda_max) = (eig.min(), eig.max());
     let (g, c, s) = (&z * z.transpose(), &dy * z.transpose(), &dy * dy.transpose());
-    Some(Batch { theta, rms, lambda_min, g, c, s, cond })
+    Some(Batch { theta, rms, lambda_min, lambda_max, g, c, s, cond })
 }
 
 /// The incremental statistics equal the batch ones within `tol` relative (entrywise against
@@ -174,6 +176,31 @@ fn assert_matches_batch(reg: &mut SlidingRegression, samples: &[Sample], tol: f6
         est.gram_lambda_min,
         b.lambda_min
     );
+    assert!(
+        (est.gram_lambda_max - b.lambda_max).abs() <= tol * b.lambda_max,
+        "lambda_max {} vs {}",
+        est.gram_lambda_max,
+        b.lambda_max
+    );
+}
+
+/// Wide regressions (`d >= 8`: the reduction on both triangles and the one-pass solve with
+/// `RSS` from the forward substitution) against the batch recompute at every sample.
+#[test]
+fn wide_regressions_equal_batch_at_every_step() {
+    for (p, m, window, seed) in [(10, 10, 60, 5), (5, 4, 30, 6), (4, 4, 45, 7)] {
+        let cfg = RegressionConfig {
+            min_columns: 2 * (p + m),
+            ..RegressionConfig::new(p, m, window, 3, 1e-6)
+        };
+        let samples = random_stream(p, m, 4 * window, 0.0, seed);
+        let mut reg = SlidingRegression::new(cfg).expect("valid");
+        for k in 0..samples.len() {
+            let (t, y, u) = &samples[k];
+            reg.push(*t, y, u).expect("valid sample");
+            assert_matches_batch(&mut reg, &samples[..=k], 1e-9);
+        }
+    }
 }
 
 #[test]

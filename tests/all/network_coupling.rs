@@ -64,6 +64,20 @@ fn sample(data: &Trajectory, i: usize, j: usize) -> ([f64; 1], [f64; 2]) {
     ([y[i]], [u[i], y[1 - i]])
 }
 
+/// Every sample of a G5 run in arrival order, `(subsystem, t, y, u)`.
+fn g5_samples(gamma: f64, seed: u64) -> Vec<(usize, f64, Vec<f64>, Vec<f64>)> {
+    let data = g5(gamma, seed);
+    (0..data.len())
+        .flat_map(|j| {
+            let data = &data;
+            (0..2).map(move |i| {
+                let (y, u) = sample(data, i, j);
+                (i, data.t[j], y.to_vec(), u.to_vec())
+            })
+        })
+        .collect()
+}
+
 #[test]
 fn g5_coupling_bounds_contain_the_true_gamma() {
     for (seed, gamma) in [(0, 0.3), (1, 0.3), (2, 0.6), (3, 0.0)] {
@@ -160,16 +174,7 @@ fn batches_over_threads_equal_pushes_one_by_one() {
         assert_eq!(serial, fleet, "the whole state, batch {batch}, {threads} threads");
     }
     // The G5 network with estimated couplings, in batches of one second over two threads.
-    let data = g5(0.3, 4);
-    let g5_samples: Vec<_> = (0..data.len())
-        .flat_map(|j| {
-            let data = &data;
-            (0..2).map(move |i| {
-                let (y, u) = sample(data, i, j);
-                (i, data.t[j], y.to_vec(), u.to_vec())
-            })
-        })
-        .collect();
+    let g5_samples = g5_samples(0.3, 4);
     let (one, many, _, _) = one_by_one_and_batched(&network(0.05), &g5_samples, 100, 2);
     assert!(one.iter().any(|r| r.estimated.iter().all(Option::is_some)));
     assert_eq!(one, many);
@@ -211,16 +216,7 @@ fn estimated_couplings_are_checked() {
 
 #[test]
 fn a_rejected_sample_in_a_batch_reports_the_epochs_before_it() {
-    let data = g5(0.3, 6);
-    let mut samples: Vec<_> = (0..data.len())
-        .flat_map(|j| {
-            let data = &data;
-            (0..2).map(move |i| {
-                let (y, u) = sample(data, i, j);
-                (i, data.t[j], y.to_vec(), u.to_vec())
-            })
-        })
-        .collect();
+    let mut samples = g5_samples(0.3, 6);
     let bad = 2 * 2500 + 1; // subsystem B's sample at step 2500
     samples[bad].2[0] = f64::NAN;
     let cfg = network(0.05);

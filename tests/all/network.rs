@@ -76,6 +76,7 @@ fn g5_bidirectional_equals_two_certifiers_and_lemma_1() {
             let (l, total) = (-rate, r.participation.iter().sum::<f64>());
             let p0 = gamma * gamma / (gamma * gamma + (l + a) * (l + a));
             assert!((total - 1.0).abs() <= 1e-9, "participation sums to {total}");
+            assert!(r.sensitivity_converged);
             assert!((r.participation[0] - p0).abs() <= 1e-6, "{:?} vs {p0}", r.participation);
             if a > 0.0 && b > 0.0 {
                 let scale = r.critical_scale.expect("scale");

@@ -67,6 +67,7 @@ fn network_equals_two_certify_runs_and_compose() {
             continue;
         }
         composed += 1;
+        assert_eq!(&row[col("sensitivity_converged")], "1", "t = {t}");
         let rates = tmp("network-rates.txt");
         let gains = tmp("network-gains.txt");
         std::fs::write(&rates, format!("{ca} {cb}\n")).expect("write");

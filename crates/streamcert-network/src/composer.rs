@@ -195,6 +195,7 @@ impl Composer {
             open: false,
             critical_scale: None,
             participation: Vec::new(),
+            sensitivity_converged: false,
             limiting_subsystem: None,
             limiting_coupling: None,
             not_certified,
@@ -218,6 +219,7 @@ impl Composer {
             report.limiting_subsystem = Some(s.limiting_subsystem);
             report.limiting_coupling = s.limiting_coupling;
             report.participation = s.participation;
+            report.sensitivity_converged = s.converged;
             report.certified = report.not_certified.is_empty() && rate >= cfg.margin;
         }
         self.streak = if report.certified { self.streak + 1 } else { 0 };

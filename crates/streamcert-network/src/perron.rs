@@ -21,6 +21,9 @@ pub struct Sensitivity {
     pub limiting_coupling: Option<(usize, usize)>,
     /// Power iterations used (each is one product with `Γ` and one with `Γᵀ`).
     pub iterations: usize,
+    /// Whether the iteration met its tolerance (otherwise it stopped at `max_iterations` and
+    /// the sensitivities are those of its last iterate: informative, not converged).
+    pub converged: bool,
 }
 
 /// Perron vectors of `Γ + cI` (`c = max β_i + 1`, which makes it nonnegative with the same
@@ -36,7 +39,7 @@ pub fn perron_sensitivity(net: &Network, max_iterations: usize, tolerance: f64) 
     let c = beta.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b)) + 1.0;
     let (mut v, mut w) = (vec![1.0; n], vec![1.0; n]);
     let (mut nv, mut nw) = (vec![0.0; n], vec![0.0; n]);
-    let mut iterations = 0;
+    let (mut iterations, mut converged) = (0, false);
     for _ in 0..max_iterations {
         iterations += 1;
         // nv = (Γ + cI) v, nw = (Γ + cI)ᵀ w.
@@ -53,6 +56,7 @@ pub fn perron_sensitivity(net: &Network, max_iterations: usize, tolerance: f64) 
         std::mem::swap(&mut v, &mut nv);
         std::mem::swap(&mut w, &mut nw);
         if change <= tolerance {
+            converged = true;
             break;
         }
     }
@@ -71,7 +75,7 @@ pub fn perron_sensitivity(net: &Network, max_iterations: usize, tolerance: f64) 
             }
         }
     }
-    Sensitivity { participation, limiting_subsystem, limiting_coupling, iterations }
+    Sensitivity { participation, limiting_subsystem, limiting_coupling, iterations, converged }
 }
 
 /// Scale `x` to unit maximum; return the largest absolute change against `previous`.

@@ -78,6 +78,11 @@ pub struct EpochReport {
     /// `p_i = w_i v_i / (wᵀ v)` (left and right Perron vectors of `Γ`, summing to 1), how much
     /// the network rate gains per unit of its local rate (empty without a network rate).
     pub participation: Vec<f64>,
+    /// Whether the Perron-vector iteration behind `participation`, `limiting_subsystem` and
+    /// `limiting_coupling` met its tolerance (`1e-12` within 1000 iterations); when it did
+    /// not, they come from its last iterate. They describe the rate; the certificate does not
+    /// depend on them.
+    pub sensitivity_converged: bool,
     /// The subsystem whose local rate the network rate depends on most.
     pub limiting_subsystem: Option<usize>,
     /// The coupling `(i, j)` (j drives i) with the largest share in the network rate.

@@ -21,6 +21,8 @@ struct EpochRow<'a> {
     critical_scale: Option<f64>,
     limiting_subsystem: Option<&'a str>,
     limiting_coupling: Option<String>,
+    /// 1 when the Perron iteration behind the two fields above met its tolerance.
+    sensitivity_converged: u8,
     not_certified: String,
     local: std::collections::BTreeMap<&'a str, Option<f64>>,
     /// Upper bounds of the estimated couplings, keyed `gamma_<from>_<to>`.
@@ -40,7 +42,7 @@ pub(super) struct EpochWriter<W: Write> {
 
 /// The fixed CSV columns before the per-subsystem `cert_<name>` columns (and the
 /// `gamma_<from>_<to>` columns of the estimated couplings after them).
-const CSV_COLUMNS: [&str; 9] = [
+const CSV_COLUMNS: [&str; 10] = [
     "t",
     "epoch",
     "rate",
@@ -49,6 +51,7 @@ const CSV_COLUMNS: [&str; 9] = [
     "critical_scale",
     "limiting_subsystem",
     "limiting_coupling",
+    "sensitivity_converged",
     "not_certified",
 ];
 
@@ -96,6 +99,7 @@ impl<W: Write> EpochWriter<W> {
             limiting_coupling: r
                 .limiting_coupling
                 .map(|(i, j)| format!("{}->{}", names[j], names[i])),
+            sensitivity_converged: u8::from(r.sensitivity_converged),
             not_certified,
             local: names.iter().map(String::as_str).zip(r.local.iter().copied()).collect(),
             estimated: self
@@ -125,6 +129,7 @@ impl<W: Write> EpochWriter<W> {
                 num(row.critical_scale),
                 row.limiting_subsystem.unwrap_or_default().to_string(),
                 row.limiting_coupling.clone().unwrap_or_default(),
+                row.sensitivity_converged.to_string(),
                 row.not_certified.clone(),
             ];
             record.extend(r.local.iter().map(|v| num(*v)));

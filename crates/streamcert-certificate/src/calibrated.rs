@@ -101,6 +101,7 @@
 //!   smallest accepted window ([`Calibration::min_window`]) keeps `B − (p + m) >= 2`, and
 //!   `cargo xtask validity` measures the false-opening rate down to it.
 
+mod check;
 mod config;
 mod coupling;
 pub(crate) mod quantile;
@@ -452,56 +453,5 @@ impl CalibratedState {
             None => (None, None),
         };
         CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked }
-    }
-
-    /// Check a deserialised state.
-    pub(crate) fn check(
-        &self,
-        nonlinear: Option<NonlinearConfig>,
-        coupling: Option<&CouplingConfig>,
-        reg: &RegressionConfig,
-        gain: &[f64],
-    ) -> Result<(), CertifyError> {
-        let fresh = Self::new(self.cal, nonlinear, coupling, reg, gain)?;
-        let coupling_ok = match (&self.coupling, &fresh.coupling) {
-            (Some(a), Some(b)) => a.matches(b),
-            (None, None) => true,
-            _ => false,
-        };
-        match (&self.nonlinear, &fresh.nonlinear) {
-            (Some(a), Some(b)) => a.check(b)?,
-            (None, None) => {}
-            _ => {
-                return Err(CertifyError::Checkpoint(
-                    "nonlinear state does not match the configuration".into(),
-                ));
-            }
-        }
-        self.windows.check_state()?;
-        let ok = coupling_ok
-            && self.horizon == fresh.horizon
-            && self.ridge == fresh.ridge
-            && self.min_pivot == fresh.min_pivot
-            && self.windows.count() == fresh.windows.count()
-            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
-            && self.tmat == fresh.tmat
-            && self.shares == fresh.shares
-            && self.until_look.len() == fresh.until_look.len()
-            && self.looks.len() == fresh.looks.len()
-            && self.latest.len() == fresh.latest.len()
-            && self.est.matches(&fresh.est)
-            && self.sym.len() == fresh.sym.len()
-            && self.eig_work.len() == fresh.eig_work.len()
-            && self.regions.len() == fresh.regions.len()
-            && self.regions.iter().all(|r| *r == Interval::EMPTY || r.is_proper())
-            && self.ts.len() == fresh.ts.len()
-            && self.ys.len() == fresh.ys.len()
-            && self.col_range.len() == fresh.col_range.len();
-        if !ok {
-            return Err(CertifyError::Checkpoint(
-                "calibrated state does not match its configuration".into(),
-            ));
-        }
-        Ok(())
     }
 }

@@ -1,0 +1,324 @@
+//! Extreme eigenvalues of small symmetric matrices: closed forms for `n <= 2`, Householder
+//! tridiagonalisation with implicit QL up to `n = 9`, and from `n = 10` the reduction on both
+//! triangles with Laguerre's iteration for the two extremes only.
+
+use super::{dot, fast_hypot};
+
+/// Scratch length [`sym_eig_extremes`] needs for an `n × n` matrix: `n² + 2n`.
+#[must_use]
+pub const fn eig_work_len(n: usize) -> usize {
+    n * n + 2 * n
+}
+
+/// Smallest and largest eigenvalue of the symmetric `n × n` matrix `a` (row-major; only the
+/// upper triangle is read), using `work` (at least [`eig_work_len`]`(n)` long) as scratch.
+///
+/// `n = 1, 2` use closed forms; larger `n` use Householder tridiagonalisation followed by the
+/// implicit QL iteration (EISPACK `tred1`/`tql1`, as in Numerical Recipes `tred2`/`tqli`
+/// without eigenvectors): `O(n³)` with a small constant, backward stable. Returns NaNs if
+/// the iteration fails to converge (it does not for finite input).
+///
+/// The closed forms are always inlined (with a literal `n` at the call site they reduce to a
+/// few instructions); the iterative method for `n > 2` stays out of line.
+#[must_use]
+#[inline(always)]
+pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
+    match n {
+        0 => (f64::NAN, f64::NAN),
+        1 => (a[0], a[0]),
+        2 => {
+            let (p, q, r) = (a[0], a[1], a[3]);
+            let mean = 0.5 * (p + r);
+            let diff = 0.5 * (p - r);
+            // √(diff² + q²) without the cost of `hypot`, which it falls back to on overflow.
+            // The test is on the radicand, so the branch does not wait for the square root.
+            let radicand = diff * diff + q * q;
+            let half = if radicand.is_finite() { radicand.sqrt() } else { diff.hypot(q) };
+            (mean - half, mean + half)
+        }
+        _ => sym_eig_extremes_iterative(a, n, work),
+    }
+}
+
+/// [`sym_eig_extremes`] for `n > 2`: Householder tridiagonalisation and implicit QL.
+#[inline(never)]
+fn sym_eig_extremes_iterative(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
+    let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
+    let (d, e) = rest.split_at_mut(n);
+    if n >= FULL_ROWS_FROM {
+        // Both triangles of w from the upper triangle of a.
+        for i in 0..n {
+            for j in 0..n {
+                w[i * n + j] = if j >= i { a[i * n + j] } else { a[j * n + i] };
+            }
+        }
+        tridiagonalise_full(w, n, d, e);
+        // e[1..] holds the sub-diagonal; the extremes by Laguerre, QL if it does not converge.
+        if let Some(pair) = tridiagonal_extremes(d, &e[1..]) {
+            return pair;
+        }
+    } else {
+        // Lower triangle of w from the upper triangle of a.
+        for i in 0..n {
+            for j in 0..=i {
+                w[i * n + j] = a[j * n + i];
+            }
+        }
+        tridiagonalise(w, n, d, e);
+    }
+    if !tridiagonal_ql(d, e) {
+        return (f64::NAN, f64::NAN);
+    }
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for &v in d.iter() {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    (lo, hi)
+}
+
+/// Householder reduction of the symmetric matrix held in the lower triangle of `a` to
+/// tridiagonal form: diagonal in `d`, sub-diagonal in `e[1..]` (`e[0] = 0`).
+fn tridiagonalise(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
+    for i in (1..n).rev() {
+        let l = i - 1;
+        let mut h = 0.0;
+        if l > 0 {
+            let scale: f64 = (0..=l).map(|k| a[i * n + k].abs()).sum();
+            if scale == 0.0 {
+                e[i] = a[i * n + l];
+            } else {
+                for k in 0..=l {
+                    a[i * n + k] /= scale;
+                    h += a[i * n + k] * a[i * n + k];
+                }
+                let f = a[i * n + l];
+                let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
+                e[i] = scale * g;
+                h -= f * g;
+                a[i * n + l] = f - g;
+                let mut f = 0.0;
+                for j in 0..=l {
+                    let mut g = 0.0;
+                    for k in 0..=j {
+                        g += a[j * n + k] * a[i * n + k];
+                    }
+                    for k in j + 1..=l {
+                        g += a[k * n + j] * a[i * n + k];
+                    }
+                    e[j] = g / h;
+                    f += e[j] * a[i * n + j];
+                }
+                let hh = f / (h + h);
+                for j in 0..=l {
+                    let f = a[i * n + j];
+                    let g = e[j] - hh * f;
+                    e[j] = g;
+                    for k in 0..=j {
+                        a[j * n + k] -= f * e[k] + g * a[i * n + k];
+                    }
+                }
+            }
+        } else {
+            e[i] = a[i * n + l];
+        }
+        d[i] = h;
+    }
+    e[0] = 0.0;
+    for i in 0..n {
+        d[i] = a[i * n + i];
+    }
+}
+
+/// From this size on [`sym_eig_extremes`] reduces on both triangles ([`tridiagonalise_full`]:
+/// contiguous rows, so the products vectorise) and finds the two extremes of the tridiagonal
+/// by Laguerre ([`tridiagonal_extremes`]) instead of every eigenvalue by QL. Below it the
+/// original path is kept, so the results for the paper's and the validity study's matrices
+/// (up to the `9 × 9` score covariance of `p = 3`) stay bit for bit what they were.
+const FULL_ROWS_FROM: usize = 10;
+
+/// [`tridiagonalise`] on a matrix held in both triangles of `a` (the same Householder steps,
+/// `tred1`): at step `i` with `u` the scaled row `i` (first `i` entries), `p = A u / h` by row
+/// dot products, `q = p − (uᵀp / 2h) u`, and the symmetric rank-two update
+/// `A ← A − u qᵀ − q uᵀ` on the leading `i × i` block, row by row.
+fn tridiagonalise_full(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
+    for i in (1..n).rev() {
+        let l = i - 1;
+        let (head, tail) = a.split_at_mut(i * n);
+        let u = &mut tail[..=l];
+        let mut h = 0.0;
+        if l > 0 {
+            let scale: f64 = u.iter().map(|v| v.abs()).sum();
+            if scale == 0.0 {
+                e[i] = u[l];
+            } else {
+                let inv = 1.0 / scale;
+                for v in u.iter_mut() {
+                    *v *= inv;
+                }
+                h = dot(u, u);
+                let f = u[l];
+                let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
+                e[i] = scale * g;
+                h -= f * g;
+                u[l] = f - g;
+                let mut f = 0.0;
+                for j in 0..=l {
+                    e[j] = dot(&head[j * n..j * n + l + 1], u) / h;
+                    f += e[j] * u[j];
+                }
+                let hh = f / (h + h);
+                for j in 0..=l {
+                    e[j] -= hh * u[j];
+                }
+                let q = &e[..=l];
+                for j in 0..=l {
+                    let (uj, qj) = (u[j], q[j]);
+                    let row = &mut head[j * n..j * n + l + 1];
+                    for ((r, &uk), &qk) in row.iter_mut().zip(u.iter()).zip(q) {
+                        *r -= uj * qk + qj * uk;
+                    }
+                }
+            }
+        } else {
+            e[i] = u[l];
+        }
+        d[i] = h;
+    }
+    e[0] = 0.0;
+    for i in 0..n {
+        d[i] = a[i * n + i];
+    }
+}
+
+/// The smallest and largest eigenvalues of the symmetric tridiagonal matrix with diagonal `d`
+/// and off-diagonal `e` (`d.len() − 1` entries), without the others: Laguerre's iteration on
+/// `p(x) = det(xI − T)` from Gershgorin's bound outside the spectrum. For a polynomial with
+/// real roots it converges monotonically (cubically near a simple root) to the extreme root
+/// on that side. `G = (ln p)'` and `H = −(ln p)''` come from the `LDLᵀ` recurrence
+/// `q_0 = x − d_0`, `q_i = x − d_i − e²_{i−1}/q_{i−1}` and its first two derivatives (one
+/// division per entry), on the matrix scaled to unit size (no overflow for any finite input),
+/// and the step is `n / (G + √((n − 1)(nH − G²)))`. `None` when an iteration does not settle in
+/// 100 steps (the caller then uses QL). About 10× cheaper than QL for all eigenvalues at
+/// `n = 20`, whose square roots and divisions dominate it.
+pub(super) fn tridiagonal_extremes(d: &[f64], e: &[f64]) -> Option<(f64, f64)> {
+    let n = d.len();
+    let scale = d.iter().chain(e).fold(0.0f64, |m, v| m.max(v.abs()));
+    if scale == 0.0 {
+        return Some((0.0, 0.0));
+    }
+    if !scale.is_finite() {
+        return None;
+    }
+    let inv = 1.0 / scale;
+    // Extreme on the upper side of (sign · d, e): sign = 1 gives λ_max, −1 gives −λ_min.
+    let top = |sign: f64| -> Option<f64> {
+        let mut x = f64::NEG_INFINITY;
+        for i in 0..n {
+            let off =
+                if i > 0 { e[i - 1].abs() } else { 0.0 } + if i + 1 < n { e[i].abs() } else { 0.0 };
+            x = x.max(sign * d[i] * inv + off * inv);
+        }
+        x += 1e-12;
+        let nf = n as f64;
+        for _ in 0..100 {
+            let (mut q, mut q1, mut q2) = (0.0f64, 0.0f64, 0.0f64);
+            let (mut g, mut h) = (0.0f64, 0.0f64);
+            for i in 0..n {
+                let di = sign * d[i] * inv;
+                let (qi, qi1, qi2) = if i == 0 {
+                    (x - di, 1.0, 0.0)
+                } else {
+                    let b2 = (e[i - 1] * inv) * (e[i - 1] * inv);
+                    let r = 1.0 / q;
+                    let (r1, r2) = (q1 * r, q2 * r);
+                    (x - di - b2 * r, 1.0 + b2 * r1 * r, b2 * r * (r2 - 2.0 * r1 * r1))
+                };
+                if !(qi > 0.0) {
+                    // On (or past) an eigenvalue to working precision.
+                    return Some(x);
+                }
+                let r = 1.0 / qi;
+                let a1 = qi1 * r;
+                g += a1;
+                h += a1 * a1 - qi2 * r;
+                (q, q1, q2) = (qi, qi1, qi2);
+            }
+            let disc = ((nf - 1.0) * (nf * h - g * g)).max(0.0);
+            let step = nf / (g + disc.sqrt());
+            if !step.is_finite() || step < 0.0 {
+                return None;
+            }
+            x -= step;
+            if step <= 4.0 * f64::EPSILON * x.abs().max(1.0) {
+                return Some(x);
+            }
+        }
+        None
+    };
+    let hi = top(1.0)? * scale;
+    let lo = -top(-1.0)? * scale;
+    Some((lo, hi))
+}
+
+/// Eigenvalues of the symmetric tridiagonal matrix (`d` diagonal, `e[1..]` sub-diagonal) by
+/// the implicit QL method with Wilkinson shifts; overwrites `d` with the eigenvalues.
+pub(super) fn tridiagonal_ql(d: &mut [f64], e: &mut [f64]) -> bool {
+    let n = d.len();
+    for i in 1..n {
+        e[i - 1] = e[i];
+    }
+    e[n - 1] = 0.0;
+    for l in 0..n {
+        let mut iter = 0;
+        loop {
+            let mut m = l;
+            while m + 1 < n {
+                let dd = d[m].abs() + d[m + 1].abs();
+                if e[m].abs() <= f64::EPSILON * dd {
+                    break;
+                }
+                m += 1;
+            }
+            if m == l {
+                break;
+            }
+            iter += 1;
+            if iter > 60 {
+                return false;
+            }
+            let mut g = (d[l + 1] - d[l]) / (2.0 * e[l]);
+            let mut r = fast_hypot(g, 1.0);
+            g = d[m] - d[l] + e[l] / (g + if g >= 0.0 { r.abs() } else { -r.abs() });
+            let (mut s, mut c, mut p) = (1.0, 1.0, 0.0);
+            let mut deflated = false;
+            for i in (l..m).rev() {
+                let f = s * e[i];
+                let b = c * e[i];
+                r = fast_hypot(f, g);
+                e[i + 1] = r;
+                if r == 0.0 {
+                    d[i + 1] -= p;
+                    e[m] = 0.0;
+                    deflated = true;
+                    break;
+                }
+                s = f / r;
+                c = g / r;
+                g = d[i + 1] - p;
+                r = (d[i] - g) * s + 2.0 * c * b;
+                p = s * r;
+                d[i + 1] = g + p;
+                g = c * r - b;
+            }
+            if deflated {
+                continue;
+            }
+            d[l] -= p;
+            e[l] = g;
+            e[m] = 0.0;
+        }
+    }
+    true
+}

@@ -216,6 +216,24 @@ mod tests {
         }
 
         #[test]
+        fn a_value_that_is_not_finite_gives_nan_extremes(
+            a in (1usize..24).prop_flat_map(sym),
+            at in any::<prop::sample::Index>(),
+            bad in prop::sample::select(vec![f64::NAN, f64::INFINITY, f64::NEG_INFINITY]),
+        ) {
+            // Every path (closed forms, QL, Laguerre) must not turn a bad input into a number.
+            let n = (a.len() as f64).sqrt() as usize;
+            let mut a = a;
+            let k = at.index(a.len());
+            let (i, j) = (k / n, k % n);
+            a[i * n + j] = bad;
+            a[j * n + i] = bad;
+            let mut work = vec![0.0; eig_work_len(n)];
+            let (lo, hi) = sym_eig_extremes(&a, n, &mut work);
+            prop_assert!(!(lo.is_finite() && hi.is_finite()), "n = {n}: {lo}, {hi}");
+        }
+
+        #[test]
         fn eigen_extremes_at_extreme_scales(
             a in (3usize..12).prop_flat_map(sym),
             exponent in prop::sample::select(vec![-300i32, -150, 150, 300]),

@@ -204,6 +204,11 @@ fn tridiagonalise_full(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
 /// `n = 20`, whose square roots and divisions dominate it.
 pub(super) fn tridiagonal_extremes(d: &[f64], e: &[f64]) -> Option<(f64, f64)> {
     let n = d.len();
+    // A value that is not finite goes to QL, which carries it into the result (`f64::max`
+    // would skip a NaN here and report a number).
+    if !d.iter().chain(e).all(|v| v.is_finite()) {
+        return None;
+    }
     let scale = d.iter().chain(e).fold(0.0f64, |m, v| m.max(v.abs()));
     if scale == 0.0 {
         return Some((0.0, 0.0));

@@ -199,6 +199,14 @@ fn estimated_couplings_are_checked() {
     bad.gain = vec![s.k1, 0.5];
     let err = Certifier::new(bad).expect_err("actuated coupling channel");
     assert!(err.to_string().contains("row of K must be zero"), "{err}");
+    // A block past the inputs (even one whose end overflows), and an empty one.
+    for (first, len) in [(2, 1), (1, usize::MAX), (1, 0)] {
+        let mut bad = coupled(s.k1);
+        bad.couplings =
+            Some(CouplingConfig { blocks: vec![CouplingBlock { first, len }], delta: 0.01 });
+        let err = Certifier::new(bad).expect_err("bad block");
+        assert!(err.to_string().contains("within the 2 inputs"), "{err}");
+    }
     // A block the subsystem does not have, and a coupling both given and estimated.
     let mut cfg = network(0.05);
     cfg.estimated[0].block = 1;

@@ -39,7 +39,9 @@ use std::sync::{Arc, Mutex, mpsc};
 
 use serde::{Deserialize, Serialize};
 use shard::Shard;
-use streamcert_network::{Composer, EpochReport, LocalSnapshot, NetworkConfig, NetworkError};
+use streamcert_network::{
+    Composer, EpochReport, LocalSnapshot, NetworkCertifier, NetworkConfig, NetworkError,
+};
 use timely::container::CapacityContainerBuilder;
 use timely::dataflow::channels::pact::Exchange;
 use timely::dataflow::operators::generic::operator::Operator;
@@ -81,7 +83,8 @@ pub enum TimelyError<E: std::error::Error + 'static> {
         /// The source's error.
         source: E,
     },
-    /// The network refused the row named `line` (a time too far ahead).
+    /// The network refused the row named `line` (a time too far ahead, a subsystem it does
+    /// not have).
     #[error("line {line}: {source}")]
     Network {
         /// The row's [`Row::line`].
@@ -166,7 +169,9 @@ where
     S: FnOnce() -> I + Send + 'static,
     I: Iterator<Item = Result<Row, E>>,
 {
-    cfg.validate().map_err(|e| TimelyError::Config(e.to_string()))?;
+    // Every check of the one-process certifier, including each subsystem's certifier, before
+    // any worker starts (a worker must not meet a configuration it cannot build).
+    NetworkCertifier::new(cfg.clone()).map_err(|e| TimelyError::Config(e.to_string()))?;
     let config = timely::Config::from_args(args.iter().cloned()).map_err(TimelyError::Config)?;
     let (tx, rx) = mpsc::channel::<Event<E>>();
     let tx = Arc::new(Mutex::new(tx));
@@ -359,6 +364,14 @@ fn worker_main<E, S, I>(
                         send(Event::Failed(Failure::Network { row, line: r.line, source }));
                         break;
                     }
+                }
+                // A sample of a subsystem the network does not have stops the run, as in one
+                // process (`NetworkError::UnknownSubsystem`), before anything of its row is sent.
+                let len = cfg.subsystems.len();
+                if let Some(&(index, _)) = r.samples.iter().find(|(i, _)| *i >= len) {
+                    let source = NetworkError::UnknownSubsystem { index, len };
+                    send(Event::Failed(Failure::Network { row, line: r.line, source }));
+                    break;
                 }
                 outcome.rows = row;
                 outcome.last_time = Some(r.t);

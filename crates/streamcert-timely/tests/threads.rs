@@ -156,3 +156,34 @@ fn unaligned_subsystem_rows_give_the_one_process_reports() {
         assert_eq!(got, want, "{workers} workers");
     }
 }
+
+#[test]
+fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
+    // A row naming subsystem 7 of a 3-subsystem network stops the run where one process stops.
+    let cfg = network(3);
+    let mut data = rows(3, 600, 13);
+    data[450].samples[1].0 = 7;
+    let (want, err) = serial(&cfg, &data);
+    assert!(err.is_some_and(|e| e.contains("no subsystem 7")));
+    let mut out = Vec::new();
+    let result = run(
+        cfg,
+        &["-w".to_string(), "2".to_string()],
+        move || data.into_iter().map(Ok::<Row, BadRow>),
+        |r| out.push(r.clone()),
+    );
+    match result {
+        Err(TimelyError::Network { line, source }) => {
+            assert_eq!(line, 452);
+            assert!(source.to_string().contains("no subsystem 7"), "{source}");
+        }
+        other => panic!("expected the unknown subsystem, got {other:?}"),
+    }
+    assert_eq!(out, want);
+    // A subsystem whose certifier cannot be built is a configuration error before any worker
+    // starts (no panic in a worker).
+    let mut bad = network(2);
+    bad.subsystems[1].certifier.gain = vec![1.0, 2.0];
+    let result = run(bad, &[], || std::iter::empty::<Result<Row, BadRow>>(), |_| {});
+    assert!(matches!(result, Err(TimelyError::Config(ref m)) if m.contains("gain")), "{result:?}");
+}

@@ -77,7 +77,7 @@ impl CouplingConfig {
         let (p, m) = (reg.outputs, reg.inputs);
         let mut used = vec![false; m];
         for b in &self.blocks {
-            if b.len == 0 || b.first + b.len > m {
+            if b.len == 0 || b.first.checked_add(b.len).is_none_or(|end| end > m) {
                 return bad(format!(
                     "block at input {} with {} channels: must be non-empty and within the {m} \
                      inputs",

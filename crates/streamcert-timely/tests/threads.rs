@@ -184,6 +184,6 @@ fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
     // starts (no panic in a worker).
     let mut bad = network(2);
     bad.subsystems[1].certifier.gain = vec![1.0, 2.0];
-    let result = run(bad, &[], || std::iter::empty::<Result<Row, BadRow>>(), |_| {});
+    let result = run(bad, &[], std::iter::empty::<Result<Row, BadRow>>, |_| {});
     assert!(matches!(result, Err(TimelyError::Config(ref m)) if m.contains("gain")), "{result:?}");
 }

@@ -271,43 +271,33 @@ fn worker_main<E, S, I>(
                 Exchange::new(|_: &ShardMsg| 0),
                 "Compose",
                 move |_, _| {
-                    let mut last: Vec<Option<LocalSnapshot>> =
-                        vec![None; compose_cfg.subsystems.len()];
-                    let mut stash: BTreeMap<u64, Vec<ShardMsg>> = BTreeMap::new();
-                    let mut stopped = false;
+                    let mut merged = Merged::new(compose_cfg.subsystems.len());
                     move |(input, frontier), _output| {
                         input.for_each_stamp(|cap, data| {
                             if let Some(&t) = cap.least() {
-                                let q = stash.entry(t).or_default();
+                                let q = merged.stash.entry(t).or_default();
                                 for batch in data {
                                     q.append(batch);
                                 }
                             }
                         });
+                        let complete = |t: &u64| !frontier.less_equal(t);
                         loop {
                             let next = boundaries.borrow().front().cloned();
                             let Some((segment, due)) = next else { break };
-                            if frontier.less_equal(&segment) {
+                            if !complete(&segment) {
                                 break;
                             }
-                            let complete = |t: &u64| !frontier.less_equal(t);
-                            merge_until(
-                                &mut stash,
-                                &mut last,
-                                complete,
-                                segment,
-                                &mut stopped,
-                                &reports,
-                            );
+                            merged.merge_until(&complete, segment, &reports);
                             boundaries.borrow_mut().pop_front();
-                            if stopped {
+                            if merged.stopped {
                                 continue;
                             }
                             for k in due {
-                                match composer.borrow_mut().compose(&compose_cfg, k, &last) {
+                                match composer.borrow_mut().compose(&compose_cfg, k, &merged.last) {
                                     Ok(r) => reports.borrow_mut().push(Event::Epoch(r)),
                                     Err(e) => {
-                                        stopped = true;
+                                        merged.stopped = true;
                                         reports
                                             .borrow_mut()
                                             .push(Event::Failed(Failure::Compose(e)));
@@ -318,15 +308,7 @@ fn worker_main<E, S, I>(
                         }
                         // Complete segments after the last composition point: only failures
                         // matter there (no epoch is due after them).
-                        let complete = |t: &u64| !frontier.less_equal(t);
-                        merge_until(
-                            &mut stash,
-                            &mut last,
-                            complete,
-                            u64::MAX,
-                            &mut stopped,
-                            &reports,
-                        );
+                        merged.merge_until(&complete, u64::MAX, &reports);
                     }
                 },
             )
@@ -400,40 +382,52 @@ fn worker_main<E, S, I>(
     }
 }
 
-/// Merge the complete segments up to `bound` of worker 0's stash into the newest snapshots; the
-/// first segment with a failure reports its earliest failure and stops the compositions.
-fn merge_until<E>(
-    stash: &mut BTreeMap<u64, Vec<ShardMsg>>,
-    last: &mut [Option<LocalSnapshot>],
-    complete: impl Fn(&u64) -> bool,
-    bound: u64,
-    stopped: &mut bool,
-    reports: &RefCell<Vec<Event<E>>>,
-) {
-    while let Some(entry) = stash.first_entry() {
-        if *entry.key() > bound || !complete(entry.key()) {
-            break;
-        }
-        let mut first_failure: Option<(u64, u64, u32, String)> = None;
-        for m in entry.remove() {
-            match m {
-                ShardMsg::Snapshot { index, snapshot } => {
-                    if let Some(slot) = last.get_mut(index as usize) {
-                        *slot = Some(snapshot.into());
+/// Worker 0's view of the shards: every subsystem's newest snapshot, the shards' messages
+/// of segments not merged yet, and whether a failure stopped the compositions.
+struct Merged {
+    last: Vec<Option<LocalSnapshot>>,
+    stash: BTreeMap<u64, Vec<ShardMsg>>,
+    stopped: bool,
+}
+
+impl Merged {
+    fn new(n: usize) -> Self {
+        Self { last: vec![None; n], stash: BTreeMap::new(), stopped: false }
+    }
+
+    /// Merge the complete segments up to `bound` into the newest snapshots; the first segment
+    /// with a failure reports its earliest failure and stops the compositions.
+    fn merge_until<E>(
+        &mut self,
+        complete: &impl Fn(&u64) -> bool,
+        bound: u64,
+        reports: &RefCell<Vec<Event<E>>>,
+    ) {
+        while let Some(entry) = self.stash.first_entry() {
+            if *entry.key() > bound || !complete(entry.key()) {
+                break;
+            }
+            let mut first_failure: Option<(u64, u64, u32, String)> = None;
+            for m in entry.remove() {
+                match m {
+                    ShardMsg::Snapshot { index, snapshot } => {
+                        if let Some(slot) = self.last.get_mut(index as usize) {
+                            *slot = Some(snapshot.into());
+                        }
                     }
-                }
-                ShardMsg::Failed { row, line, index, message } => {
-                    if first_failure.as_ref().is_none_or(|f| row < f.0) {
-                        first_failure = Some((row, line, index, message));
+                    ShardMsg::Failed { row, line, index, message } => {
+                        if first_failure.as_ref().is_none_or(|f| row < f.0) {
+                            first_failure = Some((row, line, index, message));
+                        }
                     }
                 }
             }
-        }
-        if let (Some((row, line, index, message)), false) = (first_failure, *stopped) {
-            *stopped = true;
-            let index = index as usize;
-            let failure = Failure::Subsystem { row, line, index, message };
-            reports.borrow_mut().push(Event::Failed(failure));
+            if let (Some((row, line, index, message)), false) = (first_failure, self.stopped) {
+                self.stopped = true;
+                let index = index as usize;
+                let failure = Failure::Subsystem { row, line, index, message };
+                reports.borrow_mut().push(Event::Failed(failure));
+            }
         }
     }
 }

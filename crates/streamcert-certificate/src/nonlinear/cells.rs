@@ -32,6 +32,15 @@ impl Bounds {
     }
 }
 
+/// The `cells` equal cells `[a, b]` of `region`, the last one ending exactly at its upper end.
+fn cell_edges(region: Interval, cells: usize) -> impl Iterator<Item = (f64, f64)> {
+    let width = (region.hi - region.lo) / cells as f64;
+    (0..cells).map(move |cell| {
+        let a = region.lo + width * cell as f64;
+        (a, if cell + 1 == cells { region.hi } else { a + width })
+    })
+}
+
 impl NonlinearState {
     /// The polynomial library: `β̂(y)` and `s(y)²` are polynomials, bounded on each cell by
     /// their Taylor expansions at its midpoint ([`polynomial_bounds`]).
@@ -76,10 +85,7 @@ impl NonlinearState {
             }
         }
         let mut out = Bounds::start(region);
-        let width = (region.hi - region.lo) / cells as f64;
-        for cell in 0..cells {
-            let a = region.lo + width * cell as f64;
-            let b = if cell + 1 == cells { region.hi } else { a + width };
+        for (a, b) in cell_edges(region, cells) {
             let (f_lo, f_hi) = polynomial_bounds(&self.poly_f, a, b, &mut self.work);
             let (_, s2_hi) = polynomial_bounds(&self.poly_s, a, b, &mut self.work);
             out.cell(a, b, (f_lo, f_hi), s2_hi.max(0.0).sqrt(), (c, c_upper));
@@ -102,11 +108,8 @@ impl NonlinearState {
         let th = &self.est.theta;
         let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
         let mut out = Bounds::start(region);
-        let width = (region.hi - region.lo) / cells as f64;
         let mut slopes = [(0.0, 0.0); FeatureSet::CAPACITY];
-        for cell in 0..cells {
-            let a = region.lo + width * cell as f64;
-            let b = if cell + 1 == cells { region.hi } else { a + width };
+        for (a, b) in cell_edges(region, cells) {
             let (mut sum_lo, mut sum_hi) = (bk, bk);
             for (k, f) in self.library.iter().enumerate() {
                 let (lo, hi) = f.slope_bounds(a, b);

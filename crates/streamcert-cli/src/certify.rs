@@ -4,7 +4,7 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Interval, NotCertified};
+use streamcert_certificate::{Certifier, Evidence, Interval, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
@@ -111,13 +111,16 @@ struct Checkpoint {
     summary: Summary,
 }
 
-fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
+/// The sealed text of the checkpoint of `cert` and `summary` (to be written to `path`).
+fn checkpoint_text(path: &Path, cert: &Certifier, summary: &Summary) -> Result<String, CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
     let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
-    let text =
-        streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))?;
-    write_atomic(path, &text)
+    streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))
+}
+
+fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
+    write_atomic(path, &checkpoint_text(path, cert, summary)?)
 }
 
 /// Write `text` to `path` atomically: a unique temporary file beside the target, flushed to
@@ -169,29 +172,47 @@ fn load(path: &Path, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
 /// Rows a reader thread hands over at a time (when the input is not live).
 const BATCH: usize = 1024;
 
-/// Parsed rows in input order: each sample with the outcome of reading it (`None` = parsed).
-/// Batches travel back to the reader to be refilled, so their buffers are reused.
+/// Certified rows on their way from the certifying thread to the writing one, in input
+/// order. Batches travel back to be refilled, so their buffers are reused.
 struct Batch {
-    samples: Vec<Sample>,
-    outcomes: Vec<Option<CliError>>,
+    evidence: Vec<Evidence>,
+    /// The rows' region values, concatenated; row `i` ends at `region_ends[i]`.
+    regions: Vec<Interval>,
+    region_ends: Vec<usize>,
+    /// Checkpoints due: the sealed text, written once the first `n` rows are out.
+    checkpoints: Vec<(usize, String)>,
+    /// The error that stopped the run, after the rows before it.
+    error: Option<CliError>,
 }
 
 impl Batch {
     fn new() -> Self {
         Self {
-            samples: (0..BATCH).map(|_| Sample::default()).collect(),
-            outcomes: Vec::with_capacity(BATCH),
+            evidence: Vec::with_capacity(BATCH),
+            regions: Vec::with_capacity(BATCH * 6),
+            region_ends: Vec::with_capacity(BATCH),
+            checkpoints: Vec::new(),
+            error: None,
         }
+    }
+
+    fn clear(&mut self) {
+        self.evidence.clear();
+        self.regions.clear();
+        self.region_ends.clear();
+        self.checkpoints.clear();
+        self.error = None;
     }
 }
 
 /// Certify a stream: one output row per accepted input row (flushed per row with
 /// [`Options::flush_each_row`]).
 ///
-/// A live input (`flush_each_row`) is read and certified row by row on the calling thread, so
-/// every row is answered as soon as its line is complete. Otherwise a second thread reads and
-/// parses the input in batches of 1024 rows while this one certifies and writes; the rows,
-/// their errors and the output are in input order either way, so the output is the same.
+/// A live input (`flush_each_row`) is read, certified and written row by row on the calling
+/// thread, so every row is answered as soon as its line is complete. Otherwise a second
+/// thread reads, parses and certifies the input while this one formats and writes, in
+/// batches of 1024 rows; rows, errors, checkpoints and output are in input order either way,
+/// so the output is the same (tested).
 ///
 /// # Errors
 /// The first malformed row under [`BadRows::Stop`], input/output errors, checkpoint errors.
@@ -221,7 +242,7 @@ pub fn run<R: Read + Send, W: Write>(
     if cfg.certifier.calibration.is_some() {
         channels.extend(cfg.columns.outputs.iter().map(|o| format!("calibrated_{o}")));
     }
-    let writer = EvidenceWriter::new(
+    let mut writer = EvidenceWriter::new(
         out,
         opts.format,
         opts.resume.is_none(),
@@ -229,89 +250,128 @@ pub fn run<R: Read + Send, W: Write>(
         region_columns(&channels),
     )
     .map_err(io)?;
-    let region = Vec::with_capacity(channels.len());
-    let mut run = Run { cert: &mut cert, summary: &mut summary, writer, opts, input_name, region };
     // Resuming: rows up to the checkpoint's last time at the start of the input are a replay
     // of what the checkpoint already holds (the same file, or a live source restarted after a
     // crash) and are passed over, counted; from the first later row on, times must increase
     // as usual, so an out-of-order row later in the input is still an error.
-    let mut replay = run.summary.last_time;
+    let replay = summary.last_time;
+    // A checkpoint's text is made on the certifying side (only when a path is set).
+    let write_checkpoint = |text: &str| match &opts.checkpoint {
+        Some(path) => write_atomic(path, text),
+        None => Ok(()),
+    };
+    let mut step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
     if opts.flush_each_row {
         let mut s = Sample::default();
+        let mut region = Vec::with_capacity(channels.len());
         while let Some(next) = reader.next_into(&mut s) {
-            run.row(next, &s, &mut replay)?;
+            region.clear();
+            if let Some(ev) = step.row(next, &s, &mut region)? {
+                writer.write_with_region(&ev, &region).map_err(io)?;
+                if let Some(text) = step.due_checkpoint()? {
+                    // The rows a checkpoint holds are on the output before it is written.
+                    writer.flush().map_err(io)?;
+                    write_checkpoint(&text)?;
+                }
+            }
         }
     } else {
         std::thread::scope(|scope| -> Result<(), CliError> {
             let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
             let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Batch>();
             scope.spawn(move || {
+                let mut s = Sample::default();
                 loop {
                     let mut batch = empty_rx.try_recv().unwrap_or_else(|_| Batch::new());
-                    batch.outcomes.clear();
-                    let mut done = false;
-                    while batch.outcomes.len() < BATCH {
-                        let i = batch.outcomes.len();
-                        match reader.next_into(&mut batch.samples[i]) {
-                            None => {
-                                done = true;
-                                break;
-                            }
-                            Some(Ok(())) => batch.outcomes.push(None),
-                            Some(Err(e)) => {
-                                // Reading stops after an error that is not one row's.
-                                done = !matches!(e, CliError::Row(_));
-                                batch.outcomes.push(Some(e));
-                                if done {
-                                    break;
-                                }
-                            }
-                        }
-                    }
-                    // A closed channel means the certifying side stopped (an error): stop too.
+                    batch.clear();
+                    let done = step.fill(&mut reader, &mut s, &mut batch);
+                    // A closed channel means the writing side stopped (an error): stop too.
                     if full_tx.send(batch).is_err() || done {
                         return;
                     }
                 }
             });
             for mut batch in full_rx {
-                for (s, outcome) in batch.samples.iter().zip(batch.outcomes.drain(..)) {
-                    run.row(outcome.map_or(Ok(()), Err), s, &mut replay)?;
+                let mut from = 0;
+                let mut checkpoints = batch.checkpoints.drain(..).peekable();
+                for (i, ev) in batch.evidence.iter().enumerate() {
+                    let to = batch.region_ends[i];
+                    writer.write_with_region(ev, &batch.regions[from..to]).map_err(io)?;
+                    from = to;
+                    while let Some((_, text)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
+                        writer.flush().map_err(io)?;
+                        write_checkpoint(&text)?;
+                    }
                 }
-                // The reader may have finished: a failed return is harmless.
+                drop(checkpoints);
+                if let Some(e) = batch.error.take() {
+                    return Err(e);
+                }
+                // The certifying thread may have finished: a failed return is harmless.
                 let _ = empty_tx.send(batch);
             }
             Ok(())
         })?;
     }
-    run.writer.flush().map_err(io)?;
+    writer.flush().map_err(io)?;
     if let Some(path) = &opts.checkpoint {
         save(path, &cert, &summary)?;
     }
     Ok(summary)
 }
 
-/// The state of one `certify` run that every row updates.
-struct Run<'a, W: Write> {
+/// The certifying side of one `certify` run: every accepted row updates it.
+struct Step<'a> {
     cert: &'a mut Certifier,
     summary: &'a mut Summary,
-    writer: EvidenceWriter<W>,
     opts: &'a Options,
     input_name: &'a str,
-    /// One row's region values (reused).
-    region: Vec<Interval>,
+    /// While resuming, the checkpoint's last time: rows up to it are passed over.
+    replay: Option<f64>,
 }
 
-impl<W: Write> Run<'_, W> {
-    /// One input row: `next` is the outcome of reading it into `s`.
+impl Step<'_> {
+    /// Read and certify up to [`BATCH`] rows into `batch`; `true` when the run ends here (the
+    /// end of the input or an error, which is then in `batch.error`).
+    fn fill<R: Read>(
+        &mut self,
+        reader: &mut SampleReader<R>,
+        s: &mut Sample,
+        batch: &mut Batch,
+    ) -> bool {
+        for _ in 0..BATCH {
+            let Some(next) = reader.next_into(s) else { return true };
+            let ev = match self.row(next, s, &mut batch.regions) {
+                Ok(Some(ev)) => ev,
+                Ok(None) => continue,
+                Err(e) => {
+                    batch.error = Some(e);
+                    return true;
+                }
+            };
+            batch.evidence.push(ev);
+            batch.region_ends.push(batch.regions.len());
+            match self.due_checkpoint() {
+                Ok(None) => {}
+                Ok(Some(text)) => batch.checkpoints.push((batch.evidence.len(), text)),
+                Err(e) => {
+                    batch.error = Some(e);
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
+    /// One input row: `next` is the outcome of reading it into `s`. `Some` is a row to write,
+    /// its region values appended to `region`; `None` a row passed over (skipped or replayed).
     fn row(
         &mut self,
         next: Result<(), CliError>,
         s: &Sample,
-        replay: &mut Option<f64>,
-    ) -> Result<(), CliError> {
+        region: &mut Vec<Interval>,
+    ) -> Result<Option<Evidence>, CliError> {
         let (opts, summary) = (self.opts, &mut *self.summary);
-        let io = |e| CliError::io("writing output", e);
         match next {
             Ok(()) => {}
             Err(CliError::Row(e)) if opts.bad_rows == BadRows::Skip => {
@@ -319,16 +379,16 @@ impl<W: Write> Run<'_, W> {
                 eprintln!("skipped: {e}");
                 summary.skipped += 1;
                 self.cert.skip(f64::NAN);
-                return Ok(());
+                return Ok(None);
             }
             Err(e) => return Err(e),
         }
-        if let Some(last) = *replay {
+        if let Some(last) = self.replay {
             if s.t <= last {
                 summary.replayed += 1;
-                return Ok(());
+                return Ok(None);
             }
-            *replay = None;
+            self.replay = None;
         }
         let ev = match self.cert.push(s.t, &s.y, &s.u) {
             Ok(ev) => ev,
@@ -343,7 +403,7 @@ impl<W: Write> Run<'_, W> {
                     eprintln!("skipped: {err}");
                     summary.skipped += 1;
                     self.cert.skip(s.t);
-                    return Ok(());
+                    return Ok(None);
                 }
                 return Err(CliError::Row(err));
             }
@@ -361,21 +421,23 @@ impl<W: Write> Run<'_, W> {
         summary.nonlinear_open += u64::from(ev.nonlinear.open);
         summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
         summary.last_time = Some(s.t);
-        self.region.clear();
-        self.region.extend_from_slice(self.cert.region());
+        region.extend_from_slice(self.cert.region());
         if self.cert.config().calibration.is_some() {
             let p = self.cert.config().regression.outputs;
             let cal = self.cert.calibrated_region();
-            self.region.extend((0..p).map(|i| cal.get(i).copied().unwrap_or(Interval::EMPTY)));
+            region.extend((0..p).map(|i| cal.get(i).copied().unwrap_or(Interval::EMPTY)));
         }
-        self.writer.write_with_region(&ev, &self.region).map_err(io)?;
-        if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
-            if every > 0 && summary.rows % every == 0 {
-                // The rows a checkpoint holds are on the output before it is written.
-                self.writer.flush().map_err(io)?;
-                save(path, self.cert, summary)?;
+        Ok(Some(ev))
+    }
+
+    /// The sealed checkpoint due after the row just certified (every `checkpoint_every`
+    /// accepted rows), if any.
+    fn due_checkpoint(&self) -> Result<Option<String>, CliError> {
+        match (&self.opts.checkpoint, self.opts.checkpoint_every) {
+            (Some(path), Some(every)) if every > 0 && self.summary.rows % every == 0 => {
+                checkpoint_text(path, self.cert, self.summary).map(Some)
             }
+            _ => Ok(None),
         }
-        Ok(())
     }
 }

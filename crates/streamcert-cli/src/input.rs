@@ -3,6 +3,9 @@
 
 use std::io::Read;
 
+mod record;
+use record::RecordReader;
+
 use crate::config::Columns;
 use crate::{CliError, RowError};
 
@@ -20,13 +23,13 @@ pub struct Sample {
 }
 
 /// Reads samples from a CSV stream whose header names the configured columns (other columns
-/// are ignored), with the csv crate: a configurable delimiter, quoted fields, a UTF-8
-/// byte-order mark before the header (as spreadsheets write it), surrounding spaces trimmed,
-/// blank lines skipped. One [`csv::ByteRecord`] is reused for every row, and a row is parsed
-/// as soon as its line is complete, so a live feed works.
+/// are ignored), with the csv crate's grammar: a configurable delimiter, quoted fields, a
+/// UTF-8 byte-order mark before the header (as spreadsheets write it), surrounding spaces
+/// trimmed, blank lines skipped, `\n`, `\r\n` or `\r` line ends. Plain lines are split in
+/// place, others go through `csv-core` (see `record.rs`); a row is parsed as soon as its line
+/// is complete, so a live feed works. Line numbers in errors are physical lines.
 pub struct SampleReader<R> {
-    reader: csv::Reader<R>,
-    record: csv::ByteRecord,
+    reader: RecordReader<R>,
     file: String,
     line: u64,
     header: Vec<String>,
@@ -36,14 +39,9 @@ pub struct SampleReader<R> {
     last_time: Option<f64>,
 }
 
-/// A read error of the csv crate as the CLI's error: I/O as [`CliError::Io`], anything else
-/// as [`CliError::Input`].
-fn read_error(file: &str, e: csv::Error) -> CliError {
-    let message = e.to_string();
-    match e.into_kind() {
-        csv::ErrorKind::Io(io) => CliError::io(format!("reading {file}"), io),
-        _ => CliError::Input { file: file.into(), message },
-    }
+/// A read error of the input as the CLI's error.
+fn read_error(file: &str, e: std::io::Error) -> CliError {
+    CliError::io(format!("reading {file}"), e)
 }
 
 impl<R: Read> SampleReader<R> {
@@ -55,19 +53,15 @@ impl<R: Read> SampleReader<R> {
     pub fn new(reader: R, file: &str, columns: &Columns) -> Result<Self, CliError> {
         let input = |message: String| CliError::Input { file: file.into(), message };
         let delimiter = columns.delimiter_byte().map_err(input)?;
-        let mut reader = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .delimiter(delimiter)
-            .from_reader(reader);
-        let mut record = csv::ByteRecord::new();
-        let read = reader.read_byte_record(&mut record).map_err(|e| read_error(file, e))?;
+        let mut reader = RecordReader::new(reader, delimiter);
+        let read = reader.read_record().map_err(|e| read_error(file, e))?;
         if !read {
             return Err(input("empty input: expected a header line naming the columns".into()));
         }
-        let line = record.position().map_or(1, csv::Position::line);
-        let mut header = Vec::with_capacity(record.len());
-        for field in &record {
+        let line = reader.line();
+        let mut header = Vec::with_capacity(reader.len());
+        for i in 0..reader.len() {
+            let field = reader.get(i).unwrap_or_default();
             let name = std::str::from_utf8(field)
                 .map_err(|_| input(format!("line {line}: the header is not valid UTF-8")))?;
             header.push(name.trim_start_matches('\u{feff}').trim().to_string());
@@ -85,51 +79,32 @@ impl<R: Read> SampleReader<R> {
         let time = find(&columns.time)?;
         let outputs = columns.outputs.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let inputs = columns.inputs.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
-        Ok(Self {
-            reader,
-            record,
-            file: file.into(),
-            line,
-            header,
-            time,
-            outputs,
-            inputs,
-            last_time: None,
-        })
+        Ok(Self { reader, file: file.into(), line, header, time, outputs, inputs, last_time: None })
     }
 
     /// The next row into `s`: `None` at the end of the input, `Some(Err)` for a malformed row
-    /// (which is then consumed; the reader can continue). Blank lines are ignored.
+    /// (which is then consumed; the reader can continue). Blank lines are ignored. An
+    /// unterminated quote runs to the end of the input, as in the csv crate, so its row has
+    /// too few fields.
     ///
     /// # Errors
-    /// I/O errors are reported as [`CliError::Io`] inside `Some(Err)`, unreadable CSV (an
-    /// unterminated quote) as a row error.
+    /// I/O errors are reported as [`CliError::Io`] inside `Some(Err)`.
     pub fn next_into(&mut self, s: &mut Sample) -> Option<Result<(), CliError>> {
-        match self.reader.read_byte_record(&mut self.record) {
+        match self.reader.read_record() {
             Ok(false) => None,
             Ok(true) => {
-                self.line = self.record.position().map_or(self.line + 1, csv::Position::line);
+                self.line = self.reader.line();
                 Some(self.parse(s).map_err(CliError::Row))
             }
             Err(e) => {
-                if let Some(p) = e.position() {
-                    self.line = p.line();
-                }
-                Some(Err(match e.kind() {
-                    csv::ErrorKind::Io(_) => read_error(&self.file, e),
-                    _ => CliError::Row(RowError {
-                        file: self.file.clone(),
-                        line: self.line,
-                        column: None,
-                        message: format!("unreadable CSV: {e}"),
-                    }),
-                }))
+                self.line = self.reader.position_line();
+                Some(Err(read_error(&self.file, e)))
             }
         }
     }
 
     fn parse(&mut self, s: &mut Sample) -> Result<(), RowError> {
-        let record = &self.record;
+        let record = &self.reader;
         let err = |column: Option<&str>, message: String| RowError {
             file: self.file.clone(),
             line: self.line,

@@ -8,6 +8,9 @@ use serde::Serialize;
 use serde::ser::SerializeMap;
 use streamcert_certificate::{EVIDENCE_COLUMNS, Evidence, EvidenceRow, Interval};
 
+mod csv_row;
+use csv_row::CsvRows;
+
 /// Output format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Format {
@@ -18,13 +21,19 @@ pub enum Format {
     Jsonl,
 }
 
+/// Encoded CSV rows are handed to `out` once this many bytes are buffered.
+const CSV_BUFFER: usize = 1 << 16;
+
 enum Sink<W: Write> {
-    Csv(Box<csv::Writer<W>>),
+    Csv { out: W, rows: Box<CsvRows> },
     Jsonl(std::io::BufWriter<W>),
 }
 
 /// Writes one [`EvidenceRow`] per [`Evidence`]. Numbers are written in the shortest form that
-/// reads back to the same `f64` (ryu), so a written file round-trips exactly.
+/// reads back to the same `f64`, so a written file round-trips exactly. The CSV bytes are
+/// those of the csv crate's serde writer (`csv::Writer::serialize`), tested byte for byte;
+/// they are encoded by a specialised encoder that skips the quoting scan of numbers and
+/// reuses the text of values that did not change since the previous row.
 pub struct EvidenceWriter<W: Write> {
     sink: Sink<W>,
     flush_each_row: bool,
@@ -85,16 +94,16 @@ impl<W: Write> EvidenceWriter<W> {
     ) -> std::io::Result<Self> {
         let sink = match format {
             Format::Csv => {
-                let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(out);
+                let mut rows = Box::new(CsvRows::new(region_names.len()));
                 if header {
-                    w.write_record(
+                    rows.header(
                         EVIDENCE_COLUMNS
                             .iter()
                             .copied()
                             .chain(region_names.iter().map(String::as_str)),
-                    )?;
+                    );
                 }
-                Sink::Csv(Box::new(w))
+                Sink::Csv { out, rows }
             }
             Format::Jsonl => Sink::Jsonl(std::io::BufWriter::with_capacity(1 << 16, out)),
         };
@@ -132,11 +141,11 @@ impl<W: Write> EvidenceWriter<W> {
             pair[1] = r.map(|r| r.hi);
         }
         match &mut self.sink {
-            Sink::Csv(w) => {
-                if self.region_values.is_empty() {
-                    w.serialize(row)?;
-                } else {
-                    w.serialize((row, &self.region_values[..]))?;
+            Sink::Csv { out, rows } => {
+                rows.row(&row, &self.region_values);
+                if rows.bytes().len() >= CSV_BUFFER {
+                    out.write_all(rows.bytes())?;
+                    rows.clear();
                 }
             }
             Sink::Jsonl(w) => {
@@ -162,8 +171,21 @@ impl<W: Write> EvidenceWriter<W> {
     /// Writing to the output.
     pub fn flush(&mut self) -> std::io::Result<()> {
         match &mut self.sink {
-            Sink::Csv(w) => w.flush(),
+            Sink::Csv { out, rows } => {
+                out.write_all(rows.bytes())?;
+                rows.clear();
+                out.flush()
+            }
             Sink::Jsonl(w) => w.flush(),
         }
+    }
+}
+
+/// Rows encoded but not yet handed to the output are written when the writer is dropped (as
+/// the csv crate's writer does), so an early return after an error keeps the rows before it.
+impl<W: Write> Drop for EvidenceWriter<W> {
+    fn drop(&mut self) {
+        // Best effort: an error here has no caller to go to.
+        let _ = self.flush();
     }
 }

@@ -184,16 +184,31 @@ fn the_reader_thread_changes_nothing_but_speed() {
         lines[k] = f.join(",");
     }
     let input = lines.join("\n") + "\n";
+    // Checkpoints every 300 accepted rows (across batch boundaries): each path its own file.
+    let dir = std::env::temp_dir().join(format!("streamcert-output-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temporary directory");
     for bad_rows in [BadRows::Skip, BadRows::Stop] {
         let outcome = |flush_each_row: bool| {
-            let opts = Options { bad_rows, flush_each_row, ..options(Format::Csv) };
+            let checkpoint = dir.join(format!("{bad_rows:?}-{flush_each_row}.ckpt"));
+            let _ = std::fs::remove_file(&checkpoint);
+            let opts = Options {
+                bad_rows,
+                flush_each_row,
+                checkpoint: Some(checkpoint.clone()),
+                checkpoint_every: Some(300),
+                ..options(Format::Csv)
+            };
             let mut out = Vec::new();
             let r = certify::run(&cfg, input.as_bytes(), "plant", &mut out, &opts);
-            (r.map_err(|e| e.to_string()), out)
+            let saved = std::fs::read(&checkpoint).expect("a checkpoint was written");
+            (r.map_err(|e| e.to_string()), out, saved)
         };
         let (threaded, live) = (outcome(false), outcome(true));
         assert_eq!(threaded.0, live.0, "{bad_rows:?}");
         assert_eq!(threaded.1, live.1, "{bad_rows:?}");
+        // The last checkpoint written (at the end, or the last periodic one before the error)
+        // is the same state.
+        assert_eq!(threaded.2, live.2, "{bad_rows:?}");
         match (bad_rows, &threaded.0) {
             (BadRows::Skip, Ok(summary)) => assert_eq!(summary.skipped, 5),
             (BadRows::Stop, Err(message)) => assert!(message.contains("plant:701:"), "{message}"),

@@ -137,9 +137,9 @@ impl CsvRows {
             cache.bytes[..n].copy_from_slice(text);
             cache.len = n as u8;
             cache.bits = x.to_bits();
-            // zmij writes `1e+16` where ryu (and so the csv crate) writes `1e16`; a `+` can
-            // only follow the `e` of a long number.
-            if n > 4 {
+            // zmij writes `1e+16` where ryu (and so the csv crate) writes `1e16`; it uses an
+            // exponent from about 1e16 up (below 1e-5 the exponent is negative: no `+`).
+            if x.abs() >= 1e15 {
                 if let Some(at) = text.iter().position(|&b| b == b'+') {
                     cache.bytes.copy_within(at + 1..n, at);
                     cache.len -= 1;

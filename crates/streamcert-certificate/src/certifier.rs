@@ -451,7 +451,7 @@ impl Certifier {
                 self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
             }
         }
-        let lambda_max = linalg::sym_eig_extremes(&self.work, p, &mut self.eig_work).1;
+        let lambda_max = linalg::sym_eig_max(&self.work, p, &mut self.eig_work);
         let beta_hat = -lambda_max;
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();

@@ -141,7 +141,7 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 mod eigen;
 
-pub use eigen::{eig_work_len, sym_eig_extremes};
+pub use eigen::{eig_work_len, sym_eig_extremes, sym_eig_max};
 #[cfg(test)]
 use eigen::{tridiagonal_extremes, tridiagonal_ql};
 
@@ -204,7 +204,7 @@ mod tests {
             let d: Vec<f64> = (0..n).map(|i| if repeat { 1.0 } else { seed[i] }).collect();
             let e: Vec<f64> =
                 (0..n - 1).map(|i| if zeros[i] { 0.0 } else { seed[40 + i] }).collect();
-            let (lo, hi) = tridiagonal_extremes(&d, &e).expect("Laguerre settles");
+            let (lo, hi) = tridiagonal_extremes(&d, &e, true).expect("Laguerre settles");
             let mut dq = d.clone();
             let mut eq = vec![0.0; n];
             eq[1..].copy_from_slice(&e);
@@ -213,6 +213,16 @@ mod tests {
             let scale = 1.0 + qlo.abs().max(qhi.abs());
             prop_assert!((lo - qlo).abs() <= 1e-12 * scale, "{lo} vs {qlo}");
             prop_assert!((hi - qhi).abs() <= 1e-12 * scale, "{hi} vs {qhi}");
+        }
+
+        #[test]
+        fn the_largest_alone_is_the_largest_of_the_pair(a in (1usize..24).prop_flat_map(sym)) {
+            // `sym_eig_max` skips `λ_min` from n = 10 on; `λ_max` must not change by a bit.
+            let n = (a.len() as f64).sqrt() as usize;
+            let mut work = vec![0.0; eig_work_len(n)];
+            let pair = sym_eig_extremes(&a, n, &mut work);
+            let top = sym_eig_max(&a, n, &mut work);
+            prop_assert_eq!(top.to_bits(), pair.1.to_bits());
         }
 
         #[test]
@@ -231,6 +241,8 @@ mod tests {
             let mut work = vec![0.0; eig_work_len(n)];
             let (lo, hi) = sym_eig_extremes(&a, n, &mut work);
             prop_assert!(!(lo.is_finite() && hi.is_finite()), "n = {n}: {lo}, {hi}");
+            let top = sym_eig_max(&a, n, &mut work);
+            prop_assert!(!top.is_finite() || top.to_bits() == hi.to_bits(), "n = {n}: {top}");
         }
 
         #[test]

@@ -4,6 +4,8 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::Interval;
 
+use crate::fixed::Fixed;
+
 /// Why a sample is not certified.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "reason", rename_all = "snake_case")]
@@ -87,7 +89,7 @@ impl std::fmt::Display for NotCertified {
             Self::InsufficientExcitation => f.write_str("insufficient excitation"),
             Self::WeakInstruments => f.write_str("weak instruments"),
             Self::BelowMargin { certificate, margin } => {
-                write!(f, "certificate {certificate:.4} below margin {margin}")
+                write!(f, "certificate {} below margin {margin}", Fixed::<4>(*certificate))
             }
             Self::Accumulating { streak, needed } => {
                 write!(f, "above margin for {streak}/{needed} samples")
@@ -100,12 +102,14 @@ impl std::fmt::Display for NotCertified {
             }
             Self::RateDropped { window, upper } => write!(
                 f,
-                "window {window}: the rate is at most {upper:.4}, below the margin (dynamics changed?)"
+                "window {window}: the rate is at most {}, below the margin (dynamics changed?)",
+                Fixed::<4>(*upper)
             ),
             Self::VaryingDynamics { window, statistic, threshold } => write!(
                 f,
-                "dynamics vary over the explored region (window {window}: Wald {statistic:.3} > \
-                 {threshold:.3})"
+                "dynamics vary over the explored region (window {window}: Wald {} > {})",
+                Fixed::<3>(*statistic),
+                Fixed::<3>(*threshold)
             ),
             Self::LinearityUntested { window } => {
                 write!(f, "window {window}: linearity not yet tested (no feature fit)")

@@ -60,6 +60,7 @@ mod certifier;
 mod config;
 mod error;
 mod evidence;
+mod fixed;
 mod gap;
 mod gate;
 pub mod nonlinear;

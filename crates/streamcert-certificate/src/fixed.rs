@@ -1,0 +1,129 @@
+//! [`Fixed`]: `format!("{:.P}", x)`, byte for byte, by exact integer arithmetic.
+//!
+//! The reasons a closed gate gives carry the certificate to four decimals at every sample;
+//! core's fixed-precision formatting often falls back to its big-number (Dragon) algorithm
+//! there, which made formatting the reasons most of the command line's time on data whose
+//! gates stay closed (BENCHMARKS.md). Here `|x| · 10^P` is rounded exactly in 128-bit
+//! integers (`x = m · 2^e` with `m < 2^53`, so `m · 10^P < 2^67`), half to even as core does;
+//! numbers too large for that (`|x| >= 2^60`), NaN and infinities go to core's formatter.
+
+use std::fmt;
+
+/// `x` with `P` decimals (`P <= 9`), exactly as `format!("{:.P}", x)` writes it (tested
+/// against it on random and tie values).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Fixed<const P: u32>(pub(crate) f64);
+
+impl<const P: u32> fmt::Display for Fixed<P> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let mut buf = [0u8; 48];
+        match write_fixed(self.0, P, &mut buf) {
+            // Only ASCII digits, a sign and a point are written.
+            Some(n) => f.write_str(std::str::from_utf8(&buf[..n]).map_err(|_| fmt::Error)?),
+            None => write!(f, "{:.*}", P as usize, self.0),
+        }
+    }
+}
+
+/// The text of `x` with `p` decimals into `out`, its length; `None` where core's formatter
+/// is needed (not finite, `|x| >= 2^60`, `p > 9`).
+fn write_fixed(x: f64, p: u32, out: &mut [u8; 48]) -> Option<usize> {
+    if !x.is_finite() || x.abs() >= (1u64 << 60) as f64 || p > 9 {
+        return None;
+    }
+    let bits = x.to_bits();
+    let exp_bits = ((bits >> 52) & 0x7ff) as i32;
+    let frac = bits & ((1u64 << 52) - 1);
+    // |x| = m · 2^e exactly.
+    let (m, e) = if exp_bits == 0 { (frac, -1074) } else { (frac | (1u64 << 52), exp_bits - 1075) };
+    let scale = 10u128.pow(p);
+    let prod = u128::from(m) * scale;
+    let n: u128 = if e >= 0 {
+        // |x| < 2^60 and m >= 2^52 give e <= 7: no overflow.
+        prod << e
+    } else {
+        let s = e.unsigned_abs();
+        if s >= 128 {
+            // prod < 2^67 <= half of 2^s: rounds to zero.
+            0
+        } else {
+            let q = prod >> s;
+            let r = prod & ((1u128 << s) - 1);
+            let half = 1u128 << (s - 1);
+            if r > half || (r == half && q & 1 == 1) { q + 1 } else { q }
+        }
+    };
+    let (int, fraction) = (n / scale, n % scale);
+    let mut len = 0;
+    if x.is_sign_negative() {
+        out[0] = b'-';
+        len = 1;
+    }
+    // The integer part's digits, most significant first.
+    let mut digits = [0u8; 40];
+    let mut k = digits.len();
+    let mut v = int;
+    loop {
+        k -= 1;
+        digits[k] = b'0' + (v % 10) as u8;
+        v /= 10;
+        if v == 0 {
+            break;
+        }
+    }
+    let whole = &digits[k..];
+    out[len..len + whole.len()].copy_from_slice(whole);
+    len += whole.len();
+    if p > 0 {
+        out[len] = b'.';
+        len += 1;
+        let mut v = fraction;
+        for i in (0..p as usize).rev() {
+            out[len + i] = b'0' + (v % 10) as u8;
+            v /= 10;
+        }
+        len += p as usize;
+    }
+    Some(len)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn same(x: f64) -> Result<(), TestCaseError> {
+        prop_assert_eq!(Fixed::<4>(x).to_string(), format!("{x:.4}"));
+        prop_assert_eq!(Fixed::<3>(x).to_string(), format!("{x:.3}"));
+        prop_assert_eq!(Fixed::<0>(x).to_string(), format!("{x:.0}"));
+        Ok(())
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(20_000))]
+        #[test]
+        fn equals_core_on_any_bits(bits in any::<u64>()) {
+            same(f64::from_bits(bits))?;
+        }
+
+        #[test]
+        fn equals_core_on_certificate_sized_numbers(x in -1e4f64..1e4, shift in -30i32..12) {
+            same(x * 2f64.powi(shift))?;
+        }
+
+        /// Exact ties at the last kept decimal (odd multiples of a power of two), where the
+        /// rounding rule (half to even) decides.
+        #[test]
+        fn equals_core_on_ties(k in -100_000i64..100_000, j in 0i32..12) {
+            same((2 * k + 1) as f64 / 2f64.powi(j))?;
+            same((2 * k + 1) as f64 / 20_000.0)?;
+        }
+    }
+
+    #[test]
+    fn signed_zeros_and_edges() {
+        for x in [0.0, -0.0, -1e-10, 5e-5, 1e-320, 0.03125, 0.09375, 2.5, (1u64 << 60) as f64] {
+            same(x).expect("equal to core");
+        }
+    }
+}

@@ -358,8 +358,8 @@ impl SlidingRegression {
         if self.cfg.estimator == Estimator::Ordinary {
             let (p, d) = (self.cfg.outputs, self.d());
             if p == 1 && d == 2 {
-                self.sum_columns(start, first, 1, 2);
-                self.sum_columns(0, self.col_len - first, 1, 2);
+                self.sum_scalar_columns(start, first);
+                self.sum_scalar_columns(0, self.col_len - first);
             } else {
                 self.sum_columns(start, first, p, d);
                 self.sum_columns(0, self.col_len - first, p, d);
@@ -377,6 +377,26 @@ impl SlidingRegression {
         for i in 0..p {
             self.peaks[d + i] = self.s[i * p + i];
         }
+    }
+
+    /// [`sum_columns`](Self::sum_columns) for `p = 1`, `d = 2`: the six sums in locals (the
+    /// same additions in the same order, so the same bits), written back once.
+    fn sum_scalar_columns(&mut self, from: usize, count: usize) {
+        let zs = self.col_z[2 * from..2 * (from + count)].chunks_exact(2);
+        let dys = &self.col_dy[from..from + count];
+        let (mut g0, mut g1, mut g3) = (self.g[0], self.g[1], self.g[3]);
+        let (mut c0, mut c1, mut s0) = (self.c[0], self.c[1], self.s[0]);
+        for (z, &dy) in zs.zip(dys) {
+            let (z0, z1) = (z[0], z[1]);
+            g0 += z0 * z0;
+            g1 += z0 * z1;
+            g3 += z1 * z1;
+            c0 += dy * z0;
+            c1 += dy * z1;
+            s0 += dy * dy;
+        }
+        (self.g[0], self.g[1], self.g[3]) = (g0, g1, g3);
+        (self.c[0], self.c[1], self.s[0]) = (c0, c1, s0);
     }
 
     /// Add the outer products of the contiguous slots `[from, from + count)` (ordinary
@@ -402,5 +422,43 @@ impl SlidingRegression {
                 }
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::{RegressionConfig, SlidingRegression};
+
+    /// The scalar refresh forms the sums in locals; they must equal, bit for bit, the outer
+    /// products added in window order (oldest first) as the general path adds them.
+    #[test]
+    fn the_scalar_refresh_is_the_ordered_sum() {
+        let mut reg = SlidingRegression::new(RegressionConfig::new(1, 1, 40, 3, 1e-4))
+            .expect("valid configuration");
+        let mut state = 0.3_f64;
+        for k in 0..517 {
+            state = 0.9 * state + ((k * 7919) % 101) as f64 / 101.0 - 0.5;
+            let u = if (k / 13) % 2 == 0 { 1.0 } else { -1.0 };
+            reg.push(k as f64 * 0.01, &[state], &[u]).expect("finite sample");
+        }
+        reg.refresh();
+        let mm = reg.cfg.window;
+        let start = (reg.col_next + mm - reg.col_len) % mm;
+        let (mut g, mut c, mut s) = ([0.0f64; 4], [0.0f64; 2], 0.0f64);
+        for k in 0..reg.col_len {
+            let q = (start + k) % mm;
+            let (z0, z1, dy) = (reg.col_z[2 * q], reg.col_z[2 * q + 1], reg.col_dy[q]);
+            g[0] += z0 * z0;
+            g[1] += z0 * z1;
+            g[3] += z1 * z1;
+            c[0] += dy * z0;
+            c[1] += dy * z1;
+            s += dy * dy;
+        }
+        for (a, b) in [(reg.g[0], g[0]), (reg.g[1], g[1]), (reg.g[3], g[3])] {
+            assert_eq!(a.to_bits(), b.to_bits());
+        }
+        assert_eq!((reg.c[0].to_bits(), reg.c[1].to_bits()), (c[0].to_bits(), c[1].to_bits()));
+        assert_eq!(reg.s[0].to_bits(), s.to_bits());
     }
 }

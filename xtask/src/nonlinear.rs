@@ -46,6 +46,10 @@ struct Cell {
     /// Base window `M` (columns); the smallest the cubic library accepts is
     /// `h (D + m + 2) = 30`.
     window: usize,
+    /// Number of calibrated windows `M, 2M, …` (`None`: the default, doubling until the
+    /// longest holds 200 blocks of `h` columns). The long-run power cells raise it so that the
+    /// longest window grows with the run.
+    windows: Option<usize>,
 }
 
 impl Cell {
@@ -108,6 +112,7 @@ fn cells() -> Vec<Cell> {
             validity: true,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
@@ -116,6 +121,7 @@ fn cells() -> Vec<Cell> {
             validity: true,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "band, rate −0.1 + 1.5 (x − 0.8)² (non-contracting near x = 0.8), K = −1",
@@ -128,6 +134,7 @@ fn cells() -> Vec<Cell> {
             validity: true,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "cubic, rate 2 + 0.9 x² (40× the margin), dither ±3",
@@ -141,6 +148,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
@@ -149,6 +157,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "same, process noise σ = 0.02",
@@ -157,6 +166,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "same, rate 0.5 + 1.8 x² (10× the margin)",
@@ -165,6 +175,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "−x tanh x, K = −2, process noise σ = 0.02",
@@ -177,6 +188,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
@@ -185,6 +197,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: None,
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "G5 subsystem A, Experiment 2 data (rate tanh x1 + x1 sech² x1 + 2.5), 40 s",
@@ -193,6 +206,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: Some(0),
             window: WINDOW,
+            windows: None,
         },
         Cell {
             name: "G5 subsystem B, Experiment 2 data (linear: rate 1 − k4 = 4), 40 s",
@@ -201,6 +215,7 @@ fn cells() -> Vec<Cell> {
             validity: false,
             g5: Some(1),
             window: WINDOW,
+            windows: None,
         },
         // Last, so that the seeds of the cells above (drawn from the cell's index) stay as they
         // were.
@@ -211,19 +226,67 @@ fn cells() -> Vec<Cell> {
             validity: true,
             g5: None,
             window: 30,
+            windows: None,
+        },
+        // Power with more data: the same loops run longer, with windows that double up to
+        // about the run's length (last, so the seeds above stay as they were).
+        Cell {
+            name: "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.1, 2000 s, windows up to 102 400 columns",
+            scenario: ScalarScenario { steps: 200_000, ..cubic(0.1) },
+            k: -0.65,
+            validity: false,
+            g5: None,
+            window: WINDOW,
+            windows: Some(12),
+        },
+        Cell {
+            name: "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.02, 200 s, windows up to 25 600 columns",
+            scenario: ScalarScenario { steps: 20_000, ..cubic(0.02) },
+            k: -0.65,
+            validity: false,
+            g5: None,
+            window: WINDOW,
+            windows: Some(10),
+        },
+        Cell {
+            name: "cubic, rate 0.5 + 1.8 x² (10× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
+            scenario: ScalarScenario { steps: 40_000, ..cubic(0.1) },
+            k: -1.0,
+            validity: false,
+            g5: None,
+            window: WINDOW,
+            windows: Some(11),
+        },
+        Cell {
+            name: "cubic, rate 0.03 + 1.8 x² (just below the margin), 400 s, windows up to 51 200 columns",
+            scenario: ScalarScenario { steps: 40_000, ..cubic(0.1) },
+            k: -0.53,
+            validity: true,
+            g5: None,
+            window: WINDOW,
+            windows: Some(11),
+        },
+        Cell {
+            name: "−x tanh x, K = −2 (16× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
+            scenario: ScalarScenario { k_explore: -2.0, steps: 40_000, ..base() },
+            k: -2.0,
+            validity: false,
+            g5: None,
+            window: WINDOW,
+            windows: Some(11),
         },
     ]
 }
 
 /// The study's certifier: `degree` 2 or 3 for the polynomial library, 0 for the named
 /// library `y, y·tanh y`.
-fn config(k: f64, degree: usize, window: usize) -> CertifierConfig {
+fn config(k: f64, degree: usize, window: usize, windows: Option<usize>) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
         ..RegressionConfig::new(1, 1, window, H, 1e-4)
     };
     CertifierConfig {
-        calibration: Some(Calibration::new(DELTA)),
+        calibration: Some(Calibration { windows, ..Calibration::new(DELTA) }),
         nonlinear: Some(if degree == 0 {
             NonlinearConfig::with_features(
                 FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
@@ -233,6 +296,18 @@ fn config(k: f64, degree: usize, window: usize) -> CertifierConfig {
         }),
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
+}
+
+/// The time by which `opened` (first opening times, one per run that opened) covers 90 % of
+/// `runs` runs: the `⌈0.9 runs⌉`-th smallest; `–` when fewer runs opened.
+fn ninety(opened: &[f64], runs: usize) -> String {
+    let need = (9 * runs).div_ceil(10);
+    if need == 0 || opened.len() < need {
+        return "–".into();
+    }
+    let mut sorted = opened.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    format!("{:.1} s", sorted[need - 1])
 }
 
 /// Range minimum of the true rate on a fine grid (sparse table, `O(1)` per query), plus the
@@ -296,9 +371,9 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
     let (ts, ys, us) = cell.data(seed)?;
     let rate = |x: f64| cell.rate(x);
     let mut certs = [
-        Certifier::new(config(cell.k, 3, cell.window))?,
-        Certifier::new(config(cell.k, 2, cell.window))?,
-        Certifier::new(config(cell.k, 0, cell.window))?,
+        Certifier::new(config(cell.k, 3, cell.window, cell.windows))?,
+        Certifier::new(config(cell.k, 2, cell.window, cell.windows))?,
+        Certifier::new(config(cell.k, 0, cell.window, cell.windows))?,
     ];
     let slot = |degree: usize| match degree {
         3 => 0,
@@ -341,7 +416,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last five cells: the length stated, with more calibrated windows) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {
@@ -391,6 +466,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                 share(above, valued),
                 share(opened.len(), n),
                 if opened.is_empty() { "–".into() } else { format!("{:.1} s", median(&opened)) },
+                if cell.validity { "–".into() } else { ninety(&opened, n) },
             ]);
         }
     }
@@ -408,13 +484,14 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                 "above truth",
                 "opened",
                 "median first opening",
+                "90 % opened by",
             ],
             &rows
         )
     );
     let _ = writeln!(
         s,
-        "\nThe nonlinear certificate's bound holds for every point of every region at once (Hotelling's T² over the span of `a(y)`, see the `nonlinear` module of streamcert-certificate), so its validity does not depend on which region the data explored. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n"
+        "\nThe nonlinear certificate's bound holds for every point of every region at once (Hotelling's T² over the span of `a(y)`, see the `nonlinear` module of streamcert-certificate), so its validity does not depend on which region the data explored. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n\nPower is a matter of data: the last cells run the same loops longer, with calibrated windows doubling up to about the run's length, and show when 90 % of the runs had opened. A library that cannot represent the drift (degree 2 or `y, y·tanh y` on a cubic) may open early, but its value then exceeds the true minimum over the region (the `above truth` column): that is not power. The long near-margin cell checks that the longer windows keep the guarantee.\n"
     );
     write(&out.join("NONLINEAR.md"), &s)?;
     bar.finish_and_clear();

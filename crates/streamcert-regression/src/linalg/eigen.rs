@@ -69,6 +69,12 @@ fn sym_eig_laguerre(a: &[f64], n: usize, work: &mut [f64], want_min: bool) -> (f
     if let Some(pair) = tridiagonal_extremes(d, &e[1..], want_min) {
         return pair;
     }
+    ql_extremes(d, e)
+}
+
+/// Every eigenvalue of the tridiagonal (`d`, `e[1..]`) by QL, then the two extremes (NaN
+/// when QL does not converge).
+fn ql_extremes(d: &mut [f64], e: &mut [f64]) -> (f64, f64) {
     if !tridiagonal_ql(d, e) {
         return (f64::NAN, f64::NAN);
     }
@@ -96,16 +102,7 @@ fn sym_eig_extremes_iterative(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f6
         }
     }
     tridiagonalise(w, n, d, e);
-    if !tridiagonal_ql(d, e) {
-        return (f64::NAN, f64::NAN);
-    }
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    for &v in d.iter() {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    (lo, hi)
+    ql_extremes(d, e)
 }
 
 /// Householder reduction of the symmetric matrix held in the lower triangle of `a` to

@@ -37,6 +37,18 @@
 //!   directions). Its variance is `vec(vvᵀ)ᵀ Ω vec(vvᵀ) <= λ_max(Ω)` for every unit `v`; for
 //!   `p = 2` the maximum over rank-one `vvᵀ` is bounded directly
 //!   ([`rank_one_variance_bound`]).
+//! * Why not the variance in the estimated direction, `vec(v̂v̂ᵀ)ᵀ Ω̂ vec(v̂v̂ᵀ)` with `v̂` the
+//!   top eigenvector of `sym Ĵ` (the delta method's first-order variance of `β̂`)? Its
+//!   validity needs `v̂` close to `v*` at the risk a look spends, and on short windows it is
+//!   not. Measured with `cargo xtask validity --runs 1000` on a variant that used it for
+//!   `p >= 2` (not kept): the `p = 3` and common-mode `p = 2` cells stayed valid (5 and 4 of
+//!   1000) with efficiency ratios 1.55 and 1.53 instead of 3.04 and 2.37, but the `p = 2`
+//!   cell with unequal noise opened falsely in 251 of 1000 runs (q99 of `(β̂ − β*)/ρ` 2.52):
+//!   where the estimated direction swings toward the quiet output, the plug-in variance is
+//!   that of the quiet output. Using it only when the estimated eigengap exceeds a multiple
+//!   of `√λ_max(Ω̂)` trades one failure for the other (3×: unequal noise 5 of 1000 and 1.53,
+//!   but common-mode 2.03 and `p = 3` 2.99; 5×: no gain), and the rigorous version (a
+//!   Davis–Kahan cone from a Hotelling bound on `‖ΔJ‖`) is never informative at these gaps.
 //! * Consecutive columns overlap in `h − 1` of their `h` sample intervals; batch means over
 //!   blocks of `h` columns with the overlap factor `3h²/(2h² + 1)` estimate the long-run
 //!   variance of the scores (exact in expectation for the triangular correlation of white

@@ -4,7 +4,7 @@
 use std::io::Read;
 
 mod record;
-use record::RecordReader;
+pub(crate) use record::RecordReader;
 
 use crate::config::Columns;
 use crate::{CliError, RowError};
@@ -40,7 +40,7 @@ pub struct SampleReader<R> {
 }
 
 /// A read error of the input as the CLI's error.
-fn read_error(file: &str, e: std::io::Error) -> CliError {
+pub(crate) fn read_error(file: &str, e: std::io::Error) -> CliError {
     CliError::io(format!("reading {file}"), e)
 }
 

@@ -156,6 +156,13 @@ fn network_long_rows_equal_the_wide_file() {
     let unknown = run(&["network", "--config", long_cfg], b"0,A,0,0\n0,C,0,0\n");
     assert_eq!(unknown.status.code(), Some(3));
     assert!(text(&unknown.stderr).contains("no subsystem named `C`"), "{}", text(&unknown.stderr));
+    // Other people's CSV: CRLF line ends, a blank line, a quoted name; the error names the
+    // physical line of the bad row (line 4 here).
+    let crlf =
+        run(&["network", "--config", long_cfg], b"0,\"A\",0,0\r\n\r\n0.02,A,0,0\r\n0.04,C,0,0\r\n");
+    assert_eq!(crlf.status.code(), Some(3));
+    let stderr = text(&crlf.stderr);
+    assert!(stderr.contains(":4:") && stderr.contains("no subsystem named `C`"), "{stderr}");
     // A corrupted time far ahead (found by fuzzing: it made the network compose 10¹³ epochs).
     let jump = run(&["network", "--config", long_cfg], b"0,A,0,0\n1e12,A,0,0\n");
     assert_eq!(jump.status.code(), Some(3));

@@ -1,11 +1,12 @@
 //! The input rows of `network`: wide (every subsystem's columns in one row, through
-//! `SampleReader`) or long (`t, subsystem, outputs..., inputs...`, through the csv crate).
+//! `SampleReader`) or long (`t, subsystem, outputs..., inputs...`, through the same
+//! `RecordReader`: the csv crate's grammar, physical line numbers).
 
 use std::io::Read;
 
 use super::config::{InputLayout, NetConfig};
 use crate::CliError;
-use crate::input::{Sample, SampleReader};
+use crate::input::{RecordReader, Sample, SampleReader, read_error};
 
 /// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
 /// the row, `(index, start of its outputs in values, p, m)`.
@@ -54,10 +55,9 @@ impl<R: Read> Rows<R> {
     }
 }
 
-/// Long rows: `t, subsystem, outputs..., inputs...`, read with the csv crate.
+/// Long rows: `t, subsystem, outputs..., inputs...`, read with the csv crate's grammar.
 pub(super) struct LongReader<R: Read> {
-    reader: csv::Reader<R>,
-    record: csv::ByteRecord,
+    record: RecordReader<R>,
     file: String,
     index: std::collections::HashMap<String, usize>,
     dims: Vec<(usize, usize)>,
@@ -70,16 +70,10 @@ impl<R: Read> LongReader<R> {
             .columns
             .delimiter_byte()
             .map_err(|message| CliError::Input { file: file.into(), message })?;
-        let reader = csv::ReaderBuilder::new()
-            .has_headers(false)
-            .flexible(true)
-            .delimiter(delimiter)
-            .from_reader(input);
         let index =
             cfg.network.subsystems.iter().enumerate().map(|(i, s)| (s.name.clone(), i)).collect();
         Ok(Self {
-            reader,
-            record: csv::ByteRecord::new(),
+            record: RecordReader::new(input, delimiter),
             file: file.into(),
             index,
             dims: cfg.dims.clone(),
@@ -93,17 +87,12 @@ impl<R: Read> LongReader<R> {
         items: &mut Vec<(usize, usize, usize, usize)>,
     ) -> Option<Result<(u64, f64), CliError>> {
         loop {
-            match self.reader.read_byte_record(&mut self.record) {
+            match self.record.read_record() {
                 Ok(false) => return None,
-                Err(e) => {
-                    return Some(Err(CliError::Input {
-                        file: self.file.clone(),
-                        message: format!("unreadable CSV: {e}"),
-                    }));
-                }
+                Err(e) => return Some(Err(read_error(&self.file, e))),
                 Ok(true) => {}
             }
-            let line = self.record.position().map_or(0, csv::Position::line);
+            let line = self.record.line();
             let err = |message: String| {
                 Some(Err(CliError::Row(crate::RowError {
                     file: self.file.clone(),

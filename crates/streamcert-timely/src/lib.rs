@@ -6,7 +6,7 @@
 //! `i mod workers`, samples exchanged by subsystem id), and at every composition point every
 //! worker sends the newest snapshots of the subsystems it advanced to worker 0, which composes
 //! the epochs with the same [`Composer`] as the one-process
-//! [`NetworkCertifier`](streamcert_network::NetworkCertifier).
+//! [`NetworkCertifier`].
 //!
 //! **Same verdicts as one process, bit for bit.** Worker 0 reads the rows in order and runs
 //! the epoch clock ([`Composer::due`]) on each row's time, as the one-process certifier does

@@ -76,178 +76,130 @@ fn cubic(sigma: f64) -> ScalarScenario {
     }
 }
 
+impl Cell {
+    /// A cell on a scalar loop with the study's base window and default windows.
+    fn new(name: &'static str, scenario: ScalarScenario, k: f64, validity: bool) -> Self {
+        Self { name, scenario, k, validity, g5: None, window: WINDOW, windows: None }
+    }
+
+    /// A validity cell: the smallest visited rate is below the margin.
+    fn validity(name: &'static str, scenario: ScalarScenario, k: f64) -> Self {
+        Self::new(name, scenario, k, true)
+    }
+
+    /// A power cell: the smallest visited rate is at least 3× the margin.
+    fn power(name: &'static str, scenario: ScalarScenario, k: f64) -> Self {
+        Self::new(name, scenario, k, false)
+    }
+
+    /// Run `steps` samples with `windows` calibrated windows.
+    fn long(self, steps: usize, windows: usize) -> Self {
+        Self { scenario: ScalarScenario { steps, ..self.scenario }, windows: Some(windows), ..self }
+    }
+}
+
+/// G5's subsystem `which` (0: A, 1: B) on Experiment 2's data, with candidate gain `k`.
+fn g5_cell(name: &'static str, which: usize, k: f64) -> Cell {
+    Cell { g5: Some(which), ..Cell::power(name, base(), k) }
+}
+
 pub(super) fn cells() -> Vec<Cell> {
     let poly = |c: Vec<f64>| ScalarDrift::Polynomial(c);
+    let setting = Experiment::Two.setting();
     vec![
-        Cell {
-            name: "−x tanh x, K = −1.1 (the issue's loop; rate < 0 near x = −1.2)",
-            scenario: base(),
-            k: -1.1,
-            validity: true,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
-            scenario: cubic(0.1),
-            k: -0.53,
-            validity: true,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "band, rate −0.1 + 1.5 (x − 0.8)² (non-contracting near x = 0.8), K = −1",
-            scenario: ScalarScenario {
-                drift: poly(vec![0.0, 0.14, 1.2, -0.5]),
-                k_explore: -1.0,
-                ..base()
-            },
-            k: -1.0,
-            validity: true,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "cubic, rate 2 + 0.9 x² (40× the margin), dither ±3",
-            scenario: ScalarScenario {
+        Cell::validity(
+            "−x tanh x, K = −1.1 (the issue's loop; rate < 0 near x = −1.2)",
+            base(),
+            -1.1,
+        ),
+        Cell::validity(
+            "cubic, rate 0.03 + 1.8 x² (just below the margin at x = 0), K_e = −1.5",
+            cubic(0.1),
+            -0.53,
+        ),
+        Cell::validity(
+            "band, rate −0.1 + 1.5 (x − 0.8)² (non-contracting near x = 0.8), K = −1",
+            ScalarScenario { drift: poly(vec![0.0, 0.14, 1.2, -0.5]), k_explore: -1.0, ..base() },
+            -1.0,
+        ),
+        Cell::power(
+            "cubic, rate 2 + 0.9 x² (40× the margin), dither ±3",
+            ScalarScenario {
                 drift: poly(vec![0.0, -1.0, 0.0, -0.3]),
                 k_explore: -1.0,
                 dither: 3.0,
                 ..base()
             },
-            k: -1.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
-            scenario: cubic(0.1),
-            k: -0.65,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "same, process noise σ = 0.02",
-            scenario: cubic(0.02),
-            k: -0.65,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "same, rate 0.5 + 1.8 x² (10× the margin)",
-            scenario: cubic(0.1),
-            k: -1.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "−x tanh x, K = −2, process noise σ = 0.02",
-            scenario: ScalarScenario {
+            -1.0,
+        ),
+        Cell::power(
+            "cubic, rate 0.15 + 1.8 x² (3× the margin at x = 0), K_e = −1.5",
+            cubic(0.1),
+            -0.65,
+        ),
+        Cell::power("same, process noise σ = 0.02", cubic(0.02), -0.65),
+        Cell::power("same, rate 0.5 + 1.8 x² (10× the margin)", cubic(0.1), -1.0),
+        Cell::power(
+            "−x tanh x, K = −2, process noise σ = 0.02",
+            ScalarScenario {
                 k_explore: -2.0,
                 noise: Process::Gaussian { sigma: 0.02 },
                 ..base()
             },
-            k: -2.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
-            scenario: ScalarScenario { k_explore: -2.0, ..base() },
-            k: -2.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "G5 subsystem A, Experiment 2 data (rate tanh x1 + x1 sech² x1 + 2.5), 40 s",
-            scenario: base(),
-            k: Experiment::Two.setting().k1,
-            validity: false,
-            g5: Some(0),
-            window: WINDOW,
-            windows: None,
-        },
-        Cell {
-            name: "G5 subsystem B, Experiment 2 data (linear: rate 1 − k4 = 4), 40 s",
-            scenario: base(),
-            k: Experiment::Two.setting().k4,
-            validity: false,
-            g5: Some(1),
-            window: WINDOW,
-            windows: None,
-        },
+            -2.0,
+        ),
+        Cell::power(
+            "−x tanh x, K = −2 (rate ≥ 0.8, 16× the margin)",
+            ScalarScenario { k_explore: -2.0, ..base() },
+            -2.0,
+        ),
+        g5_cell(
+            "G5 subsystem A, Experiment 2 data (rate tanh x1 + x1 sech² x1 + 2.5), 40 s",
+            0,
+            setting.k1,
+        ),
+        g5_cell("G5 subsystem B, Experiment 2 data (linear: rate 1 − k4 = 4), 40 s", 1, setting.k4),
         // Last, so that the seeds of the cells above (drawn from the cell's index) stay as they
         // were.
         Cell {
-            name: "the cubic 0.03 + 1.8 x² (just below the margin) at the smallest window the cubic library accepts (M = 30)",
-            scenario: cubic(0.1),
-            k: -0.53,
-            validity: true,
-            g5: None,
             window: 30,
-            windows: None,
+            ..Cell::validity(
+                "the cubic 0.03 + 1.8 x² (just below the margin) at the smallest window the cubic library accepts (M = 30)",
+                cubic(0.1),
+                -0.53,
+            )
         },
         // Power with more data: the same loops run longer, with windows that double up to
         // about the run's length (last, so the seeds above stay as they were).
-        Cell {
-            name: "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.1, 2000 s, windows up to 102 400 columns",
-            scenario: ScalarScenario { steps: 200_000, ..cubic(0.1) },
-            k: -0.65,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: Some(12),
-        },
-        Cell {
-            name: "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.02, 200 s, windows up to 25 600 columns",
-            scenario: ScalarScenario { steps: 20_000, ..cubic(0.02) },
-            k: -0.65,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: Some(10),
-        },
-        Cell {
-            name: "cubic, rate 0.5 + 1.8 x² (10× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
-            scenario: ScalarScenario { steps: 40_000, ..cubic(0.1) },
-            k: -1.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: Some(11),
-        },
-        Cell {
-            name: "cubic, rate 0.03 + 1.8 x² (just below the margin), 400 s, windows up to 51 200 columns",
-            scenario: ScalarScenario { steps: 40_000, ..cubic(0.1) },
-            k: -0.53,
-            validity: true,
-            g5: None,
-            window: WINDOW,
-            windows: Some(11),
-        },
-        Cell {
-            name: "−x tanh x, K = −2 (16× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
-            scenario: ScalarScenario { k_explore: -2.0, steps: 40_000, ..base() },
-            k: -2.0,
-            validity: false,
-            g5: None,
-            window: WINDOW,
-            windows: Some(11),
-        },
+        Cell::power(
+            "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.1, 2000 s, windows up to 102 400 columns",
+            cubic(0.1),
+            -0.65,
+        )
+        .long(200_000, 12),
+        Cell::power(
+            "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.02, 200 s, windows up to 25 600 columns",
+            cubic(0.02),
+            -0.65,
+        )
+        .long(20_000, 10),
+        Cell::power(
+            "cubic, rate 0.5 + 1.8 x² (10× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
+            cubic(0.1),
+            -1.0,
+        )
+        .long(40_000, 11),
+        Cell::validity(
+            "cubic, rate 0.03 + 1.8 x² (just below the margin), 400 s, windows up to 51 200 columns",
+            cubic(0.1),
+            -0.53,
+        )
+        .long(40_000, 11),
+        Cell::power(
+            "−x tanh x, K = −2 (16× the margin), σ = 0.1, 400 s, windows up to 51 200 columns",
+            ScalarScenario { k_explore: -2.0, ..base() },
+            -2.0,
+        )
+        .long(40_000, 11),
     ]
 }

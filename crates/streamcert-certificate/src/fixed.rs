@@ -2,8 +2,8 @@
 //!
 //! The reasons a closed gate gives carry the certificate to four decimals at every sample;
 //! core's fixed-precision formatting often falls back to its big-number (Dragon) algorithm
-//! there, which made formatting the reasons most of the command line's time on data whose
-//! gates stay closed (BENCHMARKS.md). Here `|x| · 10^P` is rounded exactly in 128-bit
+//! there (on data whose gates stay closed, 23 % of the command line's `perf record` samples
+//! were in `dragon::format_exact`; BENCHMARKS.md, session 8). Here `|x| · 10^P` is rounded exactly in 128-bit
 //! integers (`x = m · 2^e` with `m < 2^53`, so `m · 10^P < 2^67`), half to even as core does;
 //! numbers too large for that (`|x| >= 2^60`), NaN and infinities go to core's formatter.
 

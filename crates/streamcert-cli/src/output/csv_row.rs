@@ -4,12 +4,11 @@
 //!
 //! The csv crate is the specification: the tests compare every byte with
 //! `csv::Writer::serialize` on random rows, texts with delimiters, quotes and line breaks
-//! included. What makes it faster than the serde path (about a third of the command line's
-//! time went to `csv_core::Writer::field`, delimiters and the serde calls; see BENCHMARKS.md):
-//! numbers cannot need quotes, so their bytes are copied without a scan; `zmij` formats a
-//! float in about half of `ryu`'s time (same digits, only the exponent's `+` differs and is
-//! removed); and a column whose value did not change since the previous row (the region's
-//! bounds, `ε` at its floor, a standing reason) copies its previous bytes.
+//! included. What makes it faster than the serde path (`cargo bench --bench cli`, the
+//! `cli_write` group, in BENCHMARKS.md): numbers cannot need quotes, so their bytes are copied
+//! without a scan; `zmij` formats a float (the same digits as `ryu`, only the exponent's `+`
+//! differs and is removed); and a column whose value did not change since the previous row
+//! (the region's bounds, `ε` at its floor, a standing reason) copies its previous bytes.
 
 use std::fmt::Write as _;
 

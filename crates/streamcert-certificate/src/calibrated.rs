@@ -49,6 +49,18 @@
 //!   of `√λ_max(Ω̂)` trades one failure for the other (3×: unequal noise 5 of 1000 and 1.53,
 //!   but common-mode 2.03 and `p = 3` 2.99; 5×: no gain), and the rigorous version (a
 //!   Davis–Kahan cone from a Hotelling bound on `‖ΔJ‖`) is never informative at these gaps.
+//! * Why not a bound that is valid in every direction at once, `λ_max(S) <= max_v vᵀŜv +
+//!   c·√q̂(v)` with `c` Hotelling's multiplier over the `p(p + 1)/2` entries of `sym ΔJ` (it
+//!   needs no eigengap)? Measured (session 9, `cargo xtask validity --runs 1000`, a rigorous
+//!   Lipschitz branch and bound over the sphere for `p = 2, 3`, the smaller of it and the
+//!   present radius, each at half the look's risk; not kept): efficiency ratios 2.23
+//!   (common-mode `p = 2`, from 2.37), 1.90 (unequal, from 1.86), 3.20 (`p = 3`, from 3.04)
+//!   and 2.11 (the `p = 2` power cell, from 2.23). Hotelling's `c` exceeds the one-direction
+//!   `t` by 1.2 to 1.4 at these risks, which is about what the direction saves. With the
+//!   spending over looks alone already costing a factor of about 1.5 against the one-look
+//!   oracle (`t` at `δ_{w,k}` against `z` at `δ`; the scalar cells' 1.37 to 1.56), a ratio of
+//!   1.6 for `p >= 2` needs the plug-in direction's variance with no penalty, which the
+//!   unequal-noise cell shows is not valid.
 //! * Consecutive columns overlap in `h − 1` of their `h` sample intervals; batch means over
 //!   blocks of `h` columns with the overlap factor `3h²/(2h² + 1)` estimate the long-run
 //!   variance of the scores (exact in expectation for the triangular correlation of white

@@ -12,6 +12,8 @@ use streamcert_certificate::{
 };
 use streamcert_regression::{InputIntegral, RegressionConfig};
 
+use statrs::distribution::{ContinuousCDF, Normal};
+
 use crate::common::{markdown, median, progress, write};
 
 mod cells;
@@ -120,6 +122,9 @@ struct Outcome {
     first_open: Option<f64>,
     valued: usize,
     above_truth: usize,
+    /// The nonlinear certificate's latest look of its longest window at the end of the run:
+    /// `(β̂_min, β_nl)` (the estimate's minimum over the region, and the certificate).
+    last: Option<(f64, f64)>,
 }
 
 fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
@@ -160,7 +165,32 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
             }
         }
     }
+    for (o, (kind, degree, _)) in out.iter_mut().zip(ROWS) {
+        if matches!(kind, CertificateKind::Nonlinear) {
+            let looks = certs[slot(degree)].nonlinear_looks();
+            o.last = looks.iter().rev().flatten().next().map(|l| (l.beta_hat_min, l.certificate));
+        }
+    }
     Ok(out)
+}
+
+/// The one-look oracle at the end of the power runs (issue 12's efficiency yardstick applied
+/// to the nonlinear certificate): `sd` is the spread over runs of the longest window's last
+/// `β̂_min`; the oracle opens a run when `β̂_min − z(1 − δ)·sd >= β_margin`. Returns the share
+/// of runs it opens and the median of `(β̂_min − β_nl) / (z·sd)`, the certificate's radius over
+/// the oracle's.
+fn oracle(outs: &[Outcome]) -> Option<(f64, f64)> {
+    let last: Vec<(f64, f64)> = outs.iter().filter_map(|o| o.last).collect();
+    if last.len() < 2 || last.len() < outs.len() {
+        return None;
+    }
+    let n = last.len() as f64;
+    let mean = last.iter().map(|l| l.0).sum::<f64>() / n;
+    let sd = (last.iter().map(|l| (l.0 - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let z = -Normal::new(0.0, 1.0).ok()?.inverse_cdf(DELTA);
+    let opened = last.iter().filter(|l| l.0 - z * sd >= MARGIN).count();
+    let ratios: Vec<f64> = last.iter().map(|l| (l.0 - l.1) / (z * sd)).collect();
+    Some((opened as f64 / n, median(&ratios)))
 }
 
 pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
@@ -171,7 +201,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last five cells: the length stated, with more calibrated windows) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last five cells: the length stated, with more calibrated windows) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cell runs Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {
@@ -222,6 +252,10 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                 share(opened.len(), n),
                 if opened.is_empty() { "–".into() } else { format!("{:.1} s", median(&opened)) },
                 if cell.validity { "–".into() } else { ninety(&opened, n) },
+                match oracle(&outs).filter(|_| !cell.validity) {
+                    Some((share, ratio)) => format!("{:.0} % / {ratio:.2}", 100.0 * share),
+                    None => "–".into(),
+                },
             ]);
         }
     }
@@ -240,13 +274,14 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                 "opened",
                 "median first opening",
                 "90 % opened by",
+                "one-look oracle at the end: opened / ρ ÷ (z·sd)",
             ],
             &rows
         )
     );
     let _ = writeln!(
         s,
-        "\nThe nonlinear certificate's bound holds for every point of every region at once (Hotelling's T² over the span of `a(y)`, see the `nonlinear` module of streamcert-certificate), so its validity does not depend on which region the data explored. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n\nPower is a matter of data: the last cells run the same loops longer, with calibrated windows doubling up to about the run's length, and show when 90 % of the runs had opened. A library that cannot represent the drift (degree 2 or `y, y·tanh y` on a cubic) may open early, but its value then exceeds the true minimum over the region (the `above truth` column): that is not power. The long near-margin cell checks that the longer windows keep the guarantee.\n"
+        "\nThe nonlinear certificate's bound holds for every point of every region at once (Hotelling's T² over the span of `a(y)`, see the `nonlinear` module of streamcert-certificate), so its validity does not depend on which region the data explored. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n\nPower is a matter of data: the last cells run the same loops (and G5's subsystems) longer, with calibrated windows doubling up to about the run's length, and show when 90 % of the runs had opened. The oracle column says where 40 s cannot suffice: where the one-look oracle opens in well under 90 % of the 40 s runs, no valid rule can open in 90 % of them on that data. A library that cannot represent the drift (degree 2 or `y, y·tanh y` on a cubic) may open early, but its value then exceeds the true minimum over the region (the `above truth` column): that is not power. The long near-margin cell checks that the longer windows keep the guarantee.\n"
     );
     write(&out.join("NONLINEAR.md"), &s)?;
     bar.finish_and_clear();

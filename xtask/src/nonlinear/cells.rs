@@ -15,8 +15,10 @@ pub(super) struct Cell {
     pub(super) validity: bool,
     /// Instead of the scalar scenario: G5's subsystem A (`Some(0)`: output `x1`, input `u1`,
     /// candidate `k1`) or B (`Some(1)`: output `x4`, input `u4`, candidate `k4`) on
-    /// Experiment 2's data (`γ = 0`), run 40 s.
+    /// Experiment 2's data (`γ = 0`), run `g5_steps` samples of 0.02 s.
     pub(super) g5: Option<usize>,
+    /// Samples of a G5 cell (2000: the experiment's 40 s).
+    pub(super) g5_steps: usize,
     /// Base window `M` (columns); the smallest the cubic library accepts is
     /// `h (D + m + 2) = 30`.
     pub(super) window: usize,
@@ -48,7 +50,8 @@ impl Cell {
     /// Times, outputs and inputs of run `seed`.
     pub(super) fn data(&self, seed: u64) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>)> {
         if let Some(which) = self.g5 {
-            let data = G5Dataset { steps: Some(2000), ..G5Dataset::defaults(Experiment::Two) };
+            let data =
+                G5Dataset { steps: Some(self.g5_steps), ..G5Dataset::defaults(Experiment::Two) };
             let traj = data.run_seeded(seed)?;
             let pick = |v: &[f64], w: usize| v.chunks_exact(w).map(|r| r[which]).collect();
             Ok((traj.t.clone(), pick(&traj.y, traj.p), pick(&traj.u, traj.m)))
@@ -79,7 +82,16 @@ fn cubic(sigma: f64) -> ScalarScenario {
 impl Cell {
     /// A cell on a scalar loop with the study's base window and default windows.
     fn new(name: &'static str, scenario: ScalarScenario, k: f64, validity: bool) -> Self {
-        Self { name, scenario, k, validity, g5: None, window: WINDOW, windows: None }
+        Self {
+            name,
+            scenario,
+            k,
+            validity,
+            g5: None,
+            g5_steps: 2000,
+            window: WINDOW,
+            windows: None,
+        }
     }
 
     /// A validity cell: the smallest visited rate is below the margin.
@@ -92,9 +104,14 @@ impl Cell {
         Self::new(name, scenario, k, false)
     }
 
-    /// Run `steps` samples with `windows` calibrated windows.
+    /// Run `steps` samples (of the scalar loop, or of G5) with `windows` calibrated windows.
     fn long(self, steps: usize, windows: usize) -> Self {
-        Self { scenario: ScalarScenario { steps, ..self.scenario }, windows: Some(windows), ..self }
+        Self {
+            scenario: ScalarScenario { steps, ..self.scenario },
+            g5_steps: steps,
+            windows: Some(windows),
+            ..self
+        }
     }
 }
 
@@ -201,5 +218,15 @@ pub(super) fn cells() -> Vec<Cell> {
             -2.0,
         )
         .long(40_000, 11),
+        // G5's subsystems on five times Experiment 2's length (the 40 s cells above are
+        // short of data: see the oracle column).
+        g5_cell(
+            "G5 subsystem A, Experiment 2 data, 200 s, windows up to 6400 columns",
+            0,
+            setting.k1,
+        )
+        .long(10_000, 8),
+        g5_cell("G5 subsystem B, Experiment 2 data, 200 s, windows up to 6400 columns", 1, setting.k4)
+            .long(10_000, 8),
     ]
 }

@@ -1,8 +1,8 @@
 //! The nonlinear certificate and the region of every certificate: against the true
 //! state-dependent rate of scalar systems (`−x tanh x`, a cubic, a polynomial with a
 //! non-contracting band), the coefficient covariance against a batch recompute, degree 1
-//! against the linear calibrated certificate (property), and the nonlinearity test closing
-//! the linear calibrated gate.
+//! against the linear calibrated certificate (property), the nonlinearity test closing the
+//! linear calibrated gate, and the lack-of-fit check of the feature library.
 
 use nalgebra::{DMatrix, DVector};
 use proptest::prelude::*;
@@ -279,8 +279,23 @@ fn the_configuration_says_what_is_valid() {
     cfg.calibration = None;
     let err = Certifier::new(cfg).unwrap_err();
     assert!(matches!(err, CertifyError::InvalidConfig { field: "nonlinear", .. }), "{err}");
-    let err = Certifier::new(config(-1.0, 0.05, 25, 3)).unwrap_err();
+    // The cubic library with its two lack-of-fit terms (y⁴, y⁵): h · (3 + 2 + 1 + 2) = 40;
+    // without the check, h · (3 + 1 + 2) = 30.
+    let err = Certifier::new(config(-1.0, 0.05, 35, 3)).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 40"), "{err}");
+    assert!(err.to_string().contains("check_terms = 0"), "{err}");
+    let mut unchecked = config(-1.0, 0.05, 35, 3);
+    unchecked.nonlinear =
+        Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(3) });
+    assert!(Certifier::new(unchecked.clone()).is_ok());
+    let mut short = config(-1.0, 0.05, 25, 3);
+    short.nonlinear = unchecked.nonlinear;
+    let err = Certifier::new(short).unwrap_err();
     assert!(err.to_string().contains("smallest valid window is 30"), "{err}");
+    let mut many = config(-1.0, 0.05, 200, 3);
+    many.nonlinear = Some(NonlinearConfig { check_terms: 8, ..NonlinearConfig::with_degree(3) });
+    let err = Certifier::new(many).unwrap_err();
+    assert!(matches!(err, CertifyError::InvalidConfig { field: "nonlinear.check_terms", .. }));
     let mut cfg = config(-1.0, 0.05, 50, 3);
     cfg.regression = RegressionConfig::new(2, 2, 80, H, 1e-4);
     cfg.gain = vec![0.0; 4];
@@ -305,7 +320,10 @@ proptest! {
             ..tanh_loop()
         };
         let traj = s.run(seed).expect("valid");
-        let mut cert = Certifier::new(config(k, 0.05, window, 1)).expect("valid");
+        // The certificate's arithmetic, without the lack-of-fit check (which only closes gates).
+        let mut cfg = config(k, 0.05, window, 1);
+        cfg.nonlinear = Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(1) });
+        let mut cert = Certifier::new(cfg).expect("valid");
         let mut compared = 0;
         for i in 0..traj.t.len() {
             let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite");
@@ -327,4 +345,93 @@ proptest! {
         }
         prop_assert!(compared > 0);
     }
+}
+
+/// Runs of `s` through `cfg` (seeds `0..runs`): how many opened the nonlinear gate while its
+/// region held a state whose true rate is below the margin, and how many samples gave the
+/// lack-of-fit reason.
+fn false_openings(s: &ScalarScenario, cfg: &CertifierConfig, runs: u64) -> (usize, usize) {
+    let k = cfg.gain[0];
+    let (mut falsely, mut misfit) = (0, 0);
+    for seed in 0..runs {
+        let traj = s.run(seed).expect("valid scenario");
+        let mut cert = Certifier::new(cfg.clone()).expect("valid");
+        let mut opened_falsely = false;
+        for i in 0..traj.t.len() {
+            let ev = cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite");
+            if let (true, Some(r)) = (ev.nonlinear.open, ev.nonlinear_region) {
+                opened_falsely |= min_rate(s, k, r) < cfg.margin;
+            }
+            misfit += usize::from(matches!(
+                ev.nonlinear.reason,
+                Some(NotCertified::LibraryMisfit { .. })
+            ));
+        }
+        falsely += usize::from(opened_falsely);
+    }
+    (falsely, misfit)
+}
+
+#[test]
+fn the_lack_of_fit_check_closes_the_gate_of_a_library_that_misses_the_drift() {
+    // The band (rate −0.1 + 1.5 (x − 0.8)², non-contracting near x = 0.8) under the library
+    // `y, y·tanh y`, which cannot hold its x² and x³ terms: unchecked, the certificate of the
+    // library's best fit opens while the region holds non-contracting states.
+    let band = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, 0.14, 1.2, -0.5]),
+        k_explore: -1.0,
+        ..tanh_loop()
+    };
+    let library = FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("valid");
+    let mut cfg = config(-1.0, 0.05, 50, 1);
+    cfg.nonlinear =
+        Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_features(library) });
+    let (unchecked, none) = false_openings(&band, &cfg, 10);
+    cfg.nonlinear = Some(NonlinearConfig::with_features(library));
+    let (checked, misfit) = false_openings(&band, &cfg, 10);
+    assert_eq!(none, 0);
+    assert!(unchecked >= 6, "unchecked: {unchecked} of 10 runs opened falsely");
+    assert!(checked * 3 <= unchecked, "checked {checked} against unchecked {unchecked}");
+    assert!(misfit > 0, "no sample gave the lack-of-fit reason");
+}
+
+#[test]
+fn the_lack_of_fit_check_passes_a_library_that_holds_the_drift() {
+    // The cubic 2 + 0.9 x² (40× the margin) under the cubic library: the extra terms y⁴, y⁵
+    // are zero, the gate opens in every run, and the check rejects at few looks (its risk is
+    // δ = 0.01 per look).
+    let cubic = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
+        k_explore: -1.0,
+        dither: 3.0,
+        ..tanh_loop()
+    };
+    let cfg = config(-1.0, 0.05, 50, 3);
+    let (mut looks, mut rejected, mut untested) = (0, 0, 0);
+    for seed in 0..6 {
+        let traj = cubic.run(seed).expect("valid scenario");
+        let mut cert = Certifier::new(cfg.clone()).expect("valid");
+        let mut seen = vec![0u64; cert.nonlinear_looks().len()];
+        let mut opened = false;
+        for i in 0..traj.t.len() {
+            opened |=
+                cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("ok").nonlinear.open;
+            for (w, look) in cert.nonlinear_looks().iter().enumerate() {
+                if let Some(l) = look.filter(|l| l.look != seen[w]) {
+                    seen[w] = l.look;
+                    looks += 1;
+                    match l.misfit {
+                        Some(test) => rejected += usize::from(test.significant()),
+                        None => untested += 1,
+                    }
+                }
+            }
+        }
+        assert!(opened, "seed {seed}: the gate never opened");
+    }
+    // Untested looks (the larger fit has fewer degrees of freedom: on the shortest window
+    // its ν − e + 1 can be ≤ 0 where the certificate's is not) do not stand either.
+    let tested = looks - untested;
+    assert!(tested > 100 && untested < looks / 2, "{looks} looks, {untested} untested");
+    assert!(rejected * 20 <= tested, "{rejected} of {tested} tested looks rejected the library");
 }

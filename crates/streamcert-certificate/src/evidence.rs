@@ -78,6 +78,26 @@ pub enum NotCertified {
     },
     /// No nonlinear model is configured, so there is no nonlinear certificate.
     NoNonlinearModel,
+    /// Nonlinear certificate: the window's lack-of-fit check says the drift is not in the
+    /// span of the feature library (terms the library lacks are significant), so the
+    /// certificate's model does not hold (see [`NonlinearConfig::check_terms`]).
+    ///
+    /// [`NonlinearConfig::check_terms`]: crate::NonlinearConfig::check_terms
+    LibraryMisfit {
+        /// The window length.
+        window: usize,
+        /// The Wald statistic of the extra terms.
+        statistic: f64,
+        /// Its threshold at the test's risk.
+        threshold: f64,
+    },
+    /// Nonlinear certificate: the window's lack-of-fit check has no estimate yet (too few
+    /// columns for the larger fit, or a singular one), so the library is not checked and the
+    /// window's certificate does not stand.
+    LibraryUntested {
+        /// The window length.
+        window: usize,
+    },
 }
 
 impl std::fmt::Display for NotCertified {
@@ -115,6 +135,18 @@ impl std::fmt::Display for NotCertified {
                 write!(f, "window {window}: linearity not yet tested (no feature fit)")
             }
             Self::NoNonlinearModel => f.write_str("no nonlinear model configured"),
+            Self::LibraryMisfit { window, statistic, threshold } => write!(
+                f,
+                "the feature library misses the drift (window {window}: lack of fit, Wald {} > {})",
+                Fixed::<3>(*statistic),
+                Fixed::<3>(*threshold)
+            ),
+            Self::LibraryUntested { window } => {
+                write!(
+                    f,
+                    "window {window}: feature library not yet checked (no lack-of-fit estimate)"
+                )
+            }
         }
     }
 }

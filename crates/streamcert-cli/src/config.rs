@@ -80,7 +80,9 @@ features = "polynomial"  # y, y^2, ..., y^degree; or a list such as ["y", "y*tan
 degree = 3
 region = "bounding_box"  # the range of y over the window's samples (the rule built so far)
 # cells = 32             # grid cells on which the minimum over the region is bounded
-# test_risk = 0.01       # risk of the nonlinearity test (default: delta)
+# test_risk = 0.01       # risk of the nonlinearity and lack-of-fit tests (default: delta)
+# check_terms = 2        # lack-of-fit check: extra powers of y the library lacks (0: off);
+                         # where they are significant the nonlinear gate stays closed
 "#;
 
 #[derive(Debug, Deserialize)]
@@ -138,6 +140,8 @@ struct NonlinearSection {
     region: RegionRule,
     #[serde(default)]
     cells: Option<usize>,
+    #[serde(default)]
+    check_terms: Option<usize>,
     #[serde(default)]
     test_risk: Option<f64>,
 }
@@ -392,6 +396,7 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
             features,
             cells: nl.cells.unwrap_or(d.cells),
             test_risk: nl.test_risk,
+            check_terms: nl.check_terms.unwrap_or(d.check_terms),
         });
     }
     f.columns.delimiter_byte().map_err(&bad)?;
@@ -470,7 +475,11 @@ mod tests {
         assert_eq!(c.certifier.nonlinear, Some(NonlinearConfig::default()));
         let deg = both.replace("degree = 3", "degree = 2").replace("# cells = 32 ", "cells = 8 ");
         let c = parse(&deg, "x").unwrap().certifier.nonlinear.unwrap();
-        assert_eq!((c.degree, c.cells), (2, 8));
+        assert_eq!((c.degree, c.cells, c.check_terms), (2, 8, 2));
+        let off = both.replace("# check_terms = 2 ", "check_terms = 0 ");
+        assert_eq!(parse(&off, "x").unwrap().certifier.nonlinear.unwrap().check_terms, 0);
+        let many = both.replace("# check_terms = 2 ", "check_terms = 9 ");
+        assert!(parse(&many, "x").unwrap_err().to_string().contains("check_terms"));
         let unknown = both.replace("features = \"polynomial\"", "features = \"splines\"");
         assert!(parse(&unknown, "x").unwrap_err().to_string().contains("splines"));
         let named = both.replace("features = \"polynomial\"", "features = [\"y\", \"y*tanh(y)\"]");

@@ -23,6 +23,8 @@ enum ReasonDef {
     VaryingDynamics { window: usize, statistic: f64, threshold: f64 },
     LinearityUntested { window: usize },
     NoNonlinearModel,
+    LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
+    LibraryUntested { window: usize },
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::RegressionConfig;
 
-use super::FeatureSet;
+use super::{Feature, FeatureSet};
 use crate::CertifyError;
 
 /// Settings of the nonlinear certificate (an addition to the paper; see the
@@ -35,6 +35,20 @@ pub struct NonlinearConfig {
     /// [`NotCertified::VaryingDynamics`]: crate::NotCertified::VaryingDynamics
     #[serde(default)]
     pub test_risk: Option<f64>,
+    /// Lack-of-fit check of the library (default 2; 0 turns it off): the number `e` of extra
+    /// terms, the lowest powers `y^k` (`2 <= k <= 8`) the library lacks (`y⁴, y⁵` for the cubic
+    /// library, `y², y³` for `y, y·tanh y`). A second instrumented fit on the library plus
+    /// these terms tests them with the same Wald statistic and risk as the nonlinearity test;
+    /// where they are significant, or cannot be tested yet, the window's nonlinear certificate
+    /// does not stand ([`NotCertified::LibraryMisfit`], [`NotCertified::LibraryUntested`]):
+    /// the certificate assumes the drift lies in the library's span, and the check refuses
+    /// where the data show it does not. It closes gates only, so its risk is not part of `δ`;
+    /// it cannot prove the library right (a drift the extra terms do not see passes).
+    ///
+    /// [`NotCertified::LibraryMisfit`]: crate::NotCertified::LibraryMisfit
+    /// [`NotCertified::LibraryUntested`]: crate::NotCertified::LibraryUntested
+    #[serde(default = "default_check_terms")]
+    pub check_terms: usize,
 }
 
 fn default_degree() -> usize {
@@ -43,10 +57,19 @@ fn default_degree() -> usize {
 fn default_cells() -> usize {
     32
 }
+fn default_check_terms() -> usize {
+    2
+}
 
 impl Default for NonlinearConfig {
     fn default() -> Self {
-        Self { degree: default_degree(), features: None, cells: default_cells(), test_risk: None }
+        Self {
+            degree: default_degree(),
+            features: None,
+            cells: default_cells(),
+            test_risk: None,
+            check_terms: default_check_terms(),
+        }
     }
 }
 
@@ -73,6 +96,18 @@ impl NonlinearConfig {
     #[must_use]
     pub fn regressors(&self, inputs: usize) -> usize {
         self.library().len() + inputs
+    }
+
+    /// The extra terms of the lack-of-fit check: the lowest `check_terms` powers `y^k`,
+    /// `2 <= k <= 8`, that the library lacks (fewer when the powers run out).
+    #[must_use]
+    pub fn check_features(&self) -> Vec<Feature> {
+        let library = self.library();
+        (2..=8u8)
+            .map(Feature::Power)
+            .filter(|f| library.iter().all(|g| g != *f))
+            .take(self.check_terms)
+            .collect()
     }
 
     /// Check the settings against the regression (one output) and the calibration's smallest
@@ -118,8 +153,30 @@ impl NonlinearConfig {
                 return bad("nonlinear.test_risk", format!("must lie in (0, 1), got {a}"));
             }
         }
-        let d = self.regressors(reg.inputs);
+        if self.check_terms > 7 {
+            return bad(
+                "nonlinear.check_terms",
+                format!("must lie in 0..=7 (powers up to y^8), got {}", self.check_terms),
+            );
+        }
+        let e = self.check_features().len();
+        let d = self.regressors(reg.inputs) + e;
         let min = crate::Calibration::min_window(reg.horizon, d);
+        if reg.window < min && e > 0 {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for the nonlinear certificate with {} features, its \
+                     {e} lack-of-fit terms, h = {} and m = {}: the smallest valid window is \
+                     {min} columns (h · (D + e + m + 2)); or set check_terms = 0 (no check: \
+                     the library is then trusted to hold the drift)",
+                    reg.window,
+                    self.library().len(),
+                    reg.horizon,
+                    reg.inputs
+                ),
+            );
+        }
         if reg.window < min {
             return bad(
                 "window",

@@ -73,7 +73,8 @@ fn number_bits(r: &NotCertified) -> [u64; 3] {
         N::BelowMargin { certificate, margin } => [certificate.to_bits(), margin.to_bits(), 0],
         N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
         N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
-        N::VaryingDynamics { statistic, threshold, .. } => {
+        N::VaryingDynamics { statistic, threshold, .. }
+        | N::LibraryMisfit { statistic, threshold, .. } => {
             [statistic.to_bits(), threshold.to_bits(), 0]
         }
         N::WarmingUp { .. }
@@ -84,6 +85,7 @@ fn number_bits(r: &NotCertified) -> [u64; 3] {
         | N::NoAmbiguityModel
         | N::NoCalibration
         | N::LinearityUntested { .. }
+        | N::LibraryUntested { .. }
         | N::NoNonlinearModel => [0; 3],
     }
 }

@@ -1,0 +1,188 @@
+//! The lack-of-fit check of the feature library ([`NonlinearConfig::check_terms`]): a second
+//! instrumented fit on the library plus `e` powers of `y` it lacks, on the same columns,
+//! windows and looks, and the Wald test of those `e` coefficients,
+//!
+//! ```text
+//! W = θ̂_Eᵀ Ω̂_EE⁻¹ θ̂_E   against   ν e/(ν − e + 1) · F_{e, ν−e+1}(1 − α)
+//! ```
+//!
+//! (Hotelling's quantile, as the nonlinearity test; `ν` = effective blocks less the larger
+//! fit's unknowns, `α` = the test risk or `δ`). If the drift lies in the library's span the
+//! extra coefficients are zero and the test rejects with probability about `α`; where it
+//! rejects, the certificate's model is contradicted by the data. `O(h e + (D + e + m)²)` per
+//! column, no allocation.
+//!
+//! [`NonlinearConfig::check_terms`]: super::NonlinearConfig::check_terms
+
+use serde::{Deserialize, Serialize};
+use streamcert_regression::{InstrumentedWindows, WindowEstimate, linalg};
+
+use super::{NonlinearityTest, f_quantile};
+use crate::CertifyError;
+
+/// The larger fit and its scratch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(super) struct LackOfFit {
+    /// The exponents `k` of the extra terms `y^k`.
+    powers: Vec<u8>,
+    /// Library features `D` (the extra terms follow them, then the inputs).
+    features: usize,
+    horizon: usize,
+    windows: InstrumentedWindows,
+    est: WindowEstimate,
+    // Scratch (meaningless between calls).
+    z: Vec<f64>,
+    dir: Vec<f64>,
+    cov: Vec<f64>,
+    sub: Vec<f64>,
+    rhs: Vec<f64>,
+    work: Vec<f64>,
+}
+
+/// What one Wald test needs besides its scratch.
+pub(super) struct WaldAt<'a> {
+    /// The coefficients (one output row).
+    pub theta: &'a [f64],
+    /// Their covariance, `d × d` row-major.
+    pub cov: &'a [f64],
+    /// The tested coefficients `first .. first + q`.
+    pub first: usize,
+    pub q: usize,
+    /// Degrees of freedom `ν` and the test's risk `α`.
+    pub nu: f64,
+    pub alpha: f64,
+}
+
+/// The Wald test `θ̂_Sᵀ Ω̂_SS⁻¹ θ̂_S` of the coefficients `S = first .. first + q` against
+/// Hotelling's quantile with `q` and `ν` degrees of freedom at risk `α`. `None` when `q = 0`,
+/// `Ω̂_SS` is not positive definite, or `ν − q + 1 <= 0`. Scratch: `sub` (`q²`), `rhs`, `work`
+/// (`q` each).
+pub(super) fn wald(
+    at: &WaldAt<'_>,
+    sub: &mut [f64],
+    rhs: &mut [f64],
+    work: &mut [f64],
+) -> Option<NonlinearityTest> {
+    let WaldAt { theta, cov, first, q, nu, alpha } = *at;
+    if q == 0 {
+        return None;
+    }
+    let d = theta.len();
+    for i in 0..q {
+        for j in 0..q {
+            sub[i * q + j] = cov[(first + i) * d + (first + j)];
+        }
+        rhs[i] = theta[first + i];
+    }
+    if !linalg::cholesky_in_place(&mut sub[..q * q], q) {
+        return None;
+    }
+    work[..q].copy_from_slice(&rhs[..q]);
+    linalg::cholesky_solve_in_place(&sub[..q * q], q, &mut rhs[..q]);
+    let quad: f64 = work[..q].iter().zip(&rhs[..q]).map(|(a, b)| a * b).sum();
+    let (qf, d2) = (q as f64, nu - q as f64 + 1.0);
+    let threshold = nu * qf / d2 * f_quantile(qf, d2, alpha);
+    (quad.is_finite() && d2 > 0.0).then_some(NonlinearityTest { statistic: quad, threshold })
+}
+
+impl LackOfFit {
+    /// The check with extra terms `y^k`, `k` in `powers`, after `features` library features
+    /// and before `inputs` inputs, on windows `lengths`.
+    pub(super) fn new(
+        powers: Vec<u8>,
+        features: usize,
+        inputs: usize,
+        horizon: usize,
+        lag: usize,
+        intervals: usize,
+        lengths: &[usize],
+    ) -> Result<Self, CertifyError> {
+        let e = powers.len();
+        let d = features + e + inputs;
+        Ok(Self {
+            windows: InstrumentedWindows::with_regressors(1, d, horizon, lag, intervals, lengths)?,
+            est: WindowEstimate::with_regressors(1, d, intervals),
+            powers,
+            features,
+            horizon,
+            z: vec![0.0; d],
+            dir: vec![0.0; d],
+            cov: vec![0.0; d * d],
+            sub: vec![0.0; e * e],
+            rhs: vec![0.0; e],
+            work: vec![0.0; e],
+        })
+    }
+
+    pub(super) fn reset(&mut self) {
+        self.windows.reset();
+    }
+
+    /// Absorb a column: `z_main` holds the library's integrals then the inputs' (`D + m`),
+    /// `ts`/`ys` the column's `h + 1` samples; the extra terms are integrated by the same
+    /// trapezoidal rule.
+    pub(super) fn push(&mut self, z_main: &[f64], dy: &[f64], ts: &[f64], ys: &[f64]) {
+        let (dg, e) = (self.features, self.powers.len());
+        self.z[..dg].copy_from_slice(&z_main[..dg]);
+        self.z[dg + e..].copy_from_slice(&z_main[dg..]);
+        let extra = &mut self.z[dg..dg + e];
+        extra.fill(0.0);
+        for i in 1..ts.len() {
+            let half = 0.5 * (ts[i] - ts[i - 1]);
+            let (ya, yb) = (ys[i - 1], ys[i]);
+            for (v, &k) in extra.iter_mut().zip(&self.powers) {
+                let k = i32::from(k);
+                *v += half * (ya.powi(k) + yb.powi(k));
+            }
+        }
+        self.windows.push_column(&self.z, dy);
+    }
+
+    /// Window `w`'s test at a look. `dir_main` is the certificate's direction `a(y_mid)`
+    /// (library slopes, then `K`), extended by zeros for the extra terms (it only weighs the
+    /// blocks for `ν`).
+    pub(super) fn test(
+        &mut self,
+        w: usize,
+        dir_main: &[f64],
+        ridge: f64,
+        min_pivot: f64,
+        alpha: f64,
+    ) -> Option<NonlinearityTest> {
+        let (dg, e) = (self.features, self.powers.len());
+        let d = self.z.len();
+        self.dir[..dg].copy_from_slice(&dir_main[..dg]);
+        self.dir[dg..dg + e].fill(0.0);
+        self.dir[dg + e..].copy_from_slice(&dir_main[dg..d - e]);
+        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
+        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
+        {
+            return None;
+        }
+        let blocks = (self.est.columns / self.horizon) as f64;
+        let nu = self.est.effective_blocks.min(blocks) - d as f64;
+        let at = WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: dg, q: e, nu, alpha };
+        wald(&at, &mut self.sub, &mut self.rhs, &mut self.work)
+    }
+
+    /// Whether a deserialised check matches a fresh one.
+    pub(super) fn matches(&self, fresh: &Self) -> bool {
+        self.windows.check_state().is_ok()
+            && self.powers == fresh.powers
+            && self.features == fresh.features
+            && self.horizon == fresh.horizon
+            && self.windows.count() == fresh.windows.count()
+            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
+            && self.est.matches(&fresh.est)
+            && [
+                (self.z.len(), fresh.z.len()),
+                (self.dir.len(), fresh.dir.len()),
+                (self.cov.len(), fresh.cov.len()),
+                (self.sub.len(), fresh.sub.len()),
+                (self.rhs.len(), fresh.rhs.len()),
+                (self.work.len(), fresh.work.len()),
+            ]
+            .iter()
+            .all(|(a, b)| a == b)
+    }
+}

@@ -393,6 +393,9 @@ impl InstrumentedWindows {
             // One output with four regressors (the nonlinear certificate's cubic library and
             // one input).
             self.push_column_dims(z, dy, 1, 4, 4)
+        } else if self.p == 1 && self.m == 5 && self.intervals == 1 {
+            // Six regressors: the cubic library, its two lack-of-fit terms and one input.
+            self.push_column_dims(z, dy, 1, 6, 6)
         } else {
             let lay = self.layout();
             self.push_column_dims(z, dy, lay.p, lay.d, lay.k)

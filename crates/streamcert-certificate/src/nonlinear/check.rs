@@ -127,13 +127,23 @@ impl LackOfFit {
         self.z[dg + e..].copy_from_slice(&z_main[dg..]);
         let extra = &mut self.z[dg..dg + e];
         extra.fill(0.0);
+        // Each sample's powers once (`y^k` by repeated multiplication), then the trapezoids.
+        let top = usize::from(self.powers.iter().copied().max().unwrap_or(1));
+        let powers = |y: f64, out: &mut [f64; 9]| {
+            out[1] = y;
+            for k in 2..=top {
+                out[k] = out[k - 1] * y;
+            }
+        };
+        let (mut pa, mut pb) = ([0.0; 9], [0.0; 9]);
+        powers(ys[0], &mut pa);
         for i in 1..ts.len() {
             let half = 0.5 * (ts[i] - ts[i - 1]);
-            let (ya, yb) = (ys[i - 1], ys[i]);
+            powers(ys[i], &mut pb);
             for (v, &k) in extra.iter_mut().zip(&self.powers) {
-                let k = i32::from(k);
-                *v += half * (ya.powi(k) + yb.powi(k));
+                *v += half * (pa[usize::from(k)] + pb[usize::from(k)]);
             }
+            pa = pb;
         }
         self.windows.push_column(&self.z, dy);
     }

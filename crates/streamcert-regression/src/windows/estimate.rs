@@ -218,6 +218,7 @@ impl InstrumentedWindows {
         let (sum_w, sum_w2) = match (p, d, k) {
             (1, 2, 2) => self.block_scores(w, out, 1, 2, 2),
             (1, 4, 4) => self.block_scores(w, out, 1, 4, 4),
+            (1, 6, 6) => self.block_scores(w, out, 1, 6, 6),
             _ => self.block_scores(w, out, p, d, k),
         };
         out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
@@ -332,6 +333,7 @@ impl InstrumentedWindows {
         match (lay.p, lay.d, lay.k) {
             (1, 2, 2) => self.coefficient_covariance_dims(w, out, cov, 1, 2, 2),
             (1, 4, 4) => self.coefficient_covariance_dims(w, out, cov, 1, 4, 4),
+            (1, 6, 6) => self.coefficient_covariance_dims(w, out, cov, 1, 6, 6),
             (p, d, k) => self.coefficient_covariance_dims(w, out, cov, p, d, k),
         }
         true

@@ -38,6 +38,18 @@ fn tanh_loop() -> ScalarScenario {
     ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
 }
 
+/// `f = −x − 0.3 x³` explored by `u = −x + PRBS(±3, held 1 s)`: under `k = −1` the rate
+/// `2 + 0.9 x²` is at least 2 (40× the margin 0.05) everywhere.
+fn cubic_40x() -> ScalarScenario {
+    ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
+        k_explore: -1.0,
+        dither: 3.0,
+        dither_hold: 1.0,
+        ..tanh_loop()
+    }
+}
+
 /// The smallest true rate over `[lo, hi]` by a dense scan (the rates here are smooth).
 fn min_rate(s: &ScalarScenario, k: f64, r: Interval) -> f64 {
     (0..=400)
@@ -175,14 +187,7 @@ fn the_tanh_loop_is_refused_by_the_nonlinear_gate_and_the_linear_gate_is_told() 
 
 #[test]
 fn a_contracting_nonlinear_loop_is_certified_with_its_region() {
-    // f = −x − 0.3 x³ under k = −1: the rate 2 + 0.9 x² is at least 2 everywhere.
-    let s = ScalarScenario {
-        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
-        k_explore: -1.0,
-        dither: 3.0,
-        dither_hold: 1.0,
-        ..tanh_loop()
-    };
+    let s = cubic_40x();
     let mut opened = 0;
     for seed in 0..10 {
         let (traj, out, cert) = trace(&s, &config(-1.0, 0.05, 50, 3), seed);
@@ -400,12 +405,7 @@ fn the_lack_of_fit_check_passes_a_library_that_holds_the_drift() {
     // The cubic 2 + 0.9 x² (40× the margin) under the cubic library: the extra terms y⁴, y⁵
     // are zero, the gate opens in every run, and the check rejects at few looks (its risk is
     // δ = 0.01 per look).
-    let cubic = ScalarScenario {
-        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
-        k_explore: -1.0,
-        dither: 3.0,
-        ..tanh_loop()
-    };
+    let cubic = cubic_40x();
     let cfg = config(-1.0, 0.05, 50, 3);
     let (mut looks, mut rejected, mut untested) = (0, 0, 0);
     for seed in 0..6 {

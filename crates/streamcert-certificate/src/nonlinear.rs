@@ -421,8 +421,7 @@ impl NonlinearState {
             && self.library == fresh.library
             && self.horizon == fresh.horizon
             && self.gain == fresh.gain
-            && self.windows.count() == fresh.windows.count()
-            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
+            && same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && self.latest.len() == fresh.latest.len()
             && match (&self.check, &fresh.check) {
@@ -448,4 +447,9 @@ impl NonlinearState {
             Err(CertifyError::Checkpoint("nonlinear state does not match its configuration".into()))
         }
     }
+}
+
+/// Whether two window sets have the same lengths (a restored state against a fresh one).
+fn same_windows(a: &InstrumentedWindows, b: &InstrumentedWindows) -> bool {
+    a.count() == b.count() && (0..a.count()).all(|w| a.window(w) == b.window(w))
 }

@@ -181,8 +181,7 @@ impl LackOfFit {
             && self.powers == fresh.powers
             && self.features == fresh.features
             && self.horizon == fresh.horizon
-            && self.windows.count() == fresh.windows.count()
-            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
+            && super::same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && [
                 (self.z.len(), fresh.z.len()),

@@ -336,7 +336,7 @@ impl CalibratedState {
         t: f64,
         reg: &SlidingRegression,
         margin: f64,
-    ) -> CalibratedVerdict {
+    ) -> &CalibratedVerdict {
         let built = reg.columns_built();
         let mut looked = false;
         if built < self.seen {
@@ -368,11 +368,13 @@ impl CalibratedState {
                 self.until_look[w] -= 1;
             }
         }
-        // The verdict changes only with the looks.
+        // The verdict changes only with the looks (returned by reference: with a nonlinear
+        // look it is a few hundred bytes).
         if looked || self.verdict.is_none() {
-            self.verdict = Some(self.verdict(margin));
+            let verdict = self.verdict(margin);
+            return self.verdict.insert(verdict);
         }
-        self.verdict.unwrap_or_default()
+        self.verdict.get_or_insert_with(CalibratedVerdict::default)
     }
 
     /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies; the

@@ -8,7 +8,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;
 use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, linalg};
 
-use crate::calibrated::{CalibratedState, CalibratedVerdict};
+use crate::calibrated::CalibratedState;
 use crate::gap::GapDetector;
 use crate::{
     AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, CouplingBound,
@@ -42,7 +42,17 @@ pub struct Certifier {
 }
 
 /// The nonlinear gate after a sample, why it is closed, and the look behind it.
-type NonlinearStep = (GateState, Option<NotCertified>, Option<NonlinearLook>);
+type NonlinearStep = (GateState, Option<NotCertified>, Option<Standing>);
+
+/// What the evidence needs of a standing look: its certificate, radius, window length and,
+/// for the nonlinear certificate, region (not the whole look, which is copied otherwise).
+#[derive(Clone, Copy)]
+struct Standing {
+    value: f64,
+    radius: f64,
+    window: usize,
+    region: Interval,
+}
 
 /// The regression's outcome, reduced to what the certificate needs.
 #[derive(Debug, Clone, Copy)]
@@ -257,15 +267,15 @@ impl Certifier {
                 reason: wass_reason,
             },
             calibrated: Verdict {
-                value: best.map(|b| b.certificate()),
+                value: best.map(|b| b.value),
                 radius: best.map(|b| b.radius),
                 open: calibrated_gate.open,
                 reason: calibrated_reason,
             },
             calibrated_window: best.map(|b| b.window),
             nonlinear: Verdict {
-                value: nl_best.map(|b| b.certificate),
-                radius: nl_best.map(|b| b.beta_hat_min - b.certificate),
+                value: nl_best.map(|b| b.value),
+                radius: nl_best.map(|b| b.radius),
                 open: nonlinear_gate.open,
                 reason: nonlinear_reason,
             },
@@ -332,20 +342,32 @@ impl Certifier {
     fn calibrated_step(
         &mut self,
         t: f64,
-    ) -> (GateState, Option<NotCertified>, Option<WindowLook>, NonlinearStep) {
+    ) -> (GateState, Option<NotCertified>, Option<Standing>, NonlinearStep) {
         let Some(state) = &mut self.calibrated else {
             // Without a calibration the calibrated gates never see a certificate.
             let nl = (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None);
             return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None, nl);
         };
-        let CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked } =
-            state.update(t, &self.regression, self.cfg.margin);
+        let verdict = state.update(t, &self.regression, self.cfg.margin);
+        let (blocked, nonlinear_blocked) = (verdict.blocked, verdict.nonlinear_blocked);
+        let best = verdict.best.as_ref().map(|b| Standing {
+            value: b.certificate(),
+            radius: b.radius,
+            window: b.window,
+            region: Interval::EMPTY,
+        });
+        let nonlinear = verdict.nonlinear.as_ref().map(|b| Standing {
+            value: b.certificate,
+            radius: b.beta_hat_min - b.certificate,
+            window: b.window,
+            region: b.region,
+        });
         self.calibrated_window = best.map(|b| b.window);
-        let cert = best.map(|b| b.certificate());
+        let cert = best.map(|b| b.value);
         let gate = self.calibrated_gate.update(t, cert);
         let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
         let nl = if self.cfg.nonlinear.is_some() {
-            let cert = nonlinear.map(|b| b.certificate);
+            let cert = nonlinear.map(|b| b.value);
             let gate = self.nonlinear_gate.update(t, cert);
             (gate, closed_reason(nonlinear_blocked, cert, &gate, &self.nonlinear_gate), nonlinear)
         } else {

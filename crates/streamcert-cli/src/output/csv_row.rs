@@ -278,6 +278,9 @@ mod tests {
             (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
                 NotCertified::VaryingDynamics { window, statistic, threshold }
             )),
+            (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
+                NotCertified::LibraryMisfit { window, statistic, threshold }
+            )),
         ]
         .prop_map(|r| r.map(ReasonText))
     }

@@ -1,7 +1,9 @@
 //! [`Certifier`]: the streaming certifier that runs the regression, forms `β̂` and the radii,
 //! feeds the ambiguity estimators and the calibrated windows, and updates the gates. The
-//! checkpoint (serialise and restore with checks) is in `checkpoint.rs`.
+//! checkpoint (serialise and restore with checks) is in `checkpoint.rs`, the calibrated and
+//! nonlinear part of a step in `calibrated_step.rs`.
 
+mod calibrated_step;
 pub(crate) mod checkpoint;
 
 use serde::{Deserialize, Serialize};
@@ -42,18 +44,6 @@ pub struct Certifier {
 }
 
 /// The nonlinear gate after a sample, why it is closed, and the look behind it.
-type NonlinearStep = (GateState, Option<NotCertified>, Option<Standing>);
-
-/// What the evidence needs of a standing look: its certificate, radius, window length and,
-/// for the nonlinear certificate, region (not the whole look, which is copied otherwise).
-#[derive(Clone, Copy)]
-struct Standing {
-    value: f64,
-    radius: f64,
-    window: usize,
-    region: Interval,
-}
-
 /// The regression's outcome, reduced to what the certificate needs.
 #[derive(Debug, Clone, Copy)]
 struct Ready {
@@ -335,45 +325,6 @@ impl Certifier {
     #[must_use]
     pub fn reference_step(&self) -> f64 {
         self.gap.reference()
-    }
-
-    /// Feed the newest column to the calibrated (and nonlinear) certificate, update their
-    /// gates, say why closed.
-    fn calibrated_step(
-        &mut self,
-        t: f64,
-    ) -> (GateState, Option<NotCertified>, Option<Standing>, NonlinearStep) {
-        let Some(state) = &mut self.calibrated else {
-            // Without a calibration the calibrated gates never see a certificate.
-            let nl = (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None);
-            return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None, nl);
-        };
-        let verdict = state.update(t, &self.regression, self.cfg.margin);
-        let (blocked, nonlinear_blocked) = (verdict.blocked, verdict.nonlinear_blocked);
-        let best = verdict.best.as_ref().map(|b| Standing {
-            value: b.certificate(),
-            radius: b.radius,
-            window: b.window,
-            region: Interval::EMPTY,
-        });
-        let nonlinear = verdict.nonlinear.as_ref().map(|b| Standing {
-            value: b.certificate,
-            radius: b.beta_hat_min - b.certificate,
-            window: b.window,
-            region: b.region,
-        });
-        self.calibrated_window = best.map(|b| b.window);
-        let cert = best.map(|b| b.value);
-        let gate = self.calibrated_gate.update(t, cert);
-        let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
-        let nl = if self.cfg.nonlinear.is_some() {
-            let cert = nonlinear.map(|b| b.value);
-            let gate = self.nonlinear_gate.update(t, cert);
-            (gate, closed_reason(nonlinear_blocked, cert, &gate, &self.nonlinear_gate), nonlinear)
-        } else {
-            (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None)
-        };
-        (gate, reason, best, nl)
     }
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.

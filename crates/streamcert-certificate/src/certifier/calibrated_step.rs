@@ -1,0 +1,61 @@
+//! The calibrated and nonlinear certificates' part of a step: feed the newest column to the
+//! calibrated state, update the two gates, and keep only what the evidence needs of the
+//! standing looks.
+
+use streamcert_regression::Interval;
+
+use super::{Certifier, closed_reason};
+use crate::{GateState, NotCertified};
+
+pub(super) type NonlinearStep = (GateState, Option<NotCertified>, Option<Standing>);
+
+/// What the evidence needs of a standing look: its certificate, radius, window length and,
+/// for the nonlinear certificate, region (not the whole look, which is copied otherwise).
+#[derive(Clone, Copy)]
+pub(super) struct Standing {
+    pub(super) value: f64,
+    pub(super) radius: f64,
+    pub(super) window: usize,
+    pub(super) region: Interval,
+}
+
+impl Certifier {
+    /// Feed the newest column to the calibrated (and nonlinear) certificate, update their
+    /// gates, say why closed.
+    pub(super) fn calibrated_step(
+        &mut self,
+        t: f64,
+    ) -> (GateState, Option<NotCertified>, Option<Standing>, NonlinearStep) {
+        let Some(state) = &mut self.calibrated else {
+            // Without a calibration the calibrated gates never see a certificate.
+            let nl = (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None);
+            return (self.calibrated_gate.state(), Some(NotCertified::NoCalibration), None, nl);
+        };
+        let verdict = state.update(t, &self.regression, self.cfg.margin);
+        let (blocked, nonlinear_blocked) = (verdict.blocked, verdict.nonlinear_blocked);
+        let best = verdict.best.as_ref().map(|b| Standing {
+            value: b.certificate(),
+            radius: b.radius,
+            window: b.window,
+            region: Interval::EMPTY,
+        });
+        let nonlinear = verdict.nonlinear.as_ref().map(|b| Standing {
+            value: b.certificate,
+            radius: b.beta_hat_min - b.certificate,
+            window: b.window,
+            region: b.region,
+        });
+        self.calibrated_window = best.map(|b| b.window);
+        let cert = best.map(|b| b.value);
+        let gate = self.calibrated_gate.update(t, cert);
+        let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
+        let nl = if self.cfg.nonlinear.is_some() {
+            let cert = nonlinear.map(|b| b.value);
+            let gate = self.nonlinear_gate.update(t, cert);
+            (gate, closed_reason(nonlinear_blocked, cert, &gate, &self.nonlinear_gate), nonlinear)
+        } else {
+            (self.nonlinear_gate.state(), Some(NotCertified::NoNonlinearModel), None)
+        };
+        (gate, reason, best, nl)
+    }
+}

@@ -13,8 +13,9 @@
 //! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein),
 //! `gaussian` (`Certifier::push`, the paper's Gaussian certificate only), `calibrated`
 //! (`Certifier::push`, Gaussian + calibrated with its default windows), `nonlinear` (the same
-//! plus the nonlinear certificate of degree 3);
-//! all for `p = m = 1`, `M = 150`, `h = 5`, on the stream of `benches/regression.rs`.
+//! plus the nonlinear certificate of degree 3), all for `p = m = 1`; `wide` (`Certifier::push`,
+//! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
+//! on the stream of `benches/regression.rs`.
 
 use std::hint::black_box;
 
@@ -51,6 +52,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut gauss = Certifier::new(CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10))?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
+    let (pw, mw) = (10usize, 10usize);
+    let mut wide_data = Vec::with_capacity((pw + mw) * len);
+    let mut wide_state = vec![0.0f64; pw + mw];
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    for _ in 0..len {
+        for v in &mut wide_state {
+            *v = 0.95 * *v + rng.random::<f64>() - 0.5;
+        }
+        wide_data.extend_from_slice(&wide_state);
+    }
+    let wide_gain: Vec<f64> =
+        (0..mw * pw).map(|i| if i % (pw + 1) == 0 { -1.0 } else { 0.0 }).collect();
+    let wide_cfg = RegressionConfig::new(pw, mw, 150, 5, 1e-4);
+    let mut wide = Certifier::new(CertifierConfig::new(wide_cfg, wide_gain, 0.2, 0.05, 10))?;
     let mut t = 0.0;
     for i in 0..samples {
         let k = i % len;
@@ -83,6 +98,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "nonlinear" => {
                 let ev = nonlinear.push(black_box(t), y, u)?;
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
+            }
+            "wide" => {
+                let s = &wide_data[(pw + mw) * k..(pw + mw) * (k + 1)];
+                let ev = wide.push(black_box(t), &s[..pw], &s[pw..])?;
+                black_box((ev.gaussian.value, ev.gaussian.open));
             }
             other => return Err(format!("unknown mode {other}").into()),
         }

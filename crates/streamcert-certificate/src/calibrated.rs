@@ -37,30 +37,8 @@
 //!   directions). Its variance is `vec(vvᵀ)ᵀ Ω vec(vvᵀ) <= λ_max(Ω)` for every unit `v`; for
 //!   `p = 2` the maximum over rank-one `vvᵀ` is bounded directly
 //!   ([`rank_one_variance_bound`]).
-//! * Why not the variance in the estimated direction, `vec(v̂v̂ᵀ)ᵀ Ω̂ vec(v̂v̂ᵀ)` with `v̂` the
-//!   top eigenvector of `sym Ĵ` (the delta method's first-order variance of `β̂`)? Its
-//!   validity needs `v̂` close to `v*` at the risk a look spends, and on short windows it is
-//!   not. Measured with `cargo xtask validity --runs 1000` on a variant that used it for
-//!   `p >= 2` (not kept): the `p = 3` and common-mode `p = 2` cells stayed valid (5 and 4 of
-//!   1000) with efficiency ratios 1.55 and 1.53 instead of 3.04 and 2.37, but the `p = 2`
-//!   cell with unequal noise opened falsely in 251 of 1000 runs (q99 of `(β̂ − β*)/ρ` 2.52):
-//!   where the estimated direction swings toward the quiet output, the plug-in variance is
-//!   that of the quiet output. Using it only when the estimated eigengap exceeds a multiple
-//!   of `√λ_max(Ω̂)` trades one failure for the other (3×: unequal noise 5 of 1000 and 1.53,
-//!   but common-mode 2.03 and `p = 3` 2.99; 5×: no gain), and the rigorous version (a
-//!   Davis–Kahan cone from a Hotelling bound on `‖ΔJ‖`) is never informative at these gaps.
-//! * Why not a bound that is valid in every direction at once, `λ_max(S) <= max_v vᵀŜv +
-//!   c·√q̂(v)` with `c` Hotelling's multiplier over the `p(p + 1)/2` entries of `sym ΔJ` (it
-//!   needs no eigengap)? Measured (session 9, `cargo xtask validity --runs 1000`, a rigorous
-//!   Lipschitz branch and bound over the sphere for `p = 2, 3`, the smaller of it and the
-//!   present radius, each at half the look's risk; not kept): efficiency ratios 2.23
-//!   (common-mode `p = 2`, from 2.37), 1.90 (unequal, from 1.86), 3.20 (`p = 3`, from 3.04)
-//!   and 2.11 (the `p = 2` power cell, from 2.23). Hotelling's `c` exceeds the one-direction
-//!   `t` by 1.2 to 1.4 at these risks, which is about what the direction saves. With the
-//!   spending over looks alone already costing a factor of about 1.5 against the one-look
-//!   oracle (`t` at `δ_{w,k}` against `z` at `δ`; the scalar cells' 1.37 to 1.56), a ratio of
-//!   1.6 for `p >= 2` needs the plug-in direction's variance with no penalty, which the
-//!   unequal-noise cell shows is not valid.
+//! * Why not the variance in the estimated direction, or a bound over every direction at
+//!   once? Measured; see *Efficiency* below.
 //! * Consecutive columns overlap in `h − 1` of their `h` sample intervals; batch means over
 //!   blocks of `h` columns with the overlap factor `3h²/(2h² + 1)` estimate the long-run
 //!   variance of the scores (exact in expectation for the triangular correlation of white
@@ -104,6 +82,38 @@
 //! common-mode and unequal noise, p = 3) opened in at most 10 of 1000 runs, with the 95 %
 //! Clopper–Pearson upper bound at most 2δ. With the nominal `B − (p + m)` degrees of freedom
 //! instead of the effective number, the scalar cells opened in 14 to 28 of 1000.
+//!
+//! ## Efficiency against a one-look oracle
+//!
+//! VALIDITY.md splits the longest window's ratio `ρ / (z(1 − δ) sd(β̂))` into the look
+//! spending `t / z` (1.57 to 1.59 in every cell: Student's t at the last look's `δ_{w,k}`
+//! over the one-look `z`) and the spread factor `sd used / sd(β̂)`: 0.83 to 0.98 in the
+//! scalar cells (the just-identified estimate's spread across runs exceeds its batch-means
+//! sd, its tails being heavier than the normal; the spending covers it, every cell stays
+//! within 2δ), 1.17 to 1.93 for `p >= 2`, 1.78 and 3.92 under sensor noise. With the spending
+//! near 1.6 alone, a ratio of at most 1.6 needs a spread factor of about 1. Measured with
+//! `cargo xtask validity --runs 1000` on variants of this module (none kept):
+//! * `p >= 2`, the variance in the estimated direction `vec(v̂v̂ᵀ)ᵀ Ω̂ vec(v̂v̂ᵀ)` (`v̂` the top
+//!   eigenvector of `sym Ĵ`, the delta method): ratios 1.55 (`p = 3`) and 1.53
+//!   (common-mode), but the unequal-noise cell opened falsely in 251 of 1000 runs (q99 of
+//!   `(β̂ − β*)/ρ` 2.52): where `v̂` swings toward the quiet output the plug-in variance is
+//!   the quiet output's. Used only when the estimated eigengap exceeds 3 `√λ_max(Ω̂)`:
+//!   unequal 5 of 1000 and 1.53, common-mode 2.03, `p = 3` 2.99; a Davis–Kahan cone from a
+//!   Hotelling bound on `‖ΔJ‖` is never informative at these gaps.
+//! * `p >= 2`, a bound valid in every direction at once (`max_v vᵀŜv + c √q̂(v)`, Hotelling's
+//!   `c` over the `p(p + 1)/2` entries of `sym ΔJ`, a Lipschitz branch and bound over the
+//!   sphere, the smaller of it and the present radius at half the risk each): 2.23, 1.90,
+//!   3.20 and 2.11 (common-mode, unequal, `p = 3`, the `p = 2` power cell) against 2.37,
+//!   1.86, 3.04 and 2.23; `c` exceeds `t` by about what the direction saves.
+//! * Sensor noise, batches of `b` blocks (overlap factor `3bh²/(3bh² − h² + 1)`, `⌈B/b⌉`
+//!   batches): the sensor cell 2.83 → 2.21, 1.98, 2.12 for `b` = 2, 4, 8, its power cell
+//!   6.21 → 4.24, 3.45, 3.05 (valid; fewer batches, a larger `t`); the scalar cells rise to
+//!   1.6 to 1.9 at `b = 8`.
+//! * Sensor noise, the lag-one cross products of neighbouring blocks added with weight one
+//!   (unbiased in expectation for the triangular and the telescoping correlation; no overlap
+//!   factor, a third of the effective blocks): 1.56 and 2.13, but the sensor cell opened
+//!   falsely in 69 of 1000 runs (39 with the correction only on windows of at least 100
+//!   blocks): not valid.
 //!
 //! ## Assumptions (when one fails the guarantee is void)
 //! * The closed-loop Jacobian is constant over each window (linear dynamics, or a nonlinear

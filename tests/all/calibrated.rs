@@ -119,6 +119,19 @@ fn instrumented_windows_equal_a_batch_recompute_at_every_column() {
 /// with `ν` the Welch–Satterthwaite effective number of blocks less `d`.
 #[test]
 fn every_look_matches_its_formula_for_two_outputs() {
+    every_look_matches_its_formula(1);
+}
+
+/// As above with batches of four blocks (`batch_blocks = 4`): the block sums are summed over
+/// batches, the oldest batch holding the remainder (window 150: 30 blocks, a batch of 2 and
+/// seven of 4), `c_{b,h} = 3bh²/(3bh² − h² + 1)` with the remainder's batch weighted by
+/// `c_{2,h}/c_{4,h}`, `B` the number of batches, and the effective number over batch weights.
+#[test]
+fn every_look_matches_its_formula_with_batches_of_blocks() {
+    every_look_matches_its_formula(4);
+}
+
+fn every_look_matches_its_formula(batch: usize) {
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
     let scenario = LinearScenario {
         n: 2,
@@ -130,8 +143,12 @@ fn every_look_matches_its_formula_for_two_outputs() {
         ..short_window_plant()
     };
     let mut cfg = calibrated(2, gain.clone(), 150, 1);
-    cfg.calibration =
-        Some(Calibration { windows: Some(2), instrument_intervals: 3, ..Calibration::new(0.01) });
+    cfg.calibration = Some(Calibration {
+        windows: Some(2),
+        instrument_intervals: 3,
+        batch_blocks: batch,
+        ..Calibration::new(0.01)
+    });
     let traj = run_scenario(&scenario, 8);
     let mut cert = Certifier::new(cfg).expect("valid");
     let mut cols: Vec<(nalgebra::DVector<f64>, nalgebra::DVector<f64>)> = Vec::new();
@@ -183,12 +200,23 @@ fn every_look_matches_its_formula_for_two_outputs() {
             let theta = &cw * &q * &ainv;
             let x = &q * &ainv * &t_mat;
             let blocks = n / H;
+            let batches = blocks.div_ceil(batch);
+            let c = |b: usize| {
+                let b = b as f64;
+                3.0 * b * 25.0 / (3.0 * b * 25.0 - 25.0 + 1.0)
+            };
             let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
             let mut weights = Vec::new();
-            for b in 0..blocks {
+            // Batch k covers blocks [starts[k], starts[k + 1]), oldest first; the oldest holds
+            // the remainder.
+            let rem = blocks % batch;
+            let mut starts = vec![0];
+            starts.extend((if rem == 0 { batch } else { rem }..=blocks).step_by(batch));
+            for k in 0..batches {
+                let (b0, b1) = (starts[k], starts[k + 1]);
                 let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
                 let mut weight = 0.0;
-                for j in n - (blocks - b) * H..n - (blocks - b - 1) * H {
+                for j in b0 * H..b1 * H {
                     let (z, dy) = &window[j];
                     let r = dy - &theta * z;
                     let g = x.transpose() * inst(j);
@@ -197,17 +225,18 @@ fn every_look_matches_its_formula_for_two_outputs() {
                     sum += (&u + u.transpose()) * 0.5;
                 }
                 let v = nalgebra::DVector::from_column_slice(sum.as_slice());
-                omega += &v * v.transpose();
+                omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
                 weights.push(weight);
             }
-            // Welch–Satterthwaite: effective blocks (Σw)²/Σw², at most B.
+            assert_eq!(starts.len(), batches + 1);
+            assert_eq!(*starts.last().expect("batches"), blocks);
+            // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
             let ess =
                 weights.iter().sum::<f64>().powi(2) / weights.iter().map(|w| w * w).sum::<f64>();
-            let c_h = 3.0 * 25.0 / (2.0 * 25.0 + 1.0);
-            omega *= c_h * blocks as f64 / (blocks - 4) as f64;
+            omega *= c(batch) * batches as f64 / (batches - 4) as f64;
             let j = &theta * &t_mat;
             let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
-            let nu = ess.min(blocks as f64) - 4.0;
+            let nu = ess.min(batches as f64) - 4.0;
             let share = [150.0 / 450.0, 300.0 / 450.0][w];
             let risk = look_risk(0.01, share, look.look);
             let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
@@ -220,8 +249,10 @@ fn every_look_matches_its_formula_for_two_outputs() {
             checked += 1;
         }
     }
-    // Window 150 looks at columns 150, 225, …; window 300 at 300, 450, ….
-    assert!(checked >= 25, "checked {checked} looks");
+    // Window 150 looks at columns 150, 225, …; window 300 at 300, 450, …. With eight batches
+    // in the short window, `ν = min(ESS, 8) − 4` is not positive at some looks, which then
+    // give no certificate (and nothing to check).
+    assert!(checked >= if batch == 1 { 25 } else { 15 }, "checked {checked} looks");
 }
 
 #[test]
@@ -263,6 +294,23 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         ..calibrated(1, vec![-0.54], 150, 1)
     };
     assert!(Certifier::new(cfg).is_err());
+    // Batches of b blocks: h (b (p + m + 1) + 1) = 65 for b = 4, 125 for b = 8; b in 1..=8.
+    let batched = |window, batch_blocks| CertifierConfig {
+        calibration: Some(Calibration { batch_blocks, ..Calibration::new(0.01) }),
+        ..calibrated(1, vec![-0.54], window, 1)
+    };
+    for (batch, smallest) in [(4, 65), (8, 125)] {
+        let err = Certifier::new(batched(smallest - 1, batch)).unwrap_err();
+        let CertifyError::InvalidConfig { field: "window", reason } = err else { panic!("{err}") };
+        assert!(reason.contains(&format!("smallest valid window is {smallest}")), "{reason}");
+        assert!(reason.contains("fewer blocks per batch"), "{reason}");
+        assert!(Certifier::new(batched(smallest, batch)).is_ok());
+    }
+    for batch in [0, 9] {
+        let err = Certifier::new(batched(1000, batch)).unwrap_err();
+        let CertifyError::InvalidConfig { field, .. } = err else { panic!("{err}") };
+        assert_eq!(field, "calibration.batch_blocks");
+    }
 }
 
 /// The issue's case at the smallest accepted window and a one-sample gate: `K = −0.54` has true
@@ -274,15 +322,18 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
 #[test]
 fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window() {
     let runs = 300;
-    for window in [20, 30, 150] {
-        let cfg = calibrated(1, vec![-0.54], window, 1);
+    // The last two: batches of 4 blocks at their smallest accepted window, and at 150.
+    for (window, batch_blocks) in [(20, 1), (30, 1), (150, 1), (65, 4), (150, 4)] {
+        let mut cfg = calibrated(1, vec![-0.54], window, 1);
+        cfg.calibration = Some(Calibration { batch_blocks, ..Calibration::new(0.01) });
         let opened =
             (0..runs).filter(|&s| first_opening(&cfg, &short_window_plant(), 7000 + s).is_some());
         let opened = opened.count();
         let (lower, upper) = clopper_pearson(opened, runs as usize);
         assert!(
             lower <= 0.01,
-            "window {window}: {opened} of {runs} opened ([{lower:.4}, {upper:.4}])"
+            "window {window}, b = {batch_blocks}: {opened} of {runs} opened \
+             ([{lower:.4}, {upper:.4}])"
         );
     }
 }
@@ -397,4 +448,41 @@ proptest::proptest! {
         proptest::prop_assert!((got - want).abs() <= 1e-8 * want.abs(), "{got} vs {want}");
         proptest::prop_assert!((dist.sf(got) / risk - 1.0).abs() <= 1e-6, "S({got}) vs {risk}");
     }
+}
+
+/// A certifier with batches of blocks resumes from its checkpoint bit for bit, its windows'
+/// batch setting is written only when it is not 1 (so a default state reads and writes as
+/// before), and a state whose windows disagree with the configured batch is refused.
+#[test]
+fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
+    let traj = run_scenario(&short_window_plant(), 3);
+    let mut cfg = calibrated(1, vec![-0.54], 150, 1);
+    cfg.calibration = Some(Calibration { batch_blocks: 4, ..Calibration::new(0.01) });
+    let mut whole = Certifier::new(cfg.clone()).expect("valid");
+    let all: Vec<_> = (0..traj.len())
+        .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
+        .collect();
+    let split = 2345;
+    let mut first = Certifier::new(cfg.clone()).expect("valid");
+    for k in 0..split {
+        first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+    }
+    let text = first.checkpoint().expect("serialises");
+    let mut second = Certifier::restore(&text).expect("restores");
+    for k in split..traj.len() {
+        let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+        assert_eq!(ev, all[k]);
+    }
+    assert!(all.iter().any(|e| e.calibrated.value.is_some()), "the calibrated looks ran");
+    let payload = streamcert::certificate::unseal::<CertifierConfig>(&text, None).expect("sealed");
+    assert_eq!(payload.matches("\"batch\":4").count(), 1, "the windows' batch is written");
+    assert!(payload.contains("\"batch_blocks\":4"));
+    let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
+    let err = Certifier::restore(&reseal(payload.replace("\"batch\":4", "\"batch\":2")))
+        .expect_err("refused");
+    assert!(err.to_string().contains("calibrated state does not match"), "{err}");
+    // The default setting writes neither key.
+    let plain = Certifier::new(calibrated(1, vec![-0.54], 150, 1)).expect("valid");
+    let text = plain.checkpoint().expect("serialises");
+    assert!(!text.contains("\"batch\"") && !text.contains("batch_blocks"));
 }

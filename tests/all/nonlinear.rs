@@ -279,6 +279,48 @@ fn the_coefficient_covariance_equals_a_batch_recompute() {
 }
 
 #[test]
+fn the_coefficient_covariance_follows_the_batches_of_the_score_covariance() {
+    // As above, with batches of three blocks (window 1: 20 blocks of h = 2, so batches of
+    // 2, 3, …, 3): the image of Ω_θ under t is still the score variance of `estimate`, and
+    // both differ from the unbatched ones.
+    let build = |batch: usize| {
+        let w = InstrumentedWindows::with_regressors(1, 3, 2, 1, 2, &[20, 40]).expect("valid");
+        w.with_batch(batch).expect("valid batch")
+    };
+    let (mut w1, mut w3) = (build(1), build(3));
+    let mut x = 0.37f64;
+    for _ in 0..200 {
+        let mut z = [0.0; 3];
+        for v in &mut z {
+            x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+            *v = x - 0.5;
+        }
+        x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+        let dy = [0.8 * z[0] - 0.3 * z[1] + 0.5 * z[2] + 0.1 * (x - 0.5)];
+        w1.push_column(&z, &dy);
+        w3.push_column(&z, &dy);
+    }
+    let t = [1.0, 0.4, -1.2];
+    let mut scores = Vec::new();
+    for w in [&w1, &w3] {
+        let mut est = WindowEstimate::with_regressors(1, 3, 2);
+        w.estimate(1, 1e-9, &t, 1e-12, &mut est);
+        assert!(est.ready);
+        assert_eq!(est.batches, 20usize.div_ceil(w.batch()));
+        let mut cov = vec![0.0; 9];
+        assert!(w.coefficient_covariance(1, &mut est, &mut cov));
+        let quad: f64 =
+            (0..3).map(|a| (0..3).map(|b| t[a] * cov[a * 3 + b] * t[b]).sum::<f64>()).sum();
+        assert!((quad / est.score_cov[0] - 1.0).abs() < 1e-9, "{quad} vs {}", est.score_cov[0]);
+        scores.push(est.score_cov[0]);
+    }
+    assert!((scores[0] / scores[1] - 1.0).abs() > 1e-3, "{scores:?}");
+    // A batch that leaves the shortest window (10 blocks) p + m = 3 batches or fewer.
+    let w = InstrumentedWindows::with_regressors(1, 3, 2, 1, 2, &[20, 40]).expect("valid");
+    assert!(w.with_batch(4).is_err());
+}
+
+#[test]
 fn the_configuration_says_what_is_valid() {
     let mut cfg = config(-1.0, 0.05, 50, 3);
     cfg.calibration = None;

@@ -28,6 +28,8 @@ struct Cell {
     gain: Vec<f64>,
     window: usize,
     consecutive: usize,
+    /// Blocks per batch of the calibrated certificate's variance (`batch_blocks`).
+    batch: usize,
 }
 
 impl Cell {
@@ -48,7 +50,8 @@ impl Cell {
             self.consecutive,
         );
         if c.is_none() {
-            cfg.calibration = Some(Calibration::new(DELTA));
+            cfg.calibration =
+                Some(Calibration { batch_blocks: self.batch, ..Calibration::new(DELTA) });
         }
         cfg
     }
@@ -117,6 +120,7 @@ fn near_margin_cells() -> Vec<Cell> {
         gain,
         window,
         consecutive: 1,
+        batch: 1,
     };
     // Window sweep, M/h = 2 … 30, the short-window case (β* = 0.04).
     for window in [10, 15, 20, 30, 50, 75, 150] {
@@ -162,6 +166,23 @@ fn near_margin_cells() -> Vec<Cell> {
     let three = scenario(3, a3, -1.0, Process::Gaussian { sigma: 0.1 });
     let k = diagonal_candidate(&three, 0.04);
     cells.push(cell("p = 3".into(), three, k, 150));
+    // Batches of 4 and 8 blocks (`batch_blocks`): the sensor-noise cell, and the smallest
+    // window each setting accepts (h (b (p + m + 1) + 1): 65 and 125) and one below it.
+    let sensor = LinearScenario {
+        sensor_noise: 0.05,
+        ..scenario(1, vec![0.5], -1.5, Process::Gaussian { sigma: 0.1 })
+    };
+    let batched = |family: &str, scenario, window, batch| Cell {
+        batch,
+        ..cell(format!("{family}, batches of {batch} blocks"), scenario, vec![-0.54], window)
+    };
+    for (batch, smallest) in [(4, 65), (8, 125)] {
+        cells.push(batched("scalar, sensor noise σ_v = 0.05", sensor.clone(), 150, batch));
+        for window in [smallest - H, smallest] {
+            let s = scalar(Process::Gaussian { sigma: 0.1 });
+            cells.push(batched("scalar, Gaussian", s, window, batch));
+        }
+    }
     cells
 }
 
@@ -177,6 +198,7 @@ fn power_cells() -> Vec<Cell> {
             gain,
             window: 150,
             consecutive: 10,
+            batch: 1,
         });
     }
     let p2 = scenario(2, vec![0.5, 0.3, -0.2, 0.2], -1.0, Process::Gaussian { sigma: 0.1 });
@@ -186,18 +208,28 @@ fn power_cells() -> Vec<Cell> {
         scenario: p2,
         window: 150,
         consecutive: 10,
+        batch: 1,
     });
     let sensor = LinearScenario {
         sensor_noise: 0.05,
         ..scenario(1, vec![-1.0], -2.0, Process::Gaussian { sigma: 0.02 })
     };
-    cells.push(Cell {
+    let sensor_cell = Cell {
         family: "scalar, sensor noise σ_v = 0.05, β* = 3".into(),
         scenario: sensor,
         gain: vec![-2.0],
         window: 150,
         consecutive: 10,
-    });
+        batch: 1,
+    };
+    cells.push(sensor_cell.clone());
+    for batch in [4, 8] {
+        cells.push(Cell {
+            family: format!("{}, batches of {batch} blocks", sensor_cell.family),
+            batch,
+            ..sensor_cell.clone()
+        });
+    }
     cells
 }
 
@@ -461,6 +493,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
         gain: vec![-1.5],
         window: 150,
         consecutive: 10,
+        batch: 1,
     };
     let (mut delays, mut open_at_end, mut open_at_switch) = (Vec::new(), 0, 0);
     for seed in 0..100u64 {

@@ -67,6 +67,7 @@ delta = 0.01
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
+# batch_blocks = 1       # blocks of h per batch of the variance (4 or 8 with sensor noise)
 
 [nonlinear]
 # The calibrated certificate above assumes one Jacobian over its window. For a nonlinear
@@ -162,6 +163,8 @@ struct CalibrationSection {
     instrument_lag: Option<usize>,
     #[serde(default)]
     instrument_intervals: Option<usize>,
+    #[serde(default)]
+    batch_blocks: Option<usize>,
 }
 
 fn default_delta() -> f64 {
@@ -178,6 +181,7 @@ impl Default for CalibrationSection {
             look_spacing: None,
             instrument_lag: None,
             instrument_intervals: None,
+            batch_blocks: None,
         }
     }
 }
@@ -192,6 +196,7 @@ impl CalibrationSection {
             look_spacing: self.look_spacing.unwrap_or(d.look_spacing),
             instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
             instrument_intervals: self.instrument_intervals.unwrap_or(d.instrument_intervals),
+            batch_blocks: self.batch_blocks.unwrap_or(d.batch_blocks),
             ..d
         }
     }
@@ -454,6 +459,9 @@ mod tests {
         let tuned = on.replace("# windows = 4 ", "windows = 2 ");
         let c = parse(&tuned, "x").unwrap();
         assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(Some(2)));
+        let batched = on.replace("# batch_blocks = 1 ", "batch_blocks = 4 ");
+        let c = parse(&batched, "x").unwrap().certifier.calibration.unwrap();
+        assert_eq!(c.batch_blocks, 4);
         // A window below h (p + m + 2) has no calibrated bound: refused, naming the smallest.
         let short = on.replace("window = 150 ", "window = 10 ");
         assert!(

@@ -38,6 +38,7 @@
 
 use serde::{Deserialize, Serialize};
 
+mod batch;
 mod estimate;
 
 pub use estimate::WindowEstimate;
@@ -100,6 +101,10 @@ pub struct InstrumentedWindows {
     open_range: Vec<Interval>,
     #[serde(default)]
     block_ranges: Vec<Interval>,
+    // Blocks per batch of the batch-means covariance (`with_batch`; 1 by default, and then
+    // not written, so a state without it reads as it always did).
+    #[serde(default = "batch::one", skip_serializing_if = "batch::is_one")]
+    batch: usize,
 }
 
 /// `out = Σ` of the `S`-value blocks in `older` then `newer`.
@@ -178,6 +183,7 @@ impl InstrumentedWindows {
             range_channels: 0,
             open_range: Vec::new(),
             block_ranges: Vec::new(),
+            batch: 1,
         })
     }
 
@@ -452,6 +458,8 @@ impl InstrumentedWindows {
             && self.blocks.len() == fresh.blocks.len()
             && self.w.len() == fresh.w.len()
             && self.windows == fresh.windows
+            && self.batch >= 1
+            && self.windows[0].div_ceil(self.batch) > self.p + self.m
             && self.open_range.len() == self.range_channels
             && self.block_ranges.len() == self.range_channels * fresh.block_cap();
         if !sizes_ok {

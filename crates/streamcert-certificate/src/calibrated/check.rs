@@ -36,6 +36,7 @@ impl CalibratedState {
             && self.ridge == fresh.ridge
             && self.min_pivot == fresh.min_pivot
             && self.windows.count() == fresh.windows.count()
+            && self.windows.batch() == fresh.windows.batch()
             && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
             && self.tmat == fresh.tmat
             && self.shares == fresh.shares

@@ -37,6 +37,24 @@ pub struct Calibration {
     /// products for `p = m = 1`.
     #[serde(default = "default_intervals")]
     pub instrument_intervals: usize,
+    /// Blocks of `h` columns per batch of the batch-means covariance `Ω̂` (default 1;
+    /// `1..=8`). Sensor noise on `y` enters `ΔY_q` and `ΔY_{q+h}` with opposite signs, so it
+    /// telescopes in a window's sum but batch means count it once per batch boundary: under
+    /// sensor noise the radius is then several times what the estimate's spread needs.
+    /// Batches of `b` blocks have `b` times fewer boundaries, at the price of `b` times fewer
+    /// degrees of freedom and a window at least `h (b (p + m + 1) + 1)` columns long
+    /// ([`smallest_window`](Self::smallest_window)). `cargo xtask validity` measures `b = 4`
+    /// on the sensor-noise cells (VALIDITY.md); without sensor noise `b = 1` is tighter.
+    #[serde(default = "default_batch", skip_serializing_if = "is_default_batch")]
+    pub batch_blocks: usize,
+}
+
+fn default_batch() -> usize {
+    1
+}
+#[allow(clippy::trivially_copy_pass_by_ref)] // serde's `skip_serializing_if` passes a reference
+fn is_default_batch(b: &usize) -> bool {
+    *b == 1
 }
 
 fn default_look_spacing() -> f64 {
@@ -60,6 +78,7 @@ impl Calibration {
             look_spacing: default_look_spacing(),
             instrument_lag: default_lag(),
             instrument_intervals: default_intervals(),
+            batch_blocks: default_batch(),
         }
     }
 
@@ -69,6 +88,14 @@ impl Calibration {
     #[must_use]
     pub fn min_window(horizon: usize, unknowns: usize) -> usize {
         horizon * (unknowns + 2)
+    }
+
+    /// The smallest base window with a calibrated bound for these settings:
+    /// `h (b (p + m + 1) + 1)` columns for batches of `b` blocks, so that the window holds at
+    /// least `p + m + 2` batches (`ν >= 2`); [`min_window`](Self::min_window) for `b = 1`.
+    #[must_use]
+    pub fn smallest_window(&self, horizon: usize, unknowns: usize) -> usize {
+        horizon * (self.batch_blocks * (unknowns + 1) + 1)
     }
 
     /// The window lengths for base window `base` and horizon `h`: `base · 2^i` for
@@ -125,9 +152,19 @@ impl Calibration {
                 format!("must lie in 1..=8, got {}", self.instrument_intervals),
             );
         }
+        if !(1..=8).contains(&self.batch_blocks) {
+            return bad(
+                "calibration.batch_blocks",
+                format!(
+                    "must lie in 1..=8 (the settings `cargo xtask validity` measures reach 8), \
+                     got {}",
+                    self.batch_blocks
+                ),
+            );
+        }
         let d = reg.outputs + reg.inputs;
-        let min = Self::min_window(reg.horizon, d);
-        if reg.window < min {
+        let min = self.smallest_window(reg.horizon, d);
+        if reg.window < min && self.batch_blocks == 1 {
             return bad(
                 "window",
                 format!(
@@ -135,6 +172,18 @@ impl Calibration {
                      the smallest valid window is {min} columns (h · (p + m + 2), at least two \
                      independent intervals per unknown plus two)",
                     reg.window, reg.horizon
+                ),
+            );
+        }
+        if reg.window < min {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for a calibrated bound with h = {}, p + m = {d} and \
+                     batches of b = {} blocks: the smallest valid window is {min} columns \
+                     (h · (b (p + m + 1) + 1), at least p + m + 2 batches), or use fewer \
+                     blocks per batch",
+                    reg.window, reg.horizon, self.batch_blocks
                 ),
             );
         }

@@ -4,6 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::batch::{Batches, overlap_factor};
 use super::{InstrumentedWindows, Layout};
 use crate::linalg;
 
@@ -26,6 +27,10 @@ pub struct WindowEstimate {
     /// the Welch–Satterthwaite degrees of freedom of `Ω̂` when the blocks carry unequal weight
     /// (at most `B`, equal to `B` for equal weights).
     pub effective_blocks: f64,
+    /// Batches behind `score_cov`: `⌈B/b⌉` for `B` blocks in batches of `b`
+    /// ([`InstrumentedWindows::with_batch`]; `B` when `b = 1`).
+    #[serde(default)]
+    pub batches: usize,
     // Scratch: Cholesky factor of H + λI, Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
     // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
     hfac: Vec<f64>,
@@ -57,6 +62,7 @@ impl WindowEstimate {
             score_cov: vec![0.0; p * p * p * p],
             pivot_ratio: 0.0,
             effective_blocks: 0.0,
+            batches: 0,
             hfac: vec![0.0; k * k],
             q: vec![0.0; d * k],
             lu: vec![0.0; d * d],
@@ -137,7 +143,12 @@ impl InstrumentedWindows {
     /// `h² − (h² − 1)/3` and the long-run variance per block `h²` (in units of one column's),
     /// hence `c_h`. White sensor noise makes neighbouring blocks negatively correlated (a sample
     /// enters `ΔY_q` and `ΔY_{q+h}` with opposite signs), so there `Ω̂` is conservative.
-    /// `B/(B − d)` makes up for the `d` fitted directions. (A Bartlett weight ½ on neighbouring
+    /// `B/(B − d)` makes up for the `d` fitted directions. With
+    /// [`with_batch`](InstrumentedWindows::with_batch)`(b)`, `b > 1`, the block sums are first
+    /// summed over batches of `b` consecutive blocks (the oldest batch holds the remainder
+    /// `r = B mod b` and is weighted by `c_{r,h}/c_{b,h}`), `B` is the number of batches
+    /// `⌈B/b⌉` and `c_h` becomes `c_{b,h} = 3bh²/(3bh² − h² + 1)`; the effective number is
+    /// then over batch weights. (A Bartlett weight ½ on neighbouring
     /// blocks, exact in expectation and less conservative under sensor noise, raised the
     /// false-opening rate of the study's scalar cell at `M = 150` to 16 in 1000: not used.) Cost `O(n (k d + p²) + B p⁴ + k³)`:
     /// the calibrated certificate calls it at its looks only.
@@ -158,7 +169,9 @@ impl InstrumentedWindows {
         let blocks = self.windows[w].min(self.block_len);
         out.ready = false;
         out.columns = blocks * self.horizon;
-        if blocks <= d {
+        let batches = blocks.div_ceil(self.batch);
+        out.batches = batches;
+        if batches <= d {
             return;
         }
         self.window_sums(w, &mut out.sums);
@@ -222,9 +235,8 @@ impl InstrumentedWindows {
             _ => self.block_scores(w, out, p, d, k),
         };
         out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
-        let hf = self.horizon as f64;
-        let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
-        let scale = overlap * blocks as f64 / (blocks - d) as f64;
+        let overlap = overlap_factor(self.batch, self.horizon);
+        let scale = overlap * batches as f64 / (batches - d) as f64;
         for v in &mut out.score_cov {
             *v *= scale;
         }
@@ -253,6 +265,13 @@ impl InstrumentedWindows {
         let (mut sum_w, mut sum_w2) = (0.0, 0.0);
         let (older, newer) = self.window_blocks(w);
         let stride = lay.stride();
+        // Batches of `b > 1` blocks: the batch's score sum in `g` (p d >= p² values, free
+        // here), its weight in `batch_w`.
+        let batch = self.batch;
+        let mut batches = Batches::new((older.len() + newer.len()) / stride, batch, self.horizon);
+        let acc = &mut out.g[..if batch > 1 { pp } else { 0 }];
+        acc.fill(0.0);
+        let mut batch_w = 0.0;
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
             for i in 0..p {
@@ -281,11 +300,6 @@ impl InstrumentedWindows {
                     block[jj * p + i] = s;
                 }
             }
-            for a in 0..pp {
-                for b in 0..pp {
-                    score_cov[a * pp + b] += block[a] * block[b];
-                }
-            }
             let mut weight = 0.0;
             for xj in x.chunks_exact(k) {
                 for a in 0..k {
@@ -296,8 +310,31 @@ impl InstrumentedWindows {
                     weight += xj[a] * ha;
                 }
             }
-            sum_w += weight;
-            sum_w2 += weight * weight;
+            if batch == 1 {
+                for a in 0..pp {
+                    for b in 0..pp {
+                        score_cov[a * pp + b] += block[a] * block[b];
+                    }
+                }
+                sum_w += weight;
+                sum_w2 += weight * weight;
+                continue;
+            }
+            for (c, &v) in acc.iter_mut().zip(block.iter()) {
+                *c += v;
+            }
+            batch_w += weight;
+            if let Some(f) = batches.close() {
+                for a in 0..pp {
+                    for b in 0..pp {
+                        score_cov[a * pp + b] += f * acc[a] * acc[b];
+                    }
+                }
+                sum_w += batch_w;
+                sum_w2 += batch_w * batch_w;
+                acc.fill(0.0);
+                batch_w = 0.0;
+            }
         }
         (sum_w, sum_w2)
     }
@@ -311,7 +348,8 @@ impl InstrumentedWindows {
     /// Ω_θ = c_h · B/(B − d) · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
     /// ```
     ///
-    /// with the same factors as the score covariance of [`estimate`](Self::estimate). For a
+    /// with the same factors (and the same batches, see [`with_batch`](Self::with_batch)) as
+    /// the score covariance of [`estimate`](Self::estimate). For a
     /// direction `T` (`d × p`), the score covariance of `estimate` is the image of `Ω_θ`
     /// under `vec(G) ↦ vec(sym(G T))`; for `p = 1` the variance of `(Θ̂ − Θ) T` is
     /// `Tᵀ Ω_θ T`, for every `T` at once (what a certificate over a region of states needs).
@@ -366,6 +404,12 @@ impl InstrumentedWindows {
         let stride = lay.stride();
         let (older, newer) = self.window_blocks(w);
         let (theta, qa) = (&out.theta[..p * d], &out.qa[..k * d]);
+        // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
+        // estimate; `stride >= p d` values).
+        let batch = self.batch;
+        let mut batches = Batches::new(blocks, batch, self.horizon);
+        let acc = &mut out.sums[..if batch > 1 { n } else { 0 }];
+        acc.fill(0.0);
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()]);
             for i in 0..p {
@@ -384,10 +428,24 @@ impl InstrumentedWindows {
                 }
             }
             let g = &out.g[..n];
-            for a in 0..n {
-                for b in a..n {
-                    cov[a * n + b] += g[a] * g[b];
+            if batch == 1 {
+                for a in 0..n {
+                    for b in a..n {
+                        cov[a * n + b] += g[a] * g[b];
+                    }
                 }
+                continue;
+            }
+            for (c, &v) in acc.iter_mut().zip(g) {
+                *c += v;
+            }
+            if let Some(f) = batches.close() {
+                for a in 0..n {
+                    for b in a..n {
+                        cov[a * n + b] += f * acc[a] * acc[b];
+                    }
+                }
+                acc.fill(0.0);
             }
         }
         for a in 0..n {
@@ -395,9 +453,8 @@ impl InstrumentedWindows {
                 cov[a * n + b] = cov[b * n + a];
             }
         }
-        let hf = self.horizon as f64;
-        let overlap = 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
-        let scale = overlap * blocks as f64 / (blocks - d) as f64;
+        let batches = blocks.div_ceil(batch);
+        let scale = overlap_factor(batch, self.horizon) * batches as f64 / (batches - d) as f64;
         for v in cov.iter_mut() {
             *v *= scale;
         }

@@ -112,8 +112,9 @@
 //!   `b = 4, 8` and the power cell's from 3.92 to 2.06 and 1.42, but the spending rises (1.78
 //!   to 2.05, fewer degrees of freedom), so the ratios are 2.20 and 2.22 (from 2.83) and 3.53
 //!   and 2.70 (from 6.21); every batched cell, down to the smallest window each setting
-//!   accepts, opened falsely in at most 1 of 1000 runs. Without sensor noise `b = 1` is
-//!   tighter (the `b = 4` cell at `M = 65`: 1.73).
+//!   accepts, opened falsely in at most 1 of 1000 runs. The shortest windows hold few
+//!   batches, so decisions can come later (the power cell's median time 3.19 s at `b = 4`,
+//!   6.19 s at `b = 8`). Without sensor noise `b = 1` is tighter.
 //! * Sensor noise, the lag-one cross products of neighbouring blocks added with weight one
 //!   (unbiased in expectation for the triangular and the telescoping correlation; no overlap
 //!   factor, a third of the effective blocks): 1.56 and 2.13, but the sensor cell opened

@@ -208,22 +208,29 @@ fn a_contracting_nonlinear_loop_is_certified_with_its_region() {
     assert!(opened >= 9, "opened in {opened} of 10 runs");
 }
 
+/// 200 columns with p = 1, d = 3 (two features and one input) from a logistic map:
+/// `(z, Δy)` with `Δy = 0.8 z₀ − 0.3 z₁ + 0.5 z₂ + noise`.
+fn logistic_columns() -> Vec<([f64; 3], f64)> {
+    let mut x = 0.37f64;
+    let mut step = || {
+        x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
+        x - 0.5
+    };
+    (0..200)
+        .map(|_| {
+            let z = [step(), step(), step()];
+            (z, 0.8 * z[0] - 0.3 * z[1] + 0.5 * z[2] + 0.1 * step())
+        })
+        .collect()
+}
+
 #[test]
 fn the_coefficient_covariance_equals_a_batch_recompute() {
     // Random columns with p = 1, d = 3 (two features and one input), J = 2.
     let mut w = InstrumentedWindows::with_regressors(1, 3, 2, 1, 2, &[20, 40]).expect("valid");
-    let mut cols = Vec::new();
-    let mut x = 0.37f64;
-    for _ in 0..200 {
-        let mut z = [0.0; 3];
-        for v in &mut z {
-            x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
-            *v = x - 0.5;
-        }
-        x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
-        let dy = [0.8 * z[0] - 0.3 * z[1] + 0.5 * z[2] + 0.1 * (x - 0.5)];
-        w.push_column(&z, &dy);
-        cols.push((z, dy[0]));
+    let cols = logistic_columns();
+    for (z, dy) in &cols {
+        w.push_column(z, &[*dy]);
     }
     let mut est = WindowEstimate::with_regressors(1, 3, 2);
     let t = [1.0, 0.4, -1.2];
@@ -288,17 +295,9 @@ fn the_coefficient_covariance_follows_the_batches_of_the_score_covariance() {
         w.with_batch(batch).expect("valid batch")
     };
     let (mut w1, mut w3) = (build(1), build(3));
-    let mut x = 0.37f64;
-    for _ in 0..200 {
-        let mut z = [0.0; 3];
-        for v in &mut z {
-            x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
-            *v = x - 0.5;
-        }
-        x = (3.91 * x * (1.0 - x)).clamp(1e-6, 1.0 - 1e-6);
-        let dy = [0.8 * z[0] - 0.3 * z[1] + 0.5 * z[2] + 0.1 * (x - 0.5)];
-        w1.push_column(&z, &dy);
-        w3.push_column(&z, &dy);
+    for (z, dy) in logistic_columns() {
+        w1.push_column(&z, &[dy]);
+        w3.push_column(&z, &[dy]);
     }
     let t = [1.0, 0.4, -1.2];
     let mut scores = Vec::new();

@@ -347,6 +347,16 @@ fn the_configuration_says_what_is_valid() {
     cfg.gain = vec![0.0; 4];
     let err = Certifier::new(cfg).unwrap_err();
     assert!(err.to_string().contains("one output"), "{err}");
+    // Batches of blocks apply to the linear calibrated certificate (smallest window
+    // h (4 (p + m + 1) + 1) = 65 at b = 4); the nonlinear certificate keeps blocks of h.
+    let batched = |window| {
+        let mut cfg = config(-1.0, 0.05, window, 3);
+        cfg.calibration = cfg.calibration.map(|c| Calibration { batch_blocks: 4, ..c });
+        Certifier::new(cfg)
+    };
+    assert!(batched(65).is_ok());
+    let err = batched(60).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 65"), "{err}");
 }
 
 proptest! {

@@ -44,7 +44,9 @@ pub struct Calibration {
     /// Batches of `b` blocks have `b` times fewer boundaries, at the price of `b` times fewer
     /// degrees of freedom and a window at least `h (b (p + m + 1) + 1)` columns long
     /// ([`smallest_window`](Self::smallest_window)). `cargo xtask validity` measures `b = 4`
-    /// on the sensor-noise cells (VALIDITY.md); without sensor noise `b = 1` is tighter.
+    /// and `8` on the sensor-noise cells and at their smallest windows (VALIDITY.md); without sensor noise `b = 1` is tighter. It
+    /// applies to the linear calibrated certificate and its coupling bounds; the nonlinear
+    /// certificate keeps batches of one block.
     #[serde(default = "default_batch", skip_serializing_if = "is_default_batch")]
     pub batch_blocks: usize,
 }

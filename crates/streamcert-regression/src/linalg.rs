@@ -141,9 +141,9 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 mod eigen;
 
-pub use eigen::{eig_work_len, sym_eig_extremes, sym_eig_max};
+pub use eigen::{eig_work_len, psd_eig_extremes, sym_eig_extremes, sym_eig_max};
 #[cfg(test)]
-use eigen::{tridiagonal_extremes, tridiagonal_ql};
+use eigen::{tridiagonal_extremes_for_test as tridiagonal_extremes, tridiagonal_ql};
 
 /// Spectral norm `‖K‖₂` of an `r × c` row-major matrix: `√λ_max(Kᵀ K)`. Allocates (it is
 /// meant for configuration time, not the hot path).
@@ -226,6 +226,38 @@ mod tests {
         }
 
         #[test]
+        fn gram_extremes_start_at_zero_and_still_match_the_dense_solver(
+            n in 1usize..24,
+            cols in 1usize..48,
+            v in prop::collection::vec(-2.0f64..2.0, 24 * 48),
+            decay in 0.0f64..4.0,
+            indefinite in any::<bool>(),
+        ) {
+            // Gram matrices Σ z zᵀ, rank-deficient when cols < n, with a spread of column
+            // scales down to 10⁻⁴ (clusters of small eigenvalues); with `indefinite` a
+            // multiple of I is subtracted, so the checked start at 0⁻ is inside the spectrum
+            // and the run must restart from Gershgorin's bound.
+            let z = DMatrix::from_fn(n, cols, |i, j| v[i * 48 + j] * 10f64.powf(-decay * i as f64 / n as f64));
+            let mut g = &z * z.transpose();
+            if indefinite {
+                g -= DMatrix::identity(n, n) * (0.5 * g.diagonal().max());
+            }
+            let a: Vec<f64> = (0..n * n).map(|k| g[(k / n, k % n)]).collect();
+            let mut work = vec![0.0; eig_work_len(n)];
+            let (lo, hi) = psd_eig_extremes(&a, n, &mut work);
+            let general = sym_eig_extremes(&a, n, &mut work);
+            // λ_max's run is untouched; below n = 10 the whole result is.
+            prop_assert_eq!(hi.to_bits(), general.1.to_bits());
+            if n < 10 {
+                prop_assert_eq!(lo.to_bits(), general.0.to_bits());
+            }
+            let eig = g.symmetric_eigen().eigenvalues;
+            let scale = 1.0 + eig.amax();
+            prop_assert!((lo - eig.min()).abs() < 1e-10 * scale, "{lo} vs {}", eig.min());
+            prop_assert!((hi - eig.max()).abs() < 1e-10 * scale, "{hi} vs {}", eig.max());
+        }
+
+        #[test]
         fn a_value_that_is_not_finite_gives_nan_extremes(
             a in (1usize..24).prop_flat_map(sym),
             at in any::<prop::sample::Index>(),
@@ -241,6 +273,8 @@ mod tests {
             let mut work = vec![0.0; eig_work_len(n)];
             let (lo, hi) = sym_eig_extremes(&a, n, &mut work);
             prop_assert!(!(lo.is_finite() && hi.is_finite()), "n = {n}: {lo}, {hi}");
+            let (plo, phi) = psd_eig_extremes(&a, n, &mut work);
+            prop_assert!(!(plo.is_finite() && phi.is_finite()), "n = {n}: {plo}, {phi}");
             let top = sym_eig_max(&a, n, &mut work);
             prop_assert!(!top.is_finite() || top.to_bits() == hi.to_bits(), "n = {n}: {top}");
         }

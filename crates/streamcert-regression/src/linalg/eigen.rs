@@ -40,6 +40,25 @@ pub fn sym_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
     }
 }
 
+/// [`sym_eig_extremes`] for a matrix the caller knows to be positive semi-definite in exact
+/// arithmetic (a Gram matrix `Σ z zᵀ`): the same contract and, below `n = 10`, the same
+/// result bit for bit. From `n = 10` Laguerre's iteration for `λ_min` starts at `0⁻`
+/// (`λ = −10⁻¹²` on the matrix scaled to unit size) instead of Gershgorin's lower bound,
+/// which for an ill-conditioned Gram matrix lies far below a cluster of small eigenvalues
+/// that Laguerre then approaches linearly (about 10 iterations at `n = 20` on the `p = m = 10`
+/// bench's stream against 5 from `0⁻`). The start is checked, not assumed: when rounding has
+/// left an eigenvalue of the reduced matrix below it (a sign change in the `LDLᵀ` pivots of
+/// `T − λ I`), that run restarts from Gershgorin's bound, which is then the arithmetic of
+/// [`sym_eig_extremes`] exactly.
+#[must_use]
+#[inline(always)]
+pub fn psd_eig_extremes(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
+    if n < FULL_ROWS_FROM {
+        return sym_eig_extremes(a, n, work);
+    }
+    sym_eig_laguerre(a, n, work, Want::BothPsd)
+}
+
 /// The largest eigenvalue of the symmetric `n × n` matrix `a` (upper triangle read), with
 /// `work` as in [`sym_eig_extremes`]: its `.1`, bit for bit, but from `n = 10` the smallest
 /// eigenvalue's Laguerre iteration is skipped (about a quarter of the eigenvalue work of the
@@ -50,13 +69,24 @@ pub fn sym_eig_max(a: &[f64], n: usize, work: &mut [f64]) -> f64 {
     if n < FULL_ROWS_FROM {
         return sym_eig_extremes(a, n, work).1;
     }
-    sym_eig_laguerre(a, n, work, false).1
+    sym_eig_laguerre(a, n, work, Want::Max).1
 }
 
-/// From `n = 10`: both triangles, the reduction, Laguerre for `λ_max` and, with `want_min`,
-/// for `λ_min` (NaN otherwise); QL for every eigenvalue when Laguerre does not settle.
+/// Which extremes [`sym_eig_laguerre`] computes, and from where `λ_min`'s iteration starts.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Want {
+    /// `λ_max` only (`λ_min` is NaN in the result).
+    Max,
+    /// Both, each from Gershgorin's bound.
+    Both,
+    /// Both, `λ_min` from `0⁻` (positive semi-definite input, see [`psd_eig_extremes`]).
+    BothPsd,
+}
+
+/// From `n = 10`: both triangles, the reduction, Laguerre for the extremes `want` asks for;
+/// QL for every eigenvalue when Laguerre does not settle.
 #[inline(never)]
-fn sym_eig_laguerre(a: &[f64], n: usize, work: &mut [f64], want_min: bool) -> (f64, f64) {
+fn sym_eig_laguerre(a: &[f64], n: usize, work: &mut [f64], want: Want) -> (f64, f64) {
     let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
     let (d, e) = rest.split_at_mut(n);
     // Both triangles from the upper one: each row's upper part in one copy, its lower part
@@ -69,7 +99,7 @@ fn sym_eig_laguerre(a: &[f64], n: usize, work: &mut [f64], want_min: bool) -> (f
     }
     tridiagonalise_full(w, n, d, e);
     // e[1..] holds the sub-diagonal; the extremes by Laguerre, QL if it does not converge.
-    if let Some(pair) = tridiagonal_extremes(d, &e[1..], want_min) {
+    if let Some(pair) = tridiagonal_extremes(d, &e[1..], want) {
         return pair;
     }
     ql_extremes(d, e)
@@ -94,7 +124,7 @@ fn ql_extremes(d: &mut [f64], e: &mut [f64]) -> (f64, f64) {
 #[inline(never)]
 fn sym_eig_extremes_iterative(a: &[f64], n: usize, work: &mut [f64]) -> (f64, f64) {
     if n >= FULL_ROWS_FROM {
-        return sym_eig_laguerre(a, n, work, true);
+        return sym_eig_laguerre(a, n, work, Want::Both);
     }
     let (w, rest) = work[..eig_work_len(n)].split_at_mut(n * n);
     let (d, e) = rest.split_at_mut(n);
@@ -233,8 +263,9 @@ fn tridiagonalise_full(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
 /// 100 steps (the caller then uses QL). About 10× cheaper than QL for all eigenvalues at
 /// `n = 20`, whose square roots and divisions dominate it.
 ///
-/// Without `want_min` only `λ_max` is computed (`λ_min` is NaN in the result).
-pub(super) fn tridiagonal_extremes(d: &[f64], e: &[f64], want_min: bool) -> Option<(f64, f64)> {
+/// With [`Want::Max`] only `λ_max` is computed (`λ_min` is NaN in the result); with
+/// [`Want::BothPsd`] `λ_min`'s run starts at `0⁻` when that is above `−λ_min` (checked).
+fn tridiagonal_extremes(d: &[f64], e: &[f64], want: Want) -> Option<(f64, f64)> {
     // A value that is not finite goes to QL, which carries it into the result (`f64::max`
     // would skip a NaN here and report a number).
     if !d.iter().chain(e).all(|v| v.is_finite()) {
@@ -251,29 +282,43 @@ pub(super) fn tridiagonal_extremes(d: &[f64], e: &[f64], want_min: bool) -> Opti
     // The extreme on the upper side of (sign · d, e): sign = 1 gives λ_max, −1 gives −λ_min.
     // Both runs advance in the same loop (independent chains of divisions, which the
     // processor overlaps); each does exactly the arithmetic it would do alone.
-    if want_min {
-        let [hi, lo] = laguerre_tops(d, e, inv, [1.0, -1.0])?;
-        Some((-lo * scale, hi * scale))
-    } else {
-        let [hi] = laguerre_tops(d, e, inv, [1.0])?;
+    if want == Want::Max {
+        let [hi] = laguerre_tops(d, e, inv, [1.0], [false])?;
         Some((f64::NAN, hi * scale))
+    } else {
+        let [hi, lo] = laguerre_tops(d, e, inv, [1.0, -1.0], [false, want == Want::BothPsd])?;
+        Some((-lo * scale, hi * scale))
     }
 }
 
+/// [`tridiagonal_extremes`] for a test: `want_min` selects [`Want::Both`] or [`Want::Max`].
+#[cfg(test)]
+pub(super) fn tridiagonal_extremes_for_test(
+    d: &[f64],
+    e: &[f64],
+    want_min: bool,
+) -> Option<(f64, f64)> {
+    tridiagonal_extremes(d, e, if want_min { Want::Both } else { Want::Max })
+}
+
 /// Laguerre's iteration for [`tridiagonal_extremes`] on the matrix scaled by `inv`, one run
-/// per sign, advanced side by side: each run starts at Gershgorin's bound (plus `1e-12`) and
+/// per sign, advanced side by side: each run starts at Gershgorin's bound (plus `1e-12`), or
+/// at `1e-12` where `from_zero` says so (a positive semi-definite matrix's `−λ_min ≤ 0`), and
 /// stops on its own test; `None` when any run does not settle in 100 steps or takes a step
-/// that is not finite and positive. The reciprocal `1/q_{i−1}` of an entry is the one the
-/// previous entry computed (one division per entry).
+/// that is not finite and positive. A run started at `1e-12` whose first pass meets a pivot
+/// `q_i ≤ 0` (the start is not above the spectrum) starts again from Gershgorin's bound. The
+/// reciprocal `1/q_{i−1}` of an entry is the one the previous entry computed (one division
+/// per entry).
 fn laguerre_tops<const S: usize>(
     d: &[f64],
     e: &[f64],
     inv: f64,
     signs: [f64; S],
+    from_zero: [bool; S],
 ) -> Option<[f64; S]> {
     let n = d.len();
     let nf = n as f64;
-    let mut x = signs.map(|sign| {
+    let gershgorin = signs.map(|sign| {
         let mut x = f64::NEG_INFINITY;
         for i in 0..n {
             let off =
@@ -282,6 +327,15 @@ fn laguerre_tops<const S: usize>(
         }
         x + 1e-12
     });
+    let mut x = gershgorin;
+    // Runs whose start is still to be checked (started at 1e-12 below Gershgorin's bound).
+    let mut unchecked = [false; S];
+    for s in 0..S {
+        if from_zero[s] && 1e-12 < x[s] {
+            x[s] = 1e-12;
+            unchecked[s] = true;
+        }
+    }
     let mut done = [false; S];
     for _ in 0..100 {
         // Per run: q_{i−1}'s derivatives and reciprocal, G, H, and whether an entry reached an
@@ -316,6 +370,12 @@ fn laguerre_tops<const S: usize>(
         }
         for s in 0..S {
             if done[s] {
+                continue;
+            }
+            if std::mem::take(&mut unchecked[s]) && hit[s] {
+                // The start is inside the spectrum: Gershgorin's bound instead (this pass's
+                // step is not taken).
+                x[s] = gershgorin[s];
                 continue;
             }
             if hit[s] {

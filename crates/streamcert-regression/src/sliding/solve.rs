@@ -70,7 +70,7 @@ impl SlidingRegression {
             out.status = EstimateStatus::WarmingUp { columns: n, needed: self.cfg.min_columns };
             return out;
         }
-        let (lo, hi) = linalg::sym_eig_extremes(&self.g, d, &mut self.work);
+        let (lo, hi) = linalg::psd_eig_extremes(&self.g, d, &mut self.work);
         // Full window (every sample after warm-up): the reciprocal computed at construction.
         let inv_n = if n == self.cfg.window { self.inv_window } else { 1.0 / n as f64 };
         out.gram_lambda_min = lo * inv_n;

@@ -140,6 +140,7 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 }
 
 mod eigen;
+pub(crate) mod lanes;
 
 pub use eigen::{eig_work_len, psd_eig_extremes, sym_eig_extremes, sym_eig_max};
 #[cfg(test)]

@@ -2,7 +2,10 @@
 //! tridiagonalisation with implicit QL up to `n = 9`, and from `n = 10` the reduction on both
 //! triangles with Laguerre's iteration for the two extremes only.
 
-use super::{dot, fast_hypot};
+mod reduce;
+
+use super::fast_hypot;
+use reduce::tridiagonalise_full;
 
 /// Scratch length [`sym_eig_extremes`] needs for an `n × n` matrix: `n² + 2n`.
 #[must_use]
@@ -197,60 +200,6 @@ fn tridiagonalise(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
 /// original path is kept, so the results for the paper's and the validity study's matrices
 /// (up to the `9 × 9` score covariance of `p = 3`) stay bit for bit what they were.
 const FULL_ROWS_FROM: usize = 10;
-
-/// [`tridiagonalise`] on a matrix held in both triangles of `a` (the same Householder steps,
-/// `tred1`): at step `i` with `u` the scaled row `i` (first `i` entries), `p = A u / h` by row
-/// dot products, `q = p − (uᵀp / 2h) u`, and the symmetric rank-two update
-/// `A ← A − u qᵀ − q uᵀ` on the leading `i × i` block, row by row.
-fn tridiagonalise_full(a: &mut [f64], n: usize, d: &mut [f64], e: &mut [f64]) {
-    for i in (1..n).rev() {
-        let l = i - 1;
-        let (head, tail) = a.split_at_mut(i * n);
-        let u = &mut tail[..=l];
-        let mut h = 0.0;
-        if l > 0 {
-            let scale: f64 = u.iter().map(|v| v.abs()).sum();
-            if scale == 0.0 {
-                e[i] = u[l];
-            } else {
-                let inv = 1.0 / scale;
-                for v in u.iter_mut() {
-                    *v *= inv;
-                }
-                h = dot(u, u);
-                let f = u[l];
-                let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
-                e[i] = scale * g;
-                h -= f * g;
-                u[l] = f - g;
-                let mut f = 0.0;
-                for j in 0..=l {
-                    e[j] = dot(&head[j * n..j * n + l + 1], u) / h;
-                    f += e[j] * u[j];
-                }
-                let hh = f / (h + h);
-                for j in 0..=l {
-                    e[j] -= hh * u[j];
-                }
-                let q = &e[..=l];
-                for j in 0..=l {
-                    let (uj, qj) = (u[j], q[j]);
-                    let row = &mut head[j * n..j * n + l + 1];
-                    for ((r, &uk), &qk) in row.iter_mut().zip(u.iter()).zip(q) {
-                        *r -= uj * qk + qj * uk;
-                    }
-                }
-            }
-        } else {
-            e[i] = u[l];
-        }
-        d[i] = h;
-    }
-    e[0] = 0.0;
-    for i in 0..n {
-        d[i] = a[i * n + i];
-    }
-}
 
 /// The smallest and largest eigenvalues of the symmetric tridiagonal matrix with diagonal `d`
 /// and off-diagonal `e` (`d.len() − 1` entries), without the others: Laguerre's iteration on

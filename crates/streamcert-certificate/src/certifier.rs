@@ -384,17 +384,18 @@ impl Certifier {
         }
         let (rms, lambda_min) = (est.rms_residual, est.gram_lambda_min);
         // J_cl = J_obs + B_obs K (views of exactly p × d and m × p, so literal dimensions
-        // leave no bounds checks), then its symmetric part. Row i of J_cl accumulates the rows
-        // of K along the contiguous row (each entry sums over l in order, as a dot product
-        // would, so the arithmetic is that of `J_obs[i, j] + Σ_l B_obs[i, l] K[l, j]`).
+        // leave no bounds checks), then its symmetric part.
+        // Row i accumulates the rows of K along its contiguous entries, so wide rows
+        // vectorise; each entry still sums over l in order, as `J_obs[i, j] + Σ_l B_obs[i, l]
+        // K[l, j]` would.
         let (theta, k) = (&est.theta[..p * d], &self.cfg.gain[..m * p]);
         let jcl = &mut self.jcl[..p * p];
-        for (row, th) in jcl.chunks_exact_mut(p).zip(theta.chunks_exact(d)) {
-            let (j_obs, b_obs) = th.split_at(p);
-            row.copy_from_slice(j_obs);
-            for (&b, k_row) in b_obs.iter().zip(k.chunks_exact(p)) {
-                for (v, &kj) in row.iter_mut().zip(k_row) {
-                    *v += b * kj;
+        for i in 0..p {
+            jcl[i * p..(i + 1) * p].copy_from_slice(&theta[i * d..i * d + p]);
+            for l in 0..m {
+                let b = theta[i * d + p + l];
+                for j in 0..p {
+                    jcl[i * p + j] += b * k[l * p + j];
                 }
             }
         }

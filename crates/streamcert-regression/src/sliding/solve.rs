@@ -98,11 +98,13 @@ impl SlidingRegression {
                 theta[1] = (a * c1 - b * c0) * inv;
             }
             Estimator::Ordinary => {
+                // The lower triangle and diagonal of G + λI (all the factorisation reads),
+                // from G's upper triangle.
                 for i in 0..d {
-                    for j in 0..d {
-                        let v = if j >= i { self.g[i * d + j] } else { self.g[j * d + i] };
-                        self.work[i * d + j] = v + if i == j { ridge } else { 0.0 };
+                    for j in 0..i {
+                        self.work[i * d + j] = self.g[j * d + i];
                     }
+                    self.work[i * d + i] = self.g[i * d + i] + ridge;
                 }
                 if !linalg::cholesky_in_place(&mut self.work, d) {
                     out.status =

@@ -36,13 +36,14 @@ impl WithSimd for Reduce<'_> {
         // One power-of-two scaling of the whole matrix (exact) to entries of unit size, so no
         // `‖u‖²` overflows or underflows and the steps need no scaling of their own.
         let big = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        // ⌊log₂ big⌋ from the exponent bits (a subnormal `big` reads as −1023 and is clamped).
         let exp = if big.is_finite() && big > 0.0 {
-            big.log2().floor().clamp(-1000.0, 1000.0) as i32
+            (((big.to_bits() >> 52) & 0x7ff) as i32 - 1023).clamp(-1000, 1000)
         } else {
             0
         };
         if exp != 0 {
-            let down = 2f64.powi(-exp);
+            let down = pow2(-exp);
             for v in a.iter_mut() {
                 *v *= down;
             }
@@ -73,7 +74,7 @@ impl WithSimd for Reduce<'_> {
             }
             rank_two_update(simd, head, n, u, p);
         }
-        let up = 2f64.powi(exp);
+        let up = pow2(exp);
         e[0] = 0.0;
         for v in &mut e[1..n] {
             *v *= up;
@@ -82,6 +83,12 @@ impl WithSimd for Reduce<'_> {
             d[i] = a[i * n + i] * up;
         }
     }
+}
+
+/// `2^e` for `|e| ≤ 1000`, from its bits.
+#[inline(always)]
+fn pow2(e: i32) -> f64 {
+    f64::from_bits(((1023 + e) as u64) << 52)
 }
 
 /// `p ← Σ_k u_k A[k, ..k']` over the rows `k < k' = u.len()` of `head` (stride `n`), each

@@ -98,15 +98,7 @@ impl SlidingRegression {
                 theta[1] = (a * c1 - b * c0) * inv;
             }
             Estimator::Ordinary => {
-                // The lower triangle and diagonal of G + λI (all the factorisation reads),
-                // from G's upper triangle.
-                for i in 0..d {
-                    for j in 0..i {
-                        self.work[i * d + j] = self.g[j * d + i];
-                    }
-                    self.work[i * d + i] = self.g[i * d + i] + ridge;
-                }
-                if !linalg::cholesky_in_place(&mut self.work, d) {
+                if !self.factor_ridge(d) {
                     out.status =
                         EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
                     return out;
@@ -160,6 +152,22 @@ impl SlidingRegression {
         out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
         out.theta = &self.theta;
         out
+    }
+
+    /// The Cholesky factor `L` of `A = G + λI` in `work` (lower triangle; the strict upper
+    /// triangle is not written): `false` when `A` is not numerically positive definite. Out of
+    /// line, so the inlined `p = m = 1` path stays small.
+    #[inline(never)]
+    fn factor_ridge(&mut self, d: usize) -> bool {
+        // The lower triangle and diagonal of G + λI (all the factorisation reads), from G's
+        // upper triangle.
+        for i in 0..d {
+            for j in 0..i {
+                self.work[i * d + j] = self.g[j * d + i];
+            }
+            self.work[i * d + i] = self.g[i * d + i] + self.cfg.ridge;
+        }
+        linalg::cholesky_in_place(&mut self.work, d)
     }
 
     /// The ordinary solve of a wide regression (`d >= WIDE_FROM`), after the Cholesky factor

@@ -1,6 +1,7 @@
 //! Extreme eigenvalues of small symmetric matrices: closed forms for `n <= 2`, Householder
 //! tridiagonalisation with implicit QL up to `n = 9`, and from `n = 10` the reduction on both
-//! triangles with Laguerre's iteration for the two extremes only.
+//! triangles in the processor's vectors ([`reduce`], the same bits on every width) with
+//! Laguerre's iteration for the two extremes only.
 
 mod reduce;
 

@@ -13,6 +13,8 @@ use streamcert::regression::{
 use crate::support::{run as run_scenario, scalar};
 use streamcert::dynamics::{LinearScenario, Process};
 
+mod side_by_side;
+
 type Sample = (f64, Vec<f64>, Vec<f64>);
 
 /// A random stream with non-uniform sampling: AR(1) outputs and inputs around `offset`.

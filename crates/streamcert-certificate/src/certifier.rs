@@ -367,7 +367,17 @@ impl Certifier {
     ) -> (Option<Ready>, usize, Option<NotCertified>) {
         let d = p + m;
         let residual_source = self.cfg.residuals;
-        let est = self.regression.estimate();
+        // From p = 10 the regression forms sym Ĵ_cl itself, after its solve, so the two
+        // eigenvalue problems run side by side (the same numbers as one after the other).
+        let (est, wide_top) = if p >= 10 {
+            let (gain, jcl) = (&self.cfg.gain[..m * p], &mut self.jcl[..p * p]);
+            let (sym, eig_work) = (&mut self.work[..p * p], &mut self.eig_work[..]);
+            self.regression.estimate_and_sym_max(sym, p, eig_work, |theta, sym| {
+                form_sym_jcl(theta, gain, jcl, sym, p, m);
+            })
+        } else {
+            (self.regression.estimate(), f64::NAN)
+        };
         let columns = est.columns;
         let blocked = match est.status {
             EstimateStatus::Ready => None,
@@ -383,21 +393,9 @@ impl Certifier {
             return (None, columns, blocked);
         }
         let (rms, lambda_min) = (est.rms_residual, est.gram_lambda_min);
-        // J_cl = J_obs + B_obs K (views of exactly p × d and m × p, so literal dimensions
-        // leave no bounds checks), then its symmetric part.
-        // Row i accumulates the rows of K along its contiguous entries, so wide rows
-        // vectorise; each entry still sums over l in order, as `J_obs[i, j] + Σ_l B_obs[i, l]
-        // K[l, j]` would.
-        let (theta, k) = (&est.theta[..p * d], &self.cfg.gain[..m * p]);
-        let jcl = &mut self.jcl[..p * p];
-        for i in 0..p {
-            jcl[i * p..(i + 1) * p].copy_from_slice(&theta[i * d..i * d + p]);
-            for l in 0..m {
-                let b = theta[i * d + p + l];
-                for j in 0..p {
-                    jcl[i * p + j] += b * k[l * p + j];
-                }
-            }
+        if p < 10 {
+            let (gain, jcl) = (&self.cfg.gain[..m * p], &mut self.jcl[..p * p]);
+            form_sym_jcl(est.theta, gain, jcl, &mut self.work[..p * p], p, m);
         }
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.
         let scalar_theta = (d == 2).then(|| [est.theta[0], est.theta[1]]);
@@ -422,12 +420,8 @@ impl Certifier {
                 let _ = amb.push(r);
             }
         }
-        for i in 0..p {
-            for j in i..p {
-                self.work[i * p + j] = 0.5 * (self.jcl[i * p + j] + self.jcl[j * p + i]);
-            }
-        }
-        let lambda_max = linalg::sym_eig_max(&self.work, p, &mut self.eig_work);
+        let lambda_max =
+            if p >= 10 { wide_top } else { linalg::sym_eig_max(&self.work, p, &mut self.eig_work) };
         let beta_hat = -lambda_max;
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();
@@ -435,6 +429,31 @@ impl Certifier {
             return (None, columns, Some(NotCertified::InsufficientExcitation));
         }
         (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None)
+    }
+}
+
+/// `Ĵ_cl = Ĵ_obs + B̂_obs K` into `jcl` (`p × p`) from `Θ̂ = [Ĵ_obs B̂_obs]` (`p × (p + m)`)
+/// and the gain `K` (`m × p`), then the upper triangle of `sym Ĵ_cl = (Ĵ_cl + Ĵ_clᵀ)/2`
+/// into `sym`. Row `i` of `Ĵ_cl` accumulates the rows of `K` along its contiguous entries,
+/// so wide rows vectorise; each entry still sums over `l` in order, as
+/// `J_obs[i, j] + Σ_l B_obs[i, l] K[l, j]` would.
+#[inline(always)]
+fn form_sym_jcl(theta: &[f64], k: &[f64], jcl: &mut [f64], sym: &mut [f64], p: usize, m: usize) {
+    let d = p + m;
+    let (theta, k, jcl, sym) = (&theta[..p * d], &k[..m * p], &mut jcl[..p * p], &mut sym[..p * p]);
+    for i in 0..p {
+        jcl[i * p..(i + 1) * p].copy_from_slice(&theta[i * d..i * d + p]);
+        for l in 0..m {
+            let b = theta[i * d + p + l];
+            for j in 0..p {
+                jcl[i * p + j] += b * k[l * p + j];
+            }
+        }
+    }
+    for i in 0..p {
+        for j in i..p {
+            sym[i * p + j] = 0.5 * (jcl[i * p + j] + jcl[j * p + i]);
+        }
     }
 }
 

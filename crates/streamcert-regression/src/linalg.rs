@@ -142,7 +142,9 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 mod eigen;
 pub(crate) mod lanes;
 
-pub use eigen::{eig_work_len, psd_eig_extremes, sym_eig_extremes, sym_eig_max};
+pub use eigen::{
+    eig_work_len, psd_eig_extremes, psd_extremes_and_sym_max, sym_eig_extremes, sym_eig_max,
+};
 #[cfg(test)]
 use eigen::{tridiagonal_extremes_for_test as tridiagonal_extremes, tridiagonal_ql};
 
@@ -256,6 +258,36 @@ mod tests {
             let scale = 1.0 + eig.amax();
             prop_assert!((lo - eig.min()).abs() < 1e-10 * scale, "{lo} vs {}", eig.min());
             prop_assert!((hi - eig.max()).abs() < 1e-10 * scale, "{hi} vs {}", eig.max());
+        }
+
+        #[test]
+        fn the_pair_side_by_side_is_each_alone_bit_for_bit(
+            n in 1usize..24,
+            s in (1usize..24).prop_flat_map(sym),
+            v in prop::collection::vec(-2.0f64..2.0, 24 * 30),
+            cols in 1usize..30,
+            special in 0usize..4,
+        ) {
+            // A Gram matrix (rank-deficient when cols < n) and a symmetric one; sometimes the
+            // symmetric one is zero, NaN somewhere, or huge, so the side-by-side path falls
+            // back to each problem's own.
+            let z = DMatrix::from_fn(n, cols, |i, j| v[i * 30 + j]);
+            let gm = &z * z.transpose();
+            let g: Vec<f64> = (0..n * n).map(|k| gm[(k / n, k % n)]).collect();
+            let m = (s.len() as f64).sqrt() as usize;
+            let mut s = s;
+            match special {
+                1 => s.iter_mut().for_each(|x| *x = 0.0),
+                2 => s[0] = f64::NAN,
+                3 => s.iter_mut().for_each(|x| *x *= 1e300),
+                _ => {}
+            }
+            let (mut wg, mut ws) = (vec![0.0; eig_work_len(n)], vec![0.0; eig_work_len(m)]);
+            let ((lo, hi), top) = psd_extremes_and_sym_max(&g, n, &mut wg, &s, m, &mut ws);
+            let (alo, ahi) = psd_eig_extremes(&g, n, &mut wg);
+            let atop = sym_eig_max(&s, m, &mut ws);
+            prop_assert_eq!((lo.to_bits(), hi.to_bits()), (alo.to_bits(), ahi.to_bits()));
+            prop_assert_eq!(top.to_bits(), atop.to_bits());
         }
 
         #[test]

@@ -104,7 +104,9 @@ impl SlidingRegression {
                     return out;
                 }
                 if d >= WIDE_FROM {
-                    return self.solve_wide(p, d, inv_n, out);
+                    out.rms_residual = self.solve_wide(p, d, inv_n);
+                    out.theta = &self.theta;
+                    return out;
                 }
                 for i in 0..p {
                     let row = &mut self.theta[i * d..(i + 1) * d];
@@ -154,6 +156,71 @@ impl SlidingRegression {
         out
     }
 
+    /// [`estimate`](Self::estimate), and `λ_max` of the symmetric `m × m` matrix that `form`
+    /// writes into `sym` (upper triangle read) from `Θ̂` (`p × d`, row-major), NaN when the
+    /// estimate is not ready (`form` is then not called, or its matrix not used). The
+    /// `Estimate` is bit for bit `estimate()`'s and `λ_max` bit for bit
+    /// [`linalg::sym_eig_max`]'s of the matrix formed. For the ordinary estimator with
+    /// `d, m >= 10` the solve comes first and the Gram matrix's extremes and `λ_max` are then
+    /// computed side by side ([`linalg::psd_extremes_and_sym_max`]); the certifier of a wide
+    /// system forms `sym Ĵ_cl` this way. `sym_work` is at least
+    /// [`linalg::eig_work_len`]`(m)` long. (`Θ̂` is overwritten even when the Gram matrix
+    /// then fails the excitation test; [`residual`](Self::residual) is for ready estimates.)
+    pub fn estimate_and_sym_max(
+        &mut self,
+        sym: &mut [f64],
+        m: usize,
+        sym_work: &mut [f64],
+        form: impl FnOnce(&[f64], &mut [f64]),
+    ) -> (Estimate<'_>, f64) {
+        let (p, inputs) = (self.cfg.outputs, self.cfg.inputs);
+        let (d, n) = (p + inputs, self.col_len);
+        if !(self.cfg.estimator == Estimator::Ordinary
+            && d >= 10
+            && m >= 10
+            && n >= self.cfg.min_columns)
+        {
+            let est = self.estimate();
+            if est.status != EstimateStatus::Ready {
+                return (est, f64::NAN);
+            }
+            form(est.theta, sym);
+            let top = linalg::sym_eig_max(sym, m, sym_work);
+            return (est, top);
+        }
+        let inv_n = if n == self.cfg.window { self.inv_window } else { 1.0 / n as f64 };
+        let mut out = Estimate {
+            status: EstimateStatus::Ready,
+            theta: &[],
+            outputs: p,
+            inputs,
+            rms_residual: f64::NAN,
+            gram_lambda_min: f64::NAN,
+            gram_lambda_max: f64::NAN,
+            columns: n,
+        };
+        let factored = self.factor_ridge(d);
+        let (rms, (lo, hi), top) = if factored {
+            let rms = self.solve_wide(p, d, inv_n);
+            form(&self.theta[..p * d], sym);
+            let (pair, top) =
+                linalg::psd_extremes_and_sym_max(&self.g, d, &mut self.work, sym, m, sym_work);
+            (rms, pair, top)
+        } else {
+            (f64::NAN, linalg::psd_eig_extremes(&self.g, d, &mut self.work), f64::NAN)
+        };
+        out.gram_lambda_min = lo * inv_n;
+        out.gram_lambda_max = hi * inv_n;
+        // The excitation test of `estimate`, then its factorisation's (same status).
+        if !(factored && hi > 0.0 && lo > self.cfg.min_excitation_ratio * hi) {
+            out.status = EstimateStatus::InsufficientExcitation { lambda_min: lo, lambda_max: hi };
+            return (out, f64::NAN);
+        }
+        out.rms_residual = rms;
+        out.theta = &self.theta;
+        (out, top)
+    }
+
     /// The Cholesky factor `L` of `A = G + λI` in `work` (lower triangle; the strict upper
     /// triangle is not written): `false` when `A` is not numerically positive definite. Out of
     /// line, so the inlined `p = m = 1` path stays small.
@@ -181,13 +248,8 @@ impl SlidingRegression {
     ///
     /// (`tr(Θ̂Cᵀ) = tr(C A⁻¹ Cᵀ) = Σ‖y_i‖²`, `tr(Θ̂GΘ̂ᵀ) = tr(CA⁻¹Cᵀ) − λ‖Θ̂‖²`): `O(p d²)`
     /// with no second pass over `G`.
-    fn solve_wide<'a>(
-        &'a mut self,
-        p: usize,
-        d: usize,
-        inv_n: f64,
-        mut out: Estimate<'a>,
-    ) -> Estimate<'a> {
+    /// Returns `RMS(R)`; `Θ̂` is in `theta`.
+    fn solve_wide(&mut self, p: usize, d: usize, inv_n: f64) -> f64 {
         let (l, rdiag) = self.work.split_at_mut(d * d);
         let rdiag = &mut rdiag[..d];
         for a in 0..d {
@@ -221,8 +283,6 @@ impl SlidingRegression {
         }
         let trace: f64 = (0..p).map(|i| self.s[i * p + i]).sum();
         let rss = trace - yy - self.cfg.ridge * tt;
-        out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
-        out.theta = &self.theta;
-        out
+        (rss.max(0.0) * inv_n / p as f64).sqrt()
     }
 }

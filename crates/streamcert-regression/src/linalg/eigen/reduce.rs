@@ -33,55 +33,117 @@ impl WithSimd for Reduce<'_> {
     #[inline(always)]
     fn with_simd<S: Simd>(self, simd: S) {
         let Reduce { a, n, d, e } = self;
-        // One power-of-two scaling of the whole matrix (exact) to entries of unit size, so no
-        // `‖u‖²` overflows or underflows and the steps need no scaling of their own.
-        let big = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
-        // ⌊log₂ big⌋ from the exponent bits (a subnormal `big` reads as −1023 and is clamped).
-        let exp = if big.is_finite() && big > 0.0 {
-            (((big.to_bits() >> 52) & 0x7ff) as i32 - 1023).clamp(-1000, 1000)
-        } else {
-            0
-        };
-        if exp != 0 {
-            let down = pow2(-exp);
-            for v in a.iter_mut() {
-                *v *= down;
-            }
-        }
+        let exp = scale_down(a);
         for i in (1..n).rev() {
-            let l = i - 1;
-            let (head, tail) = a.split_at_mut(i * n);
-            let u = &mut tail[..i];
-            let h = if l > 0 { dot(u, u) } else { 0.0 };
-            // `h == 0`: nothing to annihilate (NaN goes on and carries into the result).
-            if l == 0 || h == 0.0 {
-                e[i] = u[l];
-                continue;
+            step(simd, a, n, e, i);
+        }
+        finish(a, n, d, e, exp);
+    }
+}
+
+/// [`tridiagonalise_full`] of two matrices, their steps alternating (two independent chains
+/// of dependent operations, which the processor overlaps); each result is bit for bit the
+/// one alone.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn tridiagonalise_pair(
+    a: &mut [f64],
+    n: usize,
+    d: &mut [f64],
+    e: &mut [f64],
+    a2: &mut [f64],
+    n2: usize,
+    d2: &mut [f64],
+    e2: &mut [f64],
+) {
+    Arch::new().dispatch(Pair(Reduce { a, n, d, e }, Reduce { a: a2, n: n2, d: d2, e: e2 }));
+}
+
+/// The arguments of [`tridiagonalise_pair`], for [`Arch::dispatch`].
+struct Pair<'a>(Reduce<'a>, Reduce<'a>);
+
+impl WithSimd for Pair<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, simd: S) {
+        let Pair(Reduce { a, n, d, e }, Reduce { a: a2, n: n2, d: d2, e: e2 }) = self;
+        let (exp, exp2) = (scale_down(a), scale_down(a2));
+        let (mut i, mut i2) = (n, n2);
+        while i > 1 || i2 > 1 {
+            if i > 1 {
+                i -= 1;
+                step(simd, a, n, e, i);
             }
-            let f = u[l];
-            let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
-            e[i] = g;
-            let h = h - f * g;
-            u[l] = f - g;
-            let rh = 1.0 / h;
-            let p = &mut e[..i];
-            weighted_rows_of(simd, head, n, u, p);
-            let rv = simd.splat_f64s(rh);
-            in_chunks!(S, p, |_c, v| simd.mul_f64s(v, rv), |_c, v| v * rh);
-            let hh = 0.5 * rh * dot(p, u);
-            for (pj, &uj) in p.iter_mut().zip(u.iter()) {
-                *pj -= hh * uj;
+            if i2 > 1 {
+                i2 -= 1;
+                step(simd, a2, n2, e2, i2);
             }
-            rank_two_update(simd, head, n, u, p);
         }
-        let up = pow2(exp);
-        e[0] = 0.0;
-        for v in &mut e[1..n] {
-            *v *= up;
+        finish(a, n, d, e, exp);
+        finish(a2, n2, d2, e2, exp2);
+    }
+}
+
+/// One power-of-two scaling of the whole matrix (exact) to entries of unit size, so no
+/// `‖u‖²` overflows or underflows and the steps need no scaling of their own; returns the
+/// exponent to scale back by.
+#[inline(always)]
+fn scale_down(a: &mut [f64]) -> i32 {
+    let big = a.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    // ⌊log₂ big⌋ from the exponent bits (a subnormal `big` reads as −1023 and is clamped).
+    let exp = if big.is_finite() && big > 0.0 {
+        (((big.to_bits() >> 52) & 0x7ff) as i32 - 1023).clamp(-1000, 1000)
+    } else {
+        0
+    };
+    if exp != 0 {
+        let down = pow2(-exp);
+        for v in a.iter_mut() {
+            *v *= down;
         }
-        for i in 0..n {
-            d[i] = a[i * n + i] * up;
-        }
+    }
+    exp
+}
+
+/// Step `i` of the reduction: annihilate row `i` left of its sub-diagonal entry.
+#[inline(always)]
+fn step<S: Simd>(simd: S, a: &mut [f64], n: usize, e: &mut [f64], i: usize) {
+    let l = i - 1;
+    let (head, tail) = a.split_at_mut(i * n);
+    let u = &mut tail[..i];
+    let h = if l > 0 { dot(u, u) } else { 0.0 };
+    // `h == 0`: nothing to annihilate (NaN goes on and carries into the result).
+    if l == 0 || h == 0.0 {
+        e[i] = u[l];
+        return;
+    }
+    let f = u[l];
+    let g = if f >= 0.0 { -h.sqrt() } else { h.sqrt() };
+    e[i] = g;
+    let h = h - f * g;
+    u[l] = f - g;
+    let rh = 1.0 / h;
+    let p = &mut e[..i];
+    weighted_rows_of(simd, head, n, u, p);
+    let rv = simd.splat_f64s(rh);
+    in_chunks!(S, p, |_c, v| simd.mul_f64s(v, rv), |_c, v| v * rh);
+    let hh = 0.5 * rh * dot(p, u);
+    for (pj, &uj) in p.iter_mut().zip(u.iter()) {
+        *pj -= hh * uj;
+    }
+    rank_two_update(simd, head, n, u, p);
+}
+
+/// The diagonal and the off-diagonal, scaled back by `2^exp`.
+#[inline(always)]
+fn finish(a: &[f64], n: usize, d: &mut [f64], e: &mut [f64], exp: i32) {
+    let up = pow2(exp);
+    e[0] = 0.0;
+    for v in &mut e[1..n] {
+        *v *= up;
+    }
+    for i in 0..n {
+        d[i] = a[i * n + i] * up;
     }
 }
 

@@ -129,7 +129,7 @@ fn extremes_of_reduced(d: &mut [f64], e: &mut [f64], want: Want) -> (f64, f64) {
 /// step by step, then the three Laguerre runs (`λ_min` and `λ_max` of `g`, `λ_max` of `s`) in
 /// one loop. Each problem's arithmetic is what it is alone; the processor overlaps the two
 /// chains of dependent operations (the `p = m = 10` certifier step's Gram matrix and
-/// `sym Ĵ_cl`: about 0.3 µs of 1.7 µs, BENCHMARKS.md). A problem whose tridiagonal is not
+/// `sym Ĵ_cl`: about 0.3 of 2.7 µs, BENCHMARKS.md). A problem whose tridiagonal is not
 /// finite or is zero, or a run that does not settle, takes its own path as alone.
 #[must_use]
 pub fn psd_extremes_and_sym_max(

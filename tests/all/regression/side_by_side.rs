@@ -18,6 +18,7 @@ fn the_side_by_side_estimate_is_the_estimate_bit_for_bit() {
         (12, 1, 0.0, 12, 1e-9),
         (10, 3, 0.0, 13, 1e-9),
         (3, 9, 1e-6, 14, 1e-9),
+        (4, 4, 1e-6, 16, 1e-9),
         (10, 3, 0.0, 15, 0.0),
     ];
     let mut factorisation_failed = 0;

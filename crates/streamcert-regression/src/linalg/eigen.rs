@@ -146,13 +146,9 @@ pub fn psd_extremes_and_sym_max(
     let (wg, dg, eg) = both_triangles(g, n, g_work);
     let (ws, ds, es) = both_triangles(s, m, s_work);
     tridiagonalise_pair(wg, n, dg, eg, ws, m, ds, es);
-    // 1 / the largest entry, when every entry is finite and one is not zero.
-    let inv = |d: &[f64], e: &[f64]| {
-        let scale = d.iter().chain(e).fold(0.0f64, |m, v| m.max(v.abs()));
-        (d.iter().chain(e).all(|v| v.is_finite()) && scale > 0.0 && scale.is_finite())
-            .then(|| (scale, 1.0 / scale))
-    };
-    if let (Some((sg, ig)), Some((ss, is))) = (inv(dg, &eg[1..]), inv(ds, &es[1..])) {
+    let nonzero = |d: &[f64], e: &[f64]| largest_entry(d, e).filter(|&s| s > 0.0);
+    if let (Some(sg), Some(ss)) = (nonzero(dg, &eg[1..]), nonzero(ds, &es[1..])) {
+        let (ig, is) = (1.0 / sg, 1.0 / ss);
         let runs = [(&dg[..], &eg[1..], ig), (&dg[..], &eg[1..], ig), (&ds[..], &es[1..], is)];
         if let Some([hi, lo, top]) = laguerre_runs(runs, [1.0, -1.0, 1.0], [false, true, false]) {
             return ((-lo * sg, hi * sg), top * ss);
@@ -268,17 +264,10 @@ const FULL_ROWS_FROM: usize = 10;
 /// With [`Want::Max`] only `λ_max` is computed (`λ_min` is NaN in the result); with
 /// [`Want::BothPsd`] `λ_min`'s run starts at `0⁻` when that is above `−λ_min` (checked).
 fn tridiagonal_extremes(d: &[f64], e: &[f64], want: Want) -> Option<(f64, f64)> {
-    // A value that is not finite goes to QL, which carries it into the result (`f64::max`
-    // would skip a NaN here and report a number).
-    if !d.iter().chain(e).all(|v| v.is_finite()) {
-        return None;
-    }
-    let scale = d.iter().chain(e).fold(0.0f64, |m, v| m.max(v.abs()));
+    // A value that is not finite goes to QL, which carries it into the result.
+    let scale = largest_entry(d, e)?;
     if scale == 0.0 {
         return Some((0.0, 0.0));
-    }
-    if !scale.is_finite() {
-        return None;
     }
     let inv = 1.0 / scale;
     // The extreme on the upper side of (sign · d, e): sign = 1 gives λ_max, −1 gives −λ_min.
@@ -291,6 +280,15 @@ fn tridiagonal_extremes(d: &[f64], e: &[f64], want: Want) -> Option<(f64, f64)> 
         let [hi, lo] = laguerre_tops(d, e, inv, [1.0, -1.0], [false, want == Want::BothPsd])?;
         Some((-lo * scale, hi * scale))
     }
+}
+
+/// `max |v|` over the diagonal `d` and off-diagonal `e`, `None` when a value is not finite
+/// (`f64::max` would skip a NaN and report a number).
+fn largest_entry(d: &[f64], e: &[f64]) -> Option<f64> {
+    if !d.iter().chain(e).all(|v| v.is_finite()) {
+        return None;
+    }
+    Some(d.iter().chain(e).fold(0.0f64, |m, v| m.max(v.abs())))
 }
 
 /// [`tridiagonal_extremes`] for a test: `want_min` selects [`Want::Both`] or [`Want::Max`].

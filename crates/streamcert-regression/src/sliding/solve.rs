@@ -56,16 +56,7 @@ impl SlidingRegression {
     fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
         let d = p + m;
         let n = self.col_len;
-        let mut out = Estimate {
-            status: EstimateStatus::Ready,
-            theta: &[],
-            outputs: p,
-            inputs: m,
-            rms_residual: f64::NAN,
-            gram_lambda_min: f64::NAN,
-            gram_lambda_max: f64::NAN,
-            columns: n,
-        };
+        let mut out = Self::pending(p, m, n);
         if n < self.cfg.min_columns {
             out.status = EstimateStatus::WarmingUp { columns: n, needed: self.cfg.min_columns };
             return out;
@@ -160,10 +151,11 @@ impl SlidingRegression {
     /// writes into `sym` (upper triangle read) from `Θ̂` (`p × d`, row-major), NaN when the
     /// estimate is not ready (`form` is then not called, or its matrix not used). The
     /// `Estimate` is bit for bit `estimate()`'s and `λ_max` bit for bit
-    /// [`linalg::sym_eig_max`]'s of the matrix formed. For the ordinary estimator with
-    /// `d, m >= 10` the solve comes first and the Gram matrix's extremes and `λ_max` are then
-    /// computed side by side ([`linalg::psd_extremes_and_sym_max`]); the certifier of a wide
-    /// system forms `sym Ĵ_cl` this way. `sym_work` is at least
+    /// [`linalg::sym_eig_max`]'s of the matrix formed. For the ordinary estimator of a wide
+    /// regression (`d >= 8`, the one-pass solve) the solve comes first and the Gram matrix's
+    /// extremes and `λ_max` are then computed by [`linalg::psd_extremes_and_sym_max`] (side by
+    /// side when both matrices are at least `10 × 10`); the certifier forms `sym Ĵ_cl` this
+    /// way. `sym_work` is at least
     /// [`linalg::eig_work_len`]`(m)` long. (`Θ̂` is overwritten even when the Gram matrix
     /// then fails the excitation test; [`residual`](Self::residual) is for ready estimates.)
     pub fn estimate_and_sym_max(
@@ -176,8 +168,7 @@ impl SlidingRegression {
         let (p, inputs) = (self.cfg.outputs, self.cfg.inputs);
         let (d, n) = (p + inputs, self.col_len);
         if !(self.cfg.estimator == Estimator::Ordinary
-            && d >= 10
-            && m >= 10
+            && d >= WIDE_FROM
             && n >= self.cfg.min_columns)
         {
             let est = self.estimate();
@@ -189,16 +180,7 @@ impl SlidingRegression {
             return (est, top);
         }
         let inv_n = if n == self.cfg.window { self.inv_window } else { 1.0 / n as f64 };
-        let mut out = Estimate {
-            status: EstimateStatus::Ready,
-            theta: &[],
-            outputs: p,
-            inputs,
-            rms_residual: f64::NAN,
-            gram_lambda_min: f64::NAN,
-            gram_lambda_max: f64::NAN,
-            columns: n,
-        };
+        let mut out = Self::pending(p, inputs, n);
         let factored = self.factor_ridge(d);
         let (rms, (lo, hi), top) = if factored {
             let rms = self.solve_wide(p, d, inv_n);
@@ -219,6 +201,22 @@ impl SlidingRegression {
         out.rms_residual = rms;
         out.theta = &self.theta;
         (out, top)
+    }
+
+    /// An estimate of `n` columns with nothing filled in yet: status `Ready`, no `Θ̂`, NaN
+    /// statistics (the solve paths fill or replace each).
+    #[inline(always)]
+    fn pending(p: usize, m: usize, n: usize) -> Estimate<'static> {
+        Estimate {
+            status: EstimateStatus::Ready,
+            theta: &[],
+            outputs: p,
+            inputs: m,
+            rms_residual: f64::NAN,
+            gram_lambda_min: f64::NAN,
+            gram_lambda_max: f64::NAN,
+            columns: n,
+        }
     }
 
     /// The Cholesky factor `L` of `A = G + λI` in `work` (lower triangle; the strict upper

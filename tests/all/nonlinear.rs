@@ -199,7 +199,7 @@ fn a_contracting_nonlinear_loop_is_certified_with_its_region() {
         assert!(out.iter().all(|(v, truth)| v <= truth));
         // The paper window's region is the range of the last M + h samples.
         let n = traj.t.len();
-        let region = cert.region();
+        let region: Vec<Interval> = cert.region().collect();
         let from = n - (50 + H);
         let lo = traj.y[from..].iter().copied().fold(f64::INFINITY, f64::min);
         let hi = traj.y[from..].iter().copied().fold(f64::NEG_INFINITY, f64::max);

@@ -151,7 +151,7 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
             let v = ev.verdict(kind);
             let Some(value) = v.value else { continue };
             let region = match kind {
-                CertificateKind::Gaussian => cert.region().first().copied(),
+                CertificateKind::Gaussian => cert.region().next(),
                 CertificateKind::Calibrated => cert.calibrated_region().first().copied(),
                 _ => ev.nonlinear_region,
             };

@@ -421,7 +421,7 @@ impl Step<'_> {
         summary.nonlinear_open += u64::from(ev.nonlinear.open);
         summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
         summary.last_time = Some(s.t);
-        region.extend_from_slice(self.cert.region());
+        region.extend(self.cert.region());
         if self.cert.config().calibration.is_some() {
             let p = self.cert.config().regression.outputs;
             let cal = self.cert.calibrated_region();

@@ -6,9 +6,11 @@
 //! window ending at a sample is the tail of the previous block and the head of the current
 //! one, so its extremes are those of the previous block's suffix (formed once when the block
 //! ended) and of the current block's prefix (a running extreme): the block algorithm of van
-//! Herk (1992) and Gil and Werman (1993). A push costs two comparisons per channel and extreme
-//! plus, amortised, two more, allocates nothing, and the ranges are exact (no rounding: they
-//! are sample values).
+//! Herk (1992) and Gil and Werman (1993). A push stores the value and updates the prefix
+//! extremes (one comparison per channel and extreme, plus, amortised, two more when a block
+//! ends); the range itself is formed when it is asked for ([`SlidingRange::ranges`], one more
+//! comparison per extreme), since most samples are never asked. Nothing is allocated, and the
+//! ranges are exact (no rounding: they are sample values).
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
@@ -59,6 +61,19 @@ impl Interval {
     }
 }
 
+/// The smaller of two finite values. Plain comparisons: the values are finite (the
+/// regression checks them first), so the NaN handling of `f64::min` is not needed.
+#[inline(always)]
+fn lt(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
+}
+
+/// The larger of two finite values (see [`lt`]).
+#[inline(always)]
+fn gt(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
 /// Sliding minimum and maximum of `channels` values over the last `width` pushes; see the
 /// module docs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -75,7 +90,6 @@ pub struct SlidingRange {
     suffix_min: Vec<f64>,
     // Per channel: the current block's prefix extremes.
     prefix: Vec<Interval>,
-    ranges: Vec<Interval>,
 }
 
 impl SlidingRange {
@@ -98,7 +112,6 @@ impl SlidingRange {
             suffix_max: vec![0.0; channels * width],
             suffix_min: vec![0.0; channels * width],
             prefix: vec![Interval::EMPTY; channels],
-            ranges: vec![Interval::EMPTY; channels],
         })
     }
 
@@ -121,29 +134,16 @@ impl SlidingRange {
     #[inline]
     pub fn push(&mut self, values: impl IntoIterator<Item = f64>) {
         let (w, i) = (self.width, self.pos);
-        let full = self.count >= w as u64;
         if i == 0 && self.count > 0 {
             self.close_block();
         }
-        // Plain comparisons: the values are finite (the regression checks them first), so the
-        // NaN handling of `f64::min` is not needed on this path.
-        let lt = |a: f64, b: f64| if a < b { a } else { b };
-        let gt = |a: f64, b: f64| if a > b { a } else { b };
-        for (c, x) in values.into_iter().take(self.ranges.len()).enumerate() {
-            let base = c * w;
-            self.vals[base + i] = x;
-            let p = &mut self.prefix[c];
+        let vals = self.vals.chunks_exact_mut(w);
+        for ((v, p), x) in vals.zip(&mut self.prefix).zip(values) {
+            v[i] = x;
             *p = if i == 0 {
                 Interval { lo: x, hi: x }
             } else {
                 Interval { lo: lt(x, p.lo), hi: gt(x, p.hi) }
-            };
-            // The window is positions i + 1 .. w of the previous block and 0 ..= i of this one.
-            self.ranges[c] = if full && i + 1 < w {
-                let (lo, hi) = (self.suffix_min[base + i + 1], self.suffix_max[base + i + 1]);
-                Interval { lo: lt(lo, p.lo), hi: gt(hi, p.hi) }
-            } else {
-                *p
             };
         }
         self.pos = if i + 1 == w { 0 } else { i + 1 };
@@ -169,11 +169,24 @@ impl SlidingRange {
         }
     }
 
-    /// The range of each channel over the last `min(count, width)` samples
-    /// ([`Interval::EMPTY`] before the first).
-    #[must_use]
-    pub fn ranges(&self) -> &[Interval] {
-        &self.ranges
+    /// The range of each channel over the last `min(count, width)` samples, in channel order
+    /// ([`Interval::EMPTY`] before the first): the current block's prefix extremes, joined
+    /// with the previous block's suffix extremes from the position after the newest sample
+    /// while the window reaches back into that block. `O(channels)`, formed on each call.
+    pub fn ranges(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
+        let w = self.width;
+        // The newest sample is at position i; the window is positions i + 1 .. w of the
+        // previous block (when there is one and the window reaches it) and 0 ..= i of this one.
+        let i = if self.pos == 0 { w - 1 } else { self.pos - 1 };
+        let reaches_back = self.count > w as u64 && i + 1 < w;
+        self.prefix.iter().enumerate().map(move |(c, p)| {
+            if reaches_back {
+                let j = c * w + i + 1;
+                Interval { lo: lt(self.suffix_min[j], p.lo), hi: gt(self.suffix_max[j], p.hi) }
+            } else {
+                *p
+            }
+        })
     }
 
     /// Forget every sample.
@@ -181,7 +194,6 @@ impl SlidingRange {
         self.count = 0;
         self.pos = 0;
         self.prefix.fill(Interval::EMPTY);
-        self.ranges.fill(Interval::EMPTY);
     }
 
     /// Check a deserialised state: `channels` channels of width `width`, every value finite,
@@ -197,7 +209,6 @@ impl SlidingRange {
             && self.suffix_max.len() == channels * w
             && self.suffix_min.len() == channels * w
             && self.prefix.len() == channels
-            && self.ranges.len() == channels
             && self.pos as u64 == self.count % w as u64;
         let bad = || Err(RegressionError::CorruptState("sliding ranges".into()));
         if !shape {
@@ -205,12 +216,12 @@ impl SlidingRange {
         }
         if self.count == 0 {
             let empty = |r: &Interval| *r == Interval::EMPTY;
-            return if self.ranges.iter().all(empty) { Ok(()) } else { bad() };
+            return if self.prefix.iter().all(empty) { Ok(()) } else { bad() };
         }
         // The newest sample is at position i of the current block.
         let i = ((self.count - 1) % w as u64) as usize;
         let full = self.count > w as u64;
-        for c in 0..channels {
+        for (c, range) in self.ranges().enumerate() {
             let v = &self.vals[c * w..(c + 1) * w];
             if !v.iter().all(|x| x.is_finite()) {
                 return bad();
@@ -232,7 +243,7 @@ impl SlidingRange {
                 }
                 want = want.hull(hull(i + 1..w));
             }
-            if self.prefix[c] != prefix || self.ranges[c] != want {
+            if self.prefix[c] != prefix || range != want {
                 return bad();
             }
         }
@@ -259,12 +270,12 @@ mod tests {
             for c in 0..2 {
                 let lo = hist[from..].iter().map(|s| s[c]).fold(f64::INFINITY, f64::min);
                 let hi = hist[from..].iter().map(|s| s[c]).fold(f64::NEG_INFINITY, f64::max);
-                assert_eq!(r.ranges()[c], Interval { lo, hi }, "step {k} channel {c}");
+                assert_eq!(r.ranges().nth(c), Some(Interval { lo, hi }), "step {k} channel {c}");
             }
             r.check_state(2, 7).unwrap();
         }
         r.reset();
-        assert_eq!(r.ranges()[0], Interval::EMPTY);
+        assert!(r.ranges().eq([Interval::EMPTY; 2]));
         r.check_state(2, 7).unwrap();
     }
 
@@ -295,7 +306,7 @@ mod tests {
         bad.vals[0] = f64::NAN;
         assert!(bad.check_state(1, 4).is_err());
         let mut bad = r.clone();
-        bad.ranges[0].hi = 7.0;
+        bad.prefix[0].hi = 7.0;
         assert!(bad.check_state(1, 4).is_err());
         let mut bad = r.clone();
         bad.pos = 3;

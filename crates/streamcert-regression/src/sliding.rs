@@ -159,9 +159,10 @@ impl SlidingRegression {
     /// `M + h` samples accepted since the last reset (the samples the window's `M` columns
     /// integrate, for the ordinary estimator). A linear certificate speaks for the averaged
     /// linearisation over this region, nothing more. [`Interval::EMPTY`] before the first
-    /// sample.
-    #[must_use]
-    pub fn ranges(&self) -> &[Interval] {
+    /// sample. Formed on each call (`O(p + m)`; see [`SlidingRange::ranges`]).
+    ///
+    /// [`SlidingRange::ranges`]: crate::SlidingRange::ranges
+    pub fn ranges(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
         self.range.ranges()
     }
 

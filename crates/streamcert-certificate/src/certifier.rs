@@ -141,9 +141,8 @@ impl Certifier {
     /// The region of the paper's certificates: the range of each output, then each input,
     /// over the samples of the regression window (`M + h` samples; see
     /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the
-    /// averaged linearisation over this region, nothing more.
-    #[must_use]
-    pub fn region(&self) -> &[Interval] {
+    /// averaged linearisation over this region, nothing more. Formed on each call (`O(p + m)`).
+    pub fn region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
         self.regression.ranges()
     }
 
@@ -434,24 +433,13 @@ impl Certifier {
     }
 }
 
-/// `Ĵ_cl = Ĵ_obs + B̂_obs K` into `jcl` (`p × p`) from `Θ̂ = [Ĵ_obs B̂_obs]` (`p × (p + m)`)
-/// and the gain `K` (`m × p`), then the upper triangle of `sym Ĵ_cl = (Ĵ_cl + Ĵ_clᵀ)/2`
-/// into `sym`. Row `i` of `Ĵ_cl` accumulates the rows of `K` along its contiguous entries,
-/// so wide rows vectorise; each entry still sums over `l` in order, as
-/// `J_obs[i, j] + Σ_l B_obs[i, l] K[l, j]` would.
+/// `Ĵ_cl = Ĵ_obs + B̂_obs K` into `jcl` (`p × p`, [`linalg::closed_loop_jacobian`]) from
+/// `Θ̂ = [Ĵ_obs B̂_obs]` and the gain `K`, then the upper triangle of
+/// `sym Ĵ_cl = (Ĵ_cl + Ĵ_clᵀ)/2` into `sym`.
 #[inline(always)]
 fn form_sym_jcl(theta: &[f64], k: &[f64], jcl: &mut [f64], sym: &mut [f64], p: usize, m: usize) {
-    let d = p + m;
-    let (theta, k, jcl, sym) = (&theta[..p * d], &k[..m * p], &mut jcl[..p * p], &mut sym[..p * p]);
-    for i in 0..p {
-        jcl[i * p..(i + 1) * p].copy_from_slice(&theta[i * d..i * d + p]);
-        for l in 0..m {
-            let b = theta[i * d + p + l];
-            for j in 0..p {
-                jcl[i * p + j] += b * k[l * p + j];
-            }
-        }
-    }
+    let (jcl, sym) = (&mut jcl[..p * p], &mut sym[..p * p]);
+    linalg::closed_loop_jacobian(theta, k, jcl, p, m);
     for i in 0..p {
         for j in i..p {
             sym[i * p + j] = 0.5 * (jcl[i * p + j] + jcl[j * p + i]);

@@ -141,12 +141,14 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 mod eigen;
 pub(crate) mod lanes;
+mod product;
 
 pub use eigen::{
     eig_work_len, psd_eig_extremes, psd_extremes_and_sym_max, sym_eig_extremes, sym_eig_max,
 };
 #[cfg(test)]
 use eigen::{tridiagonal_extremes_for_test as tridiagonal_extremes, tridiagonal_ql};
+pub use product::closed_loop_jacobian;
 
 /// Spectral norm `‖K‖₂` of an `r × c` row-major matrix: `√λ_max(Kᵀ K)`. Allocates (it is
 /// meant for configuration time, not the hot path).

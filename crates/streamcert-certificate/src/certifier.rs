@@ -347,6 +347,10 @@ impl Certifier {
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity
     /// estimators; when not ready, say why.
     /// `scale` multiplies the one-step residual (see the gap module: `√(Δt_ref/Δt)`).
+    /// Inlined into `push`: out of line, its result came back through memory and `push` read
+    /// two of its fields with one load, which is not forwarded from two stores (about 2 ns
+    /// of the `p = 1` step, `examples/step_profile`).
+    #[inline(always)]
     fn evaluate(&mut self, scale: f64) -> (Option<Ready>, usize, Option<NotCertified>) {
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
         if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {

@@ -14,6 +14,7 @@ use crate::support::{run as run_scenario, scalar};
 use streamcert::dynamics::{LinearScenario, Process};
 
 mod side_by_side;
+mod window_range;
 
 type Sample = (f64, Vec<f64>, Vec<f64>);
 

@@ -251,11 +251,16 @@ impl InstrumentedWindows {
         }
         let count = self.windows[w].min(self.block_len);
         let (head, cap) = (self.block_head, self.block_cap());
-        for i in 0..count {
-            let b = if i < head { head - 1 - i } else { cap + head - 1 - i };
-            for (o, r) in out.iter_mut().zip(&self.block_ranges[b * c..(b + 1) * c]) {
-                *o = o.hull(*r);
+        // The newest block first, as far back as the window reaches. Each channel's hull is
+        // held in a register across the blocks (joined into `out` in memory, every block
+        // waited for the previous block's store to be read back).
+        let newest_first = (0..head).rev().chain((cap + head - count.max(head)..cap).rev());
+        for (ch, o) in out.iter_mut().enumerate() {
+            let mut hull = Interval::EMPTY;
+            for b in newest_first.clone().take(count) {
+                hull = hull.hull(self.block_ranges[b * c + ch]);
             }
+            *o = hull;
         }
     }
 

@@ -228,3 +228,36 @@ fn a_restored_window_with_indices_out_of_range_is_refused() {
         serde_json::from_value(edited).expect("parses");
     assert!(!bad.is_consistent());
 }
+
+/// `push_and_snapshot` is `push` then `snapshot`, bit for bit, through calibration of `σ0`,
+/// spikes entering and leaving, recomputes, and a non-finite value (an error, nothing
+/// absorbed, in both).
+#[test]
+fn push_and_snapshot_is_push_then_snapshot() {
+    let cfg = AmbiguityConfig::paper(20);
+    let (mut fused, mut apart) =
+        (AmbiguityRadius::new(cfg).expect("valid"), AmbiguityRadius::new(cfg).expect("valid"));
+    let mut x = 0.3f64;
+    for k in 0..600 {
+        x = 3.9 * x * (1.0 - x);
+        let v = match k {
+            250 => f64::NAN,
+            _ if k % 37 == 0 => 40.0 * (x - 0.5),
+            _ => x - 0.5,
+        };
+        let got = fused.push_and_snapshot(v);
+        let want = apart.push(v).map(|()| apart.snapshot());
+        match (got, want) {
+            (Ok(a), Ok(b)) => {
+                let bits = |s: streamcert::ambiguity::Ambiguity| {
+                    [s.eps, s.kurtosis.unwrap_or(-1.0), s.spike_fraction, s.sigma0.unwrap_or(-1.0)]
+                        .map(f64::to_bits)
+                };
+                assert_eq!(bits(a), bits(b), "value {k}");
+            }
+            (Err(_), Err(_)) => assert!(v.is_nan(), "value {k}"),
+            (a, b) => panic!("value {k}: {a:?} against {b:?}"),
+        }
+        assert_eq!(fused, apart, "value {k}");
+    }
+}

@@ -155,6 +155,12 @@ impl AmbiguityRadius {
     /// [`AmbiguityError::NonFinite`]; the value is not absorbed.
     #[inline]
     pub fn push(&mut self, x: f64) -> Result<(), AmbiguityError> {
+        self.push_inline(x)
+    }
+
+    /// [`push`](Self::push), always inlined.
+    #[inline(always)]
+    fn push_inline(&mut self, x: f64) -> Result<(), AmbiguityError> {
         let evicted = self.moments.oldest();
         self.moments.push(x)?;
         if let Some(sigma0) = self.sigma0 {
@@ -174,10 +180,29 @@ impl AmbiguityRadius {
         Ok(())
     }
 
+    /// [`push`](Self::push) then [`snapshot`](Self::snapshot), in one inlined piece, so the
+    /// snapshot reads the moments' sums where `push` left them (in registers) rather than
+    /// from memory after the stores: the certifier's `p = 1` step, where `ε` is at the end of
+    /// the longest chain of dependent operations.
+    ///
+    /// # Errors
+    /// [`AmbiguityError::NonFinite`]; the value is not absorbed (nor a snapshot taken).
+    #[inline(always)]
+    pub fn push_and_snapshot(&mut self, x: f64) -> Result<Ambiguity, AmbiguityError> {
+        self.push_inline(x)?;
+        Ok(self.snapshot_inline())
+    }
+
     /// `ε(t)` with its inputs.
     #[must_use]
     #[inline]
     pub fn snapshot(&self) -> Ambiguity {
+        self.snapshot_inline()
+    }
+
+    /// [`snapshot`](Self::snapshot), always inlined.
+    #[inline(always)]
+    fn snapshot_inline(&self) -> Ambiguity {
         let kurtosis = self.moments.excess_kurtosis();
         let len = self.moments.len();
         // Full window (every sample after warm-up): multiply by the reciprocal computed once.

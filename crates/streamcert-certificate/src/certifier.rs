@@ -43,7 +43,6 @@ pub struct Certifier {
     eig_work: Vec<f64>,
 }
 
-/// The nonlinear gate after a sample, why it is closed, and the look behind it.
 /// The regression's outcome, reduced to what the certificate needs.
 #[derive(Debug, Clone, Copy)]
 struct Ready {
@@ -52,6 +51,10 @@ struct Ready {
     rms: f64,
     lambda_min: f64,
 }
+
+/// [`Certifier::evaluate`]'s result: the ready estimate, the window's columns, why not ready,
+/// and the ambiguity level when the `p = 1` step took it as its residual went in.
+type Evaluated = (Option<Ready>, usize, Option<NotCertified>, Option<AmbiguityLevel>);
 
 impl Certifier {
     /// Validate and build.
@@ -199,8 +202,9 @@ impl Certifier {
         }
         self.samples += 1;
         let scale = self.gap.residual_scale(dt);
-        let (ready, columns, blocked) = self.evaluate(scale);
-        let amb = self.ambiguity_snapshot();
+        let (ready, columns, blocked, fused) = self.evaluate(scale);
+        // The p = 1 step's snapshot was taken as the residual went in (see `evaluate`).
+        let amb = if fused.is_some() { fused } else { self.ambiguity_snapshot() };
         let rho_wass = match (ready, amb) {
             (Some(r), Some(a)) => Some(r.rho * (1.0 + 2.0 * a.eps)),
             _ => None,
@@ -351,7 +355,7 @@ impl Certifier {
     /// two of its fields with one load, which is not forwarded from two stores (about 2 ns
     /// of the `p = 1` step, `examples/step_profile`).
     #[inline(always)]
-    fn evaluate(&mut self, scale: f64) -> (Option<Ready>, usize, Option<NotCertified>) {
+    fn evaluate(&mut self, scale: f64) -> Evaluated {
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
         if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {
             self.evaluate_dims(1, 1, scale)
@@ -362,12 +366,7 @@ impl Certifier {
 
     /// [`evaluate`](Self::evaluate) with the configured dimensions passed in.
     #[inline(always)]
-    fn evaluate_dims(
-        &mut self,
-        p: usize,
-        m: usize,
-        scale: f64,
-    ) -> (Option<Ready>, usize, Option<NotCertified>) {
+    fn evaluate_dims(&mut self, p: usize, m: usize, scale: f64) -> Evaluated {
         let d = p + m;
         let residual_source = self.cfg.residuals;
         // From p = 10 the regression forms sym Ĵ_cl itself, after its solve, so the two
@@ -395,7 +394,7 @@ impl Certifier {
             EstimateStatus::WeakInstruments { .. } => Some(NotCertified::WeakInstruments),
         };
         if blocked.is_some() {
-            return (None, columns, blocked);
+            return (None, columns, blocked, None);
         }
         let (rms, lambda_min) = (est.rms_residual, est.gram_lambda_min);
         if p < 10 {
@@ -403,6 +402,7 @@ impl Certifier {
             form_sym_jcl(est.theta, gain, jcl, &mut self.work[..p * p], p, m);
         }
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.
+        let mut fused = None;
         let scalar_theta = (d == 2).then(|| [est.theta[0], est.theta[1]]);
         if let ([amb], ResidualSource::OneStep, Some(th), Some((z1, dy1))) = (
             &mut self.ambiguity[..],
@@ -413,7 +413,14 @@ impl Certifier {
             // p = m = 1 with the default residual, written out: going through `residual` and
             // the `resid` buffer costs about 10 % of the whole step (measured A/B with
             // criterion), and this is the paper's case.
-            let _ = amb.push((dy1[0] - (th[0] * z1[0] + th[1] * z1[1])) * scale);
+            // The snapshot is taken at once, from the sums in registers (`ε` ends the step's
+            // longest chain of dependent operations).
+            let r = (dy1[0] - (th[0] * z1[0] + th[1] * z1[1])) * scale;
+            fused = amb.push_and_snapshot(r).ok().map(|s| AmbiguityLevel {
+                eps: s.eps,
+                kurtosis: s.kurtosis,
+                spike_fraction: s.spike_fraction,
+            });
         } else if !self.ambiguity.is_empty()
             && self.regression.residual(residual_source, &mut self.resid)
         {
@@ -431,9 +438,9 @@ impl Certifier {
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();
         if !(beta_hat.is_finite() && rho.is_finite()) {
-            return (None, columns, Some(NotCertified::InsufficientExcitation));
+            return (None, columns, Some(NotCertified::InsufficientExcitation), fused);
         }
-        (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None)
+        (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None, fused)
     }
 }
 

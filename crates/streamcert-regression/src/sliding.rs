@@ -190,6 +190,7 @@ impl SlidingRegression {
 
     /// The range of each output over the `h + 1` samples of the newest column, into `out`
     /// (`p` values); `false` (untouched) before `h + 1` samples are held. `O(h p)`, no copy.
+    #[inline]
     pub fn newest_column_ranges(&self, out: &mut [Interval]) -> bool {
         let (p, cap) = (self.cfg.outputs, self.cfg.horizon + 1);
         if self.hist_len < cap {
@@ -217,6 +218,7 @@ impl SlidingRegression {
 
     /// The newest column `(Z_q, ΔY_q)`, if any.
     #[must_use]
+    #[inline]
     pub fn newest_column(&self) -> Option<(&[f64], &[f64])> {
         if self.col_len == 0 {
             return None;

@@ -224,6 +224,7 @@ impl InstrumentedWindows {
     /// [`push_column`](Self::push_column), and the column's value ranges (`channels` of them,
     /// see [`with_ranges`](Self::with_ranges)) joined to its block's region when the column
     /// is absorbed. Use one of the two push methods throughout.
+    #[inline]
     pub fn push_column_ranged(&mut self, z: &[f64], dy: &[f64], range: &[Interval]) -> bool {
         let (before, slot) = (self.usable, self.block_head);
         let done = self.push_column(z, dy);

@@ -262,7 +262,7 @@ impl InstrumentedWindows {
         score_cov.fill(0.0);
         let (theta, x) = (&out.theta[..p * d], &out.x[..p * k]);
         let (row, block) = (&mut out.row[..k], &mut out.block[..pp]);
-        let (mut sum_w, mut sum_w2) = (0.0, 0.0);
+        let (mut sum_w, mut sum_w2, mut cov) = (0.0, 0.0, 0.0);
         let (older, newer) = self.window_blocks(w);
         let stride = lay.stride();
         // Batches of `b > 1` blocks: the batch's score sum in `g` (p d >= p² values, free
@@ -311,9 +311,15 @@ impl InstrumentedWindows {
                 }
             }
             if batch == 1 {
-                for a in 0..pp {
-                    for b in 0..pp {
-                        score_cov[a * pp + b] += block[a] * block[b];
+                if pp == 1 {
+                    // One output: the sum in a register (in memory, every block waited for
+                    // the previous block's store to be read back), the same additions.
+                    cov += block[0] * block[0];
+                } else {
+                    for a in 0..pp {
+                        for b in 0..pp {
+                            score_cov[a * pp + b] += block[a] * block[b];
+                        }
                     }
                 }
                 sum_w += weight;
@@ -335,6 +341,9 @@ impl InstrumentedWindows {
                 acc.fill(0.0);
                 batch_w = 0.0;
             }
+        }
+        if batch == 1 && pp == 1 {
+            score_cov[0] = cov;
         }
         (sum_w, sum_w2)
     }

@@ -307,8 +307,11 @@ impl SlidingRegression {
     #[inline(always)]
     fn magnitude_dropped(&mut self) -> bool {
         let (p, d) = (self.cfg.outputs, self.d());
-        let diagonals = (0..d).map(|i| self.g[i * d + i]).chain((0..p).map(|i| self.s[i * p + i]));
-        dropped_below_peak(&mut self.peaks, diagonals)
+        let (g_peaks, s_peaks) = self.peaks.split_at_mut(d);
+        // The diagonals by stepping (no index to check), `G`'s then `S`'s.
+        let g = dropped_below_peak(g_peaks, self.g.iter().step_by(d + 1).take(d).copied());
+        let s = dropped_below_peak(s_peaks, self.s.iter().step_by(p + 1).take(p).copied());
+        g | s
     }
 
     /// One pass that adds the new column (`self.z`, `self.dy`) and removes the one in slot

@@ -233,9 +233,12 @@ impl InstrumentedWindows {
                 *o = o.hull(*r);
             }
             if done {
+                // Element by element: for the few channels a loop beats a call to `memcpy`.
                 let c = self.range_channels;
-                self.block_ranges[slot * c..(slot + 1) * c].copy_from_slice(&self.open_range);
-                self.open_range.fill(Interval::EMPTY);
+                let closed = &mut self.block_ranges[slot * c..(slot + 1) * c];
+                for (b, o) in closed.iter_mut().zip(&mut self.open_range) {
+                    (*b, *o) = (*o, Interval::EMPTY);
+                }
             }
         }
         done

@@ -327,3 +327,50 @@ fn one_step_residuals_keep_the_laplace_tails_that_horizon_residuals_average_away
     assert!(one_step > 2.0, "one-step kurtosis {one_step}");
     assert!(horizon < 1.2 && horizon < one_step - 1.0, "horizon kurtosis {horizon}");
 }
+
+/// With several outputs, `ε` and its statistics are the largest over one ambiguity radius per
+/// output, each fed the one-step residual of its output whenever the regression is ready: an
+/// independent regression and radii, fed the same way, give the same numbers bit for bit at
+/// every sample (through warm-up, the σ0 calibration and spikes).
+#[test]
+fn the_ambiguity_level_of_several_outputs_is_the_largest_of_their_radii() {
+    use streamcert::ambiguity::AmbiguityRadius;
+    use streamcert::regression::{EstimateStatus, SlidingRegression};
+    let (p, m) = (2usize, 1usize);
+    let reg_cfg = RegressionConfig::new(p, m, 40, 3, 1e-4);
+    let amb_cfg = AmbiguityConfig::paper(30);
+    let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0, 0.5], 0.2, 0.05, 10);
+    cfg.ambiguity = Some(amb_cfg);
+    let mut cert = Certifier::new(cfg).expect("valid");
+    let mut reg = SlidingRegression::new(reg_cfg).expect("valid");
+    let mut radii: Vec<_> = (0..p).map(|_| AmbiguityRadius::new(amb_cfg).expect("valid")).collect();
+    let (mut x, mut state, mut resid) = (0.3f64, [0.0f64; 3], [0.0; 2]);
+    for k in 0..400 {
+        x = 3.9 * x * (1.0 - x);
+        let spike = if k % 53 == 0 { 8.0 } else { 1.0 };
+        state = [
+            0.9 * state[0] + 0.1 * state[2] + spike * (x - 0.5),
+            0.8 * state[1] - 0.2 * state[0] + 0.3 * (x * x - 0.3),
+            0.95 * state[2] + (x - 0.5),
+        ];
+        let t = 0.5 * k as f64;
+        let ev = cert.push(t, &state[..p], &state[p..]).expect("valid");
+        reg.push(t, &state[..p], &state[p..]).expect("valid");
+        if reg.estimate().status == EstimateStatus::Ready
+            && reg.residual(ResidualSource::OneStep, &mut resid)
+        {
+            for (a, &r) in radii.iter_mut().zip(&resid) {
+                let _ = a.push(r);
+            }
+        }
+        let snaps: Vec<_> = radii.iter().map(AmbiguityRadius::snapshot).collect();
+        let eps = snaps.iter().map(|s| s.eps).fold(f64::NEG_INFINITY, f64::max);
+        let spikes = snaps.iter().map(|s| s.spike_fraction).fold(f64::NEG_INFINITY, f64::max);
+        let kurtosis = snaps.iter().filter_map(|s| s.kurtosis).reduce(f64::max);
+        let level = ev.ambiguity.expect("an ambiguity model is configured");
+        assert_eq!(level.eps.to_bits(), eps.to_bits(), "sample {k}");
+        assert_eq!(level.spike_fraction.to_bits(), spikes.to_bits(), "sample {k}");
+        assert_eq!(level.kurtosis.map(f64::to_bits), kurtosis.map(f64::to_bits), "sample {k}");
+    }
+    assert!(radii.iter().all(|a| a.snapshot().kurtosis.is_some()), "the tails were reached");
+}

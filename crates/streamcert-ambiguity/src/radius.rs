@@ -182,8 +182,8 @@ impl AmbiguityRadius {
 
     /// [`push`](Self::push) then [`snapshot`](Self::snapshot), in one inlined piece, so the
     /// snapshot reads the moments' sums where `push` left them (in registers) rather than
-    /// from memory after the stores: the certifier's step, where `ε` is at the end of the
-    /// longest chain of dependent operations.
+    /// from memory after the stores: the certifier's `p = 1` step, where `ε` is at the end
+    /// of the longest chain of dependent operations.
     ///
     /// # Errors
     /// [`AmbiguityError::NonFinite`]; the value is not absorbed (nor a snapshot taken).

@@ -7,7 +7,7 @@ mod calibrated_step;
 pub(crate) mod checkpoint;
 
 use serde::{Deserialize, Serialize};
-use streamcert_ambiguity::{Ambiguity, AmbiguityRadius};
+use streamcert_ambiguity::AmbiguityRadius;
 use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, linalg};
 
 use crate::calibrated::CalibratedState;
@@ -333,7 +333,19 @@ impl Certifier {
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.
     #[inline]
     fn ambiguity_snapshot(&self) -> Option<AmbiguityLevel> {
-        self.ambiguity.iter().fold(None, |level, a| Some(widen(level, &a.snapshot())))
+        let (first, rest) = self.ambiguity.split_first()?;
+        let s = first.snapshot();
+        let (mut eps, mut kurtosis, mut spikes) = (s.eps, s.kurtosis, s.spike_fraction);
+        for a in rest {
+            let s = a.snapshot();
+            eps = eps.max(s.eps);
+            kurtosis = match (kurtosis, s.kurtosis) {
+                (Some(x), Some(y)) => Some(x.max(y)),
+                (x, y) => x.or(y),
+            };
+            spikes = spikes.max(s.spike_fraction);
+        }
+        Some(AmbiguityLevel { eps, kurtosis, spike_fraction: spikes })
     }
 
     /// Solve the regression, form `β̂` and `ρ`, and feed the residuals to the ambiguity
@@ -404,21 +416,21 @@ impl Certifier {
             // The snapshot is taken at once, from the sums in registers (`ε` ends the step's
             // longest chain of dependent operations).
             let r = (dy1[0] - (th[0] * z1[0] + th[1] * z1[1])) * scale;
-            fused = amb.push_and_snapshot(r).ok().map(|s| widen(None, &s));
+            fused = amb.push_and_snapshot(r).ok().map(|s| AmbiguityLevel {
+                eps: s.eps,
+                kurtosis: s.kurtosis,
+                spike_fraction: s.spike_fraction,
+            });
         } else if !self.ambiguity.is_empty()
             && self.regression.residual(residual_source, &mut self.resid)
         {
             // The interval normalisation applies to the one-step residual only.
             let scale = if residual_source == ResidualSource::OneStep { scale } else { 1.0 };
-            // Each output's snapshot as its residual goes in (as for p = 1), joined in order.
-            let mut level = None;
             for (amb, &r) in self.ambiguity.iter_mut().zip(&self.resid[..p]) {
                 let r = r * scale;
                 // A non-finite residual is not absorbed (AmbiguityError::NonFinite).
-                let s = amb.push_and_snapshot(r).unwrap_or_else(|_| amb.snapshot());
-                level = Some(widen(level, &s));
+                let _ = amb.push(r);
             }
-            fused = level;
         }
         let lambda_max =
             if p >= 10 { wide_top } else { linalg::sym_eig_max(&self.work, p, &mut self.eig_work) };
@@ -443,27 +455,6 @@ fn form_sym_jcl(theta: &[f64], k: &[f64], jcl: &mut [f64], sym: &mut [f64], p: u
         for j in i..p {
             sym[i * p + j] = 0.5 * (jcl[i * p + j] + jcl[j * p + i]);
         }
-    }
-}
-
-/// `level` joined with one output's snapshot: each of `(ε, κ_e, ŝ)` the larger (an undefined
-/// kurtosis gives way to a defined one); the snapshot alone when `level` is `None`.
-#[inline(always)]
-fn widen(level: Option<AmbiguityLevel>, s: &Ambiguity) -> AmbiguityLevel {
-    let Some(l) = level else {
-        return AmbiguityLevel {
-            eps: s.eps,
-            kurtosis: s.kurtosis,
-            spike_fraction: s.spike_fraction,
-        };
-    };
-    AmbiguityLevel {
-        eps: l.eps.max(s.eps),
-        kurtosis: match (l.kurtosis, s.kurtosis) {
-            (Some(x), Some(y)) => Some(x.max(y)),
-            (x, y) => x.or(y),
-        },
-        spike_fraction: l.spike_fraction.max(s.spike_fraction),
     }
 }
 

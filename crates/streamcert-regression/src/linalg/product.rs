@@ -29,12 +29,19 @@ pub fn closed_loop_jacobian(theta: &[f64], k: &[f64], jcl: &mut [f64], p: usize,
         return;
     }
     for i in 0..p {
-        jcl[i * p..(i + 1) * p].copy_from_slice(&theta[i * d..i * d + p]);
-        for l in 0..m {
-            let b = theta[i * d + p + l];
-            for j in 0..p {
-                jcl[i * p + j] += b * k[l * p + j];
-            }
+        row_by_entries(&theta[i * d..(i + 1) * d], k, &mut jcl[i * p..(i + 1) * p], p, m);
+    }
+}
+
+/// One row of [`closed_loop_jacobian`] entry by entry: `out[j] = row[j] + Σ_l row[p + l] K[l, j]`,
+/// the terms added in order of `l` (the rows of `K` accumulated along `out`).
+#[inline(always)]
+fn row_by_entries(row: &[f64], k: &[f64], out: &mut [f64], p: usize, m: usize) {
+    out[..p].copy_from_slice(&row[..p]);
+    for l in 0..m {
+        let b = row[p + l];
+        for j in 0..p {
+            out[j] += b * k[l * p + j];
         }
     }
 }
@@ -69,12 +76,7 @@ impl WithSimd for Product<'_> {
                 v
             };
             if p < lanes {
-                for (j, slot) in out.iter_mut().enumerate() {
-                    *slot = row[j];
-                    for l in 0..m {
-                        *slot += row[p + l] * k[l * p + j];
-                    }
-                }
+                row_by_entries(row, k, out, p, m);
                 continue;
             }
             let mut c = 0;

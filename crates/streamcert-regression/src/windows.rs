@@ -255,16 +255,14 @@ impl InstrumentedWindows {
         }
         let count = self.windows[w].min(self.block_len);
         let (head, cap) = (self.block_head, self.block_cap());
-        // The newest block first, as far back as the window reaches. Each channel's hull is
-        // held in a register across the blocks (joined into `out` in memory, every block
-        // waited for the previous block's store to be read back).
-        let newest_first = (0..head).rev().chain((cap + head - count.max(head)..cap).rev());
+        // The window's blocks are the newest `count` of the ring: `[head - count, head)`,
+        // wrapping to the end. Each channel's hull runs over the blocks in four independent
+        // hulls held in registers (one hull would be a chain of dependent minima), joined at
+        // the end. The minimum and maximum of finite values do not depend on the order.
+        let (recent, wrapped) = (head.min(count), count - head.min(count));
         for (ch, o) in out.iter_mut().enumerate() {
-            let mut hull = Interval::EMPTY;
-            for b in newest_first.clone().take(count) {
-                hull = hull.hull(self.block_ranges[b * c + ch]);
-            }
-            *o = hull;
+            let hull = strided_hull(&self.block_ranges[(head - recent) * c..head * c], c, ch);
+            *o = hull.hull(strided_hull(&self.block_ranges[(cap - wrapped) * c..cap * c], c, ch));
         }
     }
 
@@ -495,4 +493,21 @@ impl InstrumentedWindows {
         }
         Ok(())
     }
+}
+
+/// The hull of channel `ch` over every block of `ranges` (`c` channels per block), in four
+/// independent hulls joined at the end.
+#[inline]
+fn strided_hull(ranges: &[Interval], c: usize, ch: usize) -> Interval {
+    let mut acc = [Interval::EMPTY; 4];
+    let mut quads = ranges.chunks_exact(4 * c);
+    for quad in &mut quads {
+        for (k, a) in acc.iter_mut().enumerate() {
+            *a = a.hull(quad[k * c + ch]);
+        }
+    }
+    for (k, block) in quads.remainder().chunks_exact(c).enumerate() {
+        acc[k] = acc[k].hull(block[ch]);
+    }
+    acc[0].hull(acc[1]).hull(acc[2].hull(acc[3]))
 }

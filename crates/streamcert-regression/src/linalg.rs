@@ -141,6 +141,7 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
 
 mod eigen;
 pub(crate) mod lanes;
+mod outer;
 mod product;
 
 pub use eigen::{
@@ -148,6 +149,7 @@ pub use eigen::{
 };
 #[cfg(test)]
 use eigen::{tridiagonal_extremes_for_test as tridiagonal_extremes, tridiagonal_ql};
+pub(crate) use outer::add_outer_products;
 pub use product::closed_loop_jacobian;
 
 /// Spectral norm `‖K‖₂` of an `r × c` row-major matrix: `√λ_max(Kᵀ K)`. Allocates (it is

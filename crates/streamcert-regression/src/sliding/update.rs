@@ -2,7 +2,7 @@
 //! add-and-evict update of the sufficient statistics, and their exact periodic refresh.
 
 use super::{SlidingRegression, copy, finite3, next};
-use crate::{Estimator, InputIntegral, RegressionError};
+use crate::{Estimator, InputIntegral, RegressionError, linalg};
 
 impl SlidingRegression {
     /// Absorb one sample `(t, y, u)`: `O(h d + d²)`, no allocation.
@@ -404,28 +404,13 @@ impl SlidingRegression {
     }
 
     /// Add the outer products of the contiguous slots `[from, from + count)` (ordinary
-    /// statistics only).
+    /// statistics only; in vectors from `d = 8`, the same bits, see
+    /// [`linalg::add_outer_products`]).
     #[inline(always)]
     fn sum_columns(&mut self, from: usize, count: usize, p: usize, d: usize) {
-        let zs = self.col_z[from * d..(from + count) * d].chunks_exact(d);
-        let dys = self.col_dy[from * p..(from + count) * p].chunks_exact(p);
-        for (z, dy) in zs.zip(dys) {
-            for i in 0..d {
-                let zi = z[i];
-                for j in i..d {
-                    self.g[i * d + j] += zi * z[j];
-                }
-            }
-            for i in 0..p {
-                let di = dy[i];
-                for j in 0..d {
-                    self.c[i * d + j] += di * z[j];
-                }
-                for j in i..p {
-                    self.s[i * p + j] += di * dy[j];
-                }
-            }
-        }
+        let zs = &self.col_z[from * d..(from + count) * d];
+        let dys = &self.col_dy[from * p..(from + count) * p];
+        linalg::add_outer_products(zs, dys, (&mut self.g, &mut self.c, &mut self.s), p, d);
     }
 }
 

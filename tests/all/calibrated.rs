@@ -9,7 +9,7 @@ use streamcert::certificate::{
 };
 use streamcert::dynamics::{LinearScenario, PlantSwitch, Process};
 use streamcert::regression::{
-    InputIntegral, InstrumentedWindows, RegressionConfig, SlidingRegression,
+    InputIntegral, InstrumentedWindows, Model, RegressionConfig, SlidingRegression,
 };
 
 use crate::support::{run as run_scenario, scalar};
@@ -48,7 +48,7 @@ fn first_opening(cfg: &CertifierConfig, scenario: &LinearScenario, seed: u64) ->
 }
 
 /// The two-sided 95 % Clopper–Pearson interval for `k` successes in `n`.
-fn clopper_pearson(k: usize, n: usize) -> (f64, f64) {
+pub(crate) fn clopper_pearson(k: usize, n: usize) -> (f64, f64) {
     let lower = if k == 0 {
         0.0
     } else {
@@ -119,7 +119,8 @@ fn instrumented_windows_equal_a_batch_recompute_at_every_column() {
 /// with `ν` the Welch–Satterthwaite effective number of blocks less `d`.
 #[test]
 fn every_look_matches_its_formula_for_two_outputs() {
-    every_look_matches_its_formula(1);
+    every_look_matches_its_formula(1, Model::Affine);
+    every_look_matches_its_formula(1, Model::ThroughOrigin);
 }
 
 /// As above with batches of four blocks (`batch_blocks = 4`): the block sums are summed over
@@ -128,10 +129,15 @@ fn every_look_matches_its_formula_for_two_outputs() {
 /// `c_{2,h}/c_{4,h}`, `B` the number of batches, and the effective number over batch weights.
 #[test]
 fn every_look_matches_its_formula_with_batches_of_blocks() {
-    every_look_matches_its_formula(4);
+    every_look_matches_its_formula(4, Model::Affine);
+    every_look_matches_its_formula(4, Model::ThroughOrigin);
 }
 
-fn every_look_matches_its_formula(batch: usize) {
+/// The affine model's windows regress on `[∫y; ∫u; τ]` (`τ` the column's span, instrumented by
+/// the instrument intervals' own spans, its row of `T` zero): `d = 5` unknowns per output.
+fn every_look_matches_its_formula(batch: usize, model: Model) {
+    let affine = model == Model::Affine;
+    let dd = 4 + usize::from(affine);
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
     let scenario = LinearScenario {
         n: 2,
@@ -143,6 +149,7 @@ fn every_look_matches_its_formula(batch: usize) {
         ..short_window_plant()
     };
     let mut cfg = calibrated(2, gain.clone(), 150, 1);
+    cfg.regression.model = model;
     cfg.calibration = Some(Calibration {
         windows: Some(2),
         instrument_intervals: 3,
@@ -154,18 +161,21 @@ fn every_look_matches_its_formula(batch: usize) {
     let mut cols: Vec<(nalgebra::DVector<f64>, nalgebra::DVector<f64>)> = Vec::new();
     let mut last = [None, None];
     let mut checked = 0;
-    let t_mat = nalgebra::DMatrix::from_fn(4, 2, |r, c| {
-        if r < 2 { f64::from(u8::from(r == c)) } else { gain[(r - 2) * 2 + c] }
+    let t_mat = nalgebra::DMatrix::from_fn(dd, 2, |r, c| match r {
+        0 | 1 => f64::from(u8::from(r == c)),
+        2 | 3 => gain[(r - 2) * 2 + c],
+        _ => 0.0,
     });
     let (lag, intervals) = (1, 3);
     for i in 0..traj.len() {
         cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
         if cert.regression().columns_built() as usize > cols.len() {
             let (z, dy) = cert.regression().newest_column().expect("column");
-            cols.push((
-                nalgebra::DVector::from_column_slice(z),
-                nalgebra::DVector::from_column_slice(dy),
-            ));
+            let mut z = z.to_vec();
+            if affine {
+                z.push(cert.regression().newest_column_span().expect("column"));
+            }
+            cols.push((nalgebra::DVector::from_vec(z), nalgebra::DVector::from_column_slice(dy)));
         }
         for (w, look) in cert.calibrated_looks().iter().enumerate() {
             let Some(look) = look else { continue };
@@ -182,8 +192,8 @@ fn every_look_matches_its_formula(batch: usize) {
                     .collect();
                 nalgebra::DVector::from_vec(parts)
             };
-            let k = 4 * intervals;
-            let mut nm = nalgebra::DMatrix::zeros(4, k);
+            let k = dd * intervals;
+            let mut nm = nalgebra::DMatrix::zeros(dd, k);
             let mut cw = nalgebra::DMatrix::zeros(2, k);
             let mut hm = nalgebra::DMatrix::identity(k, k) * 1e-4;
             for (j, (z, dy)) in window.iter().enumerate() {
@@ -194,7 +204,7 @@ fn every_look_matches_its_formula(batch: usize) {
             }
             // Two-stage least squares: Q = H⁻¹Nᵀ, A = N Q + λI, Θ̂ = Cw Q A⁻¹, X = Q A⁻¹ T.
             let q = hm.try_inverse().expect("invertible") * nm.transpose();
-            let ainv = (&nm * &q + nalgebra::DMatrix::identity(4, 4) * 1e-4)
+            let ainv = (&nm * &q + nalgebra::DMatrix::identity(dd, dd) * 1e-4)
                 .try_inverse()
                 .expect("invertible");
             let theta = &cw * &q * &ainv;
@@ -233,10 +243,10 @@ fn every_look_matches_its_formula(batch: usize) {
             // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
             let ess =
                 weights.iter().sum::<f64>().powi(2) / weights.iter().map(|w| w * w).sum::<f64>();
-            omega *= c(batch) * batches as f64 / (batches - 4) as f64;
+            omega *= c(batch) * batches as f64 / (batches - dd) as f64;
             let j = &theta * &t_mat;
             let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
-            let nu = ess.min(batches as f64) - 4.0;
+            let nu = ess.min(batches as f64) - dd as f64;
             let share = [150.0 / 450.0, 300.0 / 450.0][w];
             let risk = look_risk(0.01, share, look.look);
             let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
@@ -250,9 +260,9 @@ fn every_look_matches_its_formula(batch: usize) {
         }
     }
     // Window 150 looks at columns 150, 225, …; window 300 at 300, 450, …. With eight batches
-    // in the short window, `ν = min(ESS, 8) − 4` is not positive at some looks, which then
+    // in the short window, `ν = min(ESS, 8) − d` is not positive at some looks, which then
     // give no certificate (and nothing to check).
-    assert!(checked >= if batch == 1 { 25 } else { 15 }, "checked {checked} looks");
+    assert!(checked >= if batch == 1 { 25 } else { 5 }, "checked {checked} looks");
 }
 
 #[test]
@@ -276,13 +286,24 @@ fn look_risks_sum_to_the_share_of_delta() {
 
 #[test]
 fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
-    // h (p + m + 2) = 20 is the smallest window for p = m = 1, h = 5.
-    let err = Certifier::new(calibrated(1, vec![-0.54], 19, 1)).unwrap_err();
+    // h (p + m + 3) = 25 is the smallest window for p = m = 1, h = 5 under the affine model
+    // (the intercept is one more unknown), h (p + m + 2) = 20 through the origin.
+    let err = Certifier::new(calibrated(1, vec![-0.54], 24, 1)).unwrap_err();
     let CertifyError::InvalidConfig { field: "window", reason } = err else { panic!("{err}") };
-    assert!(reason.contains("smallest valid window is 20"), "{reason}");
-    assert!(Certifier::new(calibrated(1, vec![-0.54], 20, 1)).is_ok());
-    // p = m = 2: 5 · 6 = 30.
-    let err = Certifier::new(calibrated(2, vec![0.0; 4], 29, 1)).unwrap_err();
+    assert!(reason.contains("smallest valid window is 25"), "{reason}");
+    assert!(Certifier::new(calibrated(1, vec![-0.54], 25, 1)).is_ok());
+    let origin = |p: usize, gain: Vec<f64>, window: usize| {
+        let mut cfg = calibrated(p, gain, window, 1);
+        cfg.regression.model = Model::ThroughOrigin;
+        Certifier::new(cfg)
+    };
+    let err = origin(1, vec![-0.54], 19).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 20"), "{err}");
+    assert!(origin(1, vec![-0.54], 20).is_ok());
+    // p = m = 2: 5 · 7 = 35 affine, 5 · 6 = 30 through the origin.
+    let err = Certifier::new(calibrated(2, vec![0.0; 4], 34, 1)).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 35"), "{err}");
+    let err = origin(2, vec![0.0; 4], 29).unwrap_err();
     assert!(err.to_string().contains("smallest valid window is 30"), "{err}");
     for margin in [0.0, -0.1] {
         let cfg = CertifierConfig { margin, ..calibrated(1, vec![-0.54], 150, 1) };
@@ -294,12 +315,13 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         ..calibrated(1, vec![-0.54], 150, 1)
     };
     assert!(Certifier::new(cfg).is_err());
-    // Batches of b blocks: h (b (p + m + 1) + 1) = 65 for b = 4, 125 for b = 8; b in 1..=8.
+    // Batches of b blocks: h (b (p + m + 2) + 1) = 85 for b = 4, 165 for b = 8 under the
+    // affine model (h (b (p + m + 1) + 1) = 65, 125 through the origin); b in 1..=8.
     let batched = |window, batch_blocks| CertifierConfig {
         calibration: Some(Calibration { batch_blocks, ..Calibration::new(0.01) }),
         ..calibrated(1, vec![-0.54], window, 1)
     };
-    for (batch, smallest) in [(4, 65), (8, 125)] {
+    for (batch, smallest) in [(4, 85), (8, 165)] {
         let err = Certifier::new(batched(smallest - 1, batch)).unwrap_err();
         let CertifyError::InvalidConfig { field: "window", reason } = err else { panic!("{err}") };
         assert!(reason.contains(&format!("smallest valid window is {smallest}")), "{reason}");
@@ -322,9 +344,21 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
 #[test]
 fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window() {
     let runs = 300;
-    // The last two: batches of 4 blocks at their smallest accepted window, and at 150.
-    for (window, batch_blocks) in [(20, 1), (30, 1), (150, 1), (65, 4), (150, 4)] {
+    // The smallest accepted windows of each model (the affine model's intercept is one more
+    // unknown: h (p + m + 3) = 25, and 85 with batches of 4), then batches of 4 blocks at
+    // their smallest accepted window, and at 150.
+    use Model::{Affine, ThroughOrigin};
+    for (window, batch_blocks, model) in [
+        (25, 1, Affine),
+        (30, 1, Affine),
+        (150, 1, Affine),
+        (85, 4, Affine),
+        (150, 4, Affine),
+        (20, 1, ThroughOrigin),
+        (65, 4, ThroughOrigin),
+    ] {
         let mut cfg = calibrated(1, vec![-0.54], window, 1);
+        cfg.regression.model = model;
         cfg.calibration = Some(Calibration { batch_blocks, ..Calibration::new(0.01) });
         let opened =
             (0..runs).filter(|&s| first_opening(&cfg, &short_window_plant(), 7000 + s).is_some());
@@ -332,7 +366,7 @@ fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window()
         let (lower, upper) = clopper_pearson(opened, runs as usize);
         assert!(
             lower <= 0.01,
-            "window {window}, b = {batch_blocks}: {opened} of {runs} opened \
+            "window {window}, b = {batch_blocks}, {model:?}: {opened} of {runs} opened \
              ([{lower:.4}, {upper:.4}])"
         );
     }

@@ -1,5 +1,6 @@
 //! Cross-crate and property tests of streamcert: one test binary, one module per topic.
 
+mod affine;
 mod ambiguity;
 mod calibrated;
 mod certificate;

@@ -325,19 +325,24 @@ fn the_configuration_says_what_is_valid() {
     cfg.calibration = None;
     let err = Certifier::new(cfg).unwrap_err();
     assert!(matches!(err, CertifyError::InvalidConfig { field: "nonlinear", .. }), "{err}");
-    // The cubic library with its two lack-of-fit terms (y⁴, y⁵): h · (3 + 2 + 1 + 2) = 40;
-    // without the check, h · (3 + 1 + 2) = 30.
-    let err = Certifier::new(config(-1.0, 0.05, 35, 3)).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 40"), "{err}");
+    // The cubic library with its two lack-of-fit terms (y⁴, y⁵) and the affine model's
+    // intercept: h · (3 + 2 + 1 + 1 + 2) = 45; without the check, h · (3 + 1 + 1 + 2) = 35.
+    let err = Certifier::new(config(-1.0, 0.05, 40, 3)).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 45"), "{err}");
     assert!(err.to_string().contains("check_terms = 0"), "{err}");
-    let mut unchecked = config(-1.0, 0.05, 35, 3);
+    let mut unchecked = config(-1.0, 0.05, 40, 3);
     unchecked.nonlinear =
         Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(3) });
     assert!(Certifier::new(unchecked.clone()).is_ok());
-    let mut short = config(-1.0, 0.05, 25, 3);
+    let mut short = config(-1.0, 0.05, 30, 3);
     short.nonlinear = unchecked.nonlinear;
     let err = Certifier::new(short).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 30"), "{err}");
+    assert!(err.to_string().contains("smallest valid window is 35"), "{err}");
+    // Through the origin, one unknown fewer: 40.
+    let mut origin = config(-1.0, 0.05, 35, 3);
+    origin.regression.model = streamcert::regression::Model::ThroughOrigin;
+    let err = Certifier::new(origin).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 40"), "{err}");
     let mut many = config(-1.0, 0.05, 200, 3);
     many.nonlinear = Some(NonlinearConfig { check_terms: 8, ..NonlinearConfig::with_degree(3) });
     let err = Certifier::new(many).unwrap_err();
@@ -348,15 +353,16 @@ fn the_configuration_says_what_is_valid() {
     let err = Certifier::new(cfg).unwrap_err();
     assert!(err.to_string().contains("one output"), "{err}");
     // Batches of blocks apply to the linear calibrated certificate (smallest window
-    // h (4 (p + m + 1) + 1) = 65 at b = 4); the nonlinear certificate keeps blocks of h.
+    // h (4 (p + m + 2) + 1) = 85 at b = 4 with the intercept); the nonlinear certificate keeps
+    // blocks of h.
     let batched = |window| {
         let mut cfg = config(-1.0, 0.05, window, 3);
         cfg.calibration = cfg.calibration.map(|c| Calibration { batch_blocks: 4, ..c });
         Certifier::new(cfg)
     };
-    assert!(batched(65).is_ok());
-    let err = batched(60).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 65"), "{err}");
+    assert!(batched(85).is_ok());
+    let err = batched(80).unwrap_err();
+    assert!(err.to_string().contains("smallest valid window is 85"), "{err}");
 }
 
 proptest! {
@@ -365,7 +371,7 @@ proptest! {
     /// On linear data the nonlinear certificate of degree 1 is the linear calibrated one.
     #[test]
     fn degree_one_equals_the_linear_calibrated_certificate(
-        a in -1.0f64..0.8, k in -2.5f64..-0.5, seed in 0u64..1000, window in 20usize..80,
+        a in -1.0f64..0.8, k in -2.5f64..-0.5, seed in 0u64..1000, window in 25usize..80,
     ) {
         let s = ScalarScenario {
             drift: ScalarDrift::Polynomial(vec![0.0, a]),

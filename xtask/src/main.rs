@@ -158,6 +158,10 @@ struct Run {
     /// Input integral: trapezoidal | zero_order_hold.
     #[arg(long, default_value_t = name(&Params::default().input_integral))]
     input_integral: String,
+    /// Regression model: through_origin (the paper's eq. regressor) | affine (an intercept
+    /// beside the dynamics, the library's and the command line's default).
+    #[arg(long, default_value_t = name(&Params::default().model))]
+    model: String,
     /// Experiment 2: noise also into x1.
     #[arg(long, default_value_t = Params::default().exp2_noise_on_a, action = clap::ArgAction::Set)]
     exp2_noise_on_a: bool,
@@ -197,6 +201,7 @@ impl Run {
             residuals: enum_arg("residuals", &self.residuals)?,
             estimator: enum_arg("estimator", &self.estimator)?,
             input_integral: enum_arg("input-integral", &self.input_integral)?,
+            model: enum_arg("model", &self.model)?,
             exp2_noise_on_a: self.exp2_noise_on_a,
             ..Params::default()
         };

@@ -161,6 +161,7 @@ use streamcert_regression::{
 
 use crate::nonlinear::{LookAt, NonlinearLook, NonlinearState};
 use crate::{CertifyError, NonlinearConfig, NotCertified};
+use streamcert_regression::Model;
 
 /// One window's latest look.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -238,6 +239,13 @@ pub(crate) struct CalibratedState {
     /// The estimated coupling bounds on the same looks, when configured.
     #[serde(default)]
     coupling: Option<CouplingState>,
+    /// The affine model ([`Model::Affine`]): every window regresses on `[∫y; ∫u; τ]`, the
+    /// column's span `τ` carrying the intercept (`zaug` is that column, scratch), and the
+    /// nonlinear certificate's polynomial features are taken about the regression's working
+    /// origin `nl_origin`.
+    affine: bool,
+    zaug: Vec<f64>,
+    nl_origin: f64,
     // Scratch: the newest column's samples (times, outputs) and output ranges.
     ts: Vec<f64>,
     ys: Vec<f64>,
@@ -253,10 +261,13 @@ impl CalibratedState {
         gain: &[f64],
     ) -> Result<Self, CertifyError> {
         let (p, m) = (reg.outputs, reg.inputs);
+        let affine = reg.model == Model::Affine;
+        // The intercept's regressor `τ` after the inputs; its row of `T` is zero.
+        let d = p + m + usize::from(affine);
         let lengths = cal.window_lengths(reg.window, reg.horizon);
-        let windows = InstrumentedWindows::new(
+        let windows = InstrumentedWindows::with_regressors(
             p,
-            m,
+            d,
             reg.horizon,
             cal.instrument_lag,
             cal.instrument_intervals,
@@ -264,12 +275,17 @@ impl CalibratedState {
         )?
         .with_ranges(p)
         .with_batch(cal.batch_blocks)?;
+        // The nonlinear certificate takes `τ` as one more input with gain zero.
+        let mut nl_gain = gain.to_vec();
+        if affine {
+            nl_gain.push(0.0);
+        }
         let nonlinear = nonlinear
             .map(|nl| {
                 NonlinearState::new(
                     nl,
                     reg,
-                    gain,
+                    &nl_gain,
                     &lengths,
                     cal.instrument_lag,
                     cal.instrument_intervals,
@@ -277,10 +293,16 @@ impl CalibratedState {
             })
             .transpose()?;
         let total: f64 = lengths.iter().map(|&w| w as f64).sum();
-        let tmat = (0..(p + m) * p)
+        let tmat = (0..d * p)
             .map(|idx| {
                 let (r, c) = (idx / p, idx % p);
-                if r < p { f64::from(u8::from(r == c)) } else { gain[(r - p) * p + c] }
+                if r < p {
+                    f64::from(u8::from(r == c))
+                } else if r < p + m {
+                    gain[(r - p) * p + c]
+                } else {
+                    0.0
+                }
             })
             .collect();
         Ok(Self {
@@ -295,13 +317,16 @@ impl CalibratedState {
             windows,
             tmat,
             seen: 0,
-            est: WindowEstimate::new(p, m, cal.instrument_intervals),
+            est: WindowEstimate::with_regressors(p, d, cal.instrument_intervals),
             verdict: None,
             sym: vec![0.0; p * p],
             eig_work: vec![0.0; linalg::eig_work_len(p * p)],
             regions: vec![Interval::EMPTY; p * lengths.len()],
             nonlinear,
-            coupling: coupling.map(|c| CouplingState::new(c.clone(), p, m, lengths.len())),
+            coupling: coupling.map(|c| CouplingState::new(c.clone(), p, d - p, lengths.len())),
+            affine,
+            zaug: vec![0.0; d],
+            nl_origin: 0.0,
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],
@@ -364,8 +389,25 @@ impl CalibratedState {
             self.seen = built;
             let block_done = match reg.newest_column() {
                 Some((z, dy)) if reg.newest_column_ranges(&mut self.col_range) => {
+                    let z = if self.affine {
+                        let d = z.len();
+                        self.zaug[..d].copy_from_slice(z);
+                        self.zaug[d] = reg.newest_column_span().unwrap_or(0.0);
+                        &self.zaug[..]
+                    } else {
+                        z
+                    };
                     if let Some(n) = &mut self.nonlinear {
                         reg.column_samples(&mut self.ts, &mut self.ys);
+                        if self.affine && n.is_polynomial() {
+                            // Powers of `y − y_o` (the regression's origin): with the
+                            // intercept the polynomial class is the same, and the digits are
+                            // those of the plant's excursions.
+                            self.nl_origin = reg.origin()[0];
+                            for y in &mut self.ys {
+                                *y -= self.nl_origin;
+                            }
+                        }
                         n.push(z, dy, &self.ts, &self.ys);
                     }
                     self.windows.push_column_ranged(z, dy, &self.col_range)
@@ -402,7 +444,8 @@ impl CalibratedState {
         if let Some(n) = &mut self.nonlinear {
             let risk = look_risk(self.cal.delta, self.shares[w], k);
             let (delta, ridge, min_pivot) = (self.cal.delta, self.ridge, self.min_pivot);
-            n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot });
+            let origin = self.nl_origin;
+            n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });
         }
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;

@@ -404,6 +404,7 @@ impl Certifier {
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.
         let mut fused = None;
         let scalar_theta = (d == 2).then(|| [est.theta[0], est.theta[1]]);
+        let intercept = est.intercept.first().copied();
         if let ([amb], ResidualSource::OneStep, Some(th), Some((z1, dy1))) = (
             &mut self.ambiguity[..],
             residual_source,
@@ -415,7 +416,12 @@ impl Certifier {
             // criterion), and this is the paper's case.
             // The snapshot is taken at once, from the sums in registers (`ε` ends the step's
             // longest chain of dependent operations).
-            let r = (dy1[0] - (th[0] * z1[0] + th[1] * z1[1])) * scale;
+            let mut r = dy1[0] - (th[0] * z1[0] + th[1] * z1[1]);
+            if let (Some(c), Some(tau)) = (intercept, self.regression.newest_interval_span()) {
+                // The affine model's intercept over the same interval.
+                r -= c * tau;
+            }
+            let r = r * scale;
             fused = amb.push_and_snapshot(r).ok().map(|s| AmbiguityLevel {
                 eps: s.eps,
                 kurtosis: s.kurtosis,

@@ -175,6 +175,10 @@ pub(crate) struct LookAt {
     pub ridge: f64,
     /// The smallest pivot ratio of an instrumented solve.
     pub min_pivot: f64,
+    /// The origin the features were taken about (the affine model's working origin for a
+    /// polynomial library, else 0): the look's region and worst point are reported in the
+    /// record's own coordinates, `origin +` the internal ones.
+    pub origin: f64,
 }
 
 impl Look for NonlinearLook {
@@ -229,7 +233,8 @@ impl NonlinearState {
         intervals: usize,
     ) -> Result<Self, CertifyError> {
         let library = cfg.library();
-        let (dg, m) = (library.len(), reg.inputs);
+        // The inputs' gains, then zero for the affine model's `τ` (an input with gain zero).
+        let (dg, m) = (library.len(), gain.len());
         let d = dg + m;
         let windows =
             InstrumentedWindows::with_regressors(1, d, reg.horizon, lag, intervals, lengths)?
@@ -263,6 +268,11 @@ impl NonlinearState {
             sub: vec![0.0; (dg - 1) * (dg - 1)],
             rhs: vec![0.0; dg - 1],
         })
+    }
+
+    /// Whether the library is polynomial (its class is the same about any origin).
+    pub(crate) fn is_polynomial(&self) -> bool {
+        self.library.is_polynomial()
     }
 
     /// The number of features `D`.
@@ -324,7 +334,7 @@ impl NonlinearState {
     }
 
     fn compute(&mut self, w: usize, at: LookAt) -> Option<NonlinearLook> {
-        let LookAt { k, t, risk, delta, margin, ridge, min_pivot } = at;
+        let LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin } = at;
         let (dg, m) = (self.library.len(), self.gain.len());
         let d = dg + m;
         let mut region = [Interval::EMPTY];
@@ -370,8 +380,8 @@ impl NonlinearState {
             beta_hat_min: beta_min,
             multiplier: c,
             nu,
-            region,
-            worst,
+            region: Interval { lo: region.lo + origin, hi: region.hi + origin },
+            worst: worst + origin,
             upper: (upper < margin).then_some(upper),
             test,
             misfit,

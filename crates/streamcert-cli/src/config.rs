@@ -5,7 +5,7 @@ use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
     Calibration, Certifier, CertifierConfig, FeatureSet, NonlinearConfig, ResidualSource,
 };
-use streamcert_regression::{Estimator, InputIntegral, RegressionConfig};
+use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 
 use crate::CliError;
 
@@ -36,6 +36,10 @@ consecutive = 10
 # gap_factor = 5.0
 
 [regression]
+# The model: "affine" fits an intercept beside the dynamics (dY = Theta Z + c tau), so the
+# verdict does not depend on the operating point or the sensor's units offset (°C or K);
+# "through_origin" is the paper's dY = Theta Z, valid only for a loop that runs about zero.
+model = "affine"
 window = 150            # M: columns in the sliding window
 horizon = 5             # h: samples per integration interval
 ridge = 1e-4            # lambda
@@ -59,7 +63,8 @@ residuals = "one_step"  # or "horizon"
 # A third certificate beside the paper's two: an instrumented regression on several windows
 # (M, 2M, 4M, ...) with a radius from its own uncertainty (no c); its gate opens for a
 # controller whose true rate is below the margin with probability at most delta over the whole
-# run (see the README for the assumptions). Needs margin > 0 and window >= h (p + m + 2).
+# run (see the README for the assumptions). Needs margin > 0 and window >= h (p + m + 3)
+# (h (p + m + 2) with model = "through_origin").
 enabled = false
 delta = 0.01
 # windows = 4            # M, 2M, 4M, 8M (default: doubling until the longest holds 200 h)
@@ -258,6 +263,7 @@ struct Certificate {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct Regression {
+    model: Model,
     window: usize,
     horizon: usize,
     ridge: f64,
@@ -269,6 +275,7 @@ struct Regression {
 impl Default for Regression {
     fn default() -> Self {
         Self {
+            model: Model::Affine,
             window: 150,
             horizon: 5,
             ridge: 1e-4,
@@ -350,6 +357,7 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
         min_columns: r.min_columns.unwrap_or(r.window),
         input_integral: r.input_integral,
         estimator: r.estimator,
+        model: r.model,
         ..RegressionConfig::new(p, m, r.window, r.horizon, r.ridge)
     };
     let mut certifier = CertifierConfig::new(
@@ -462,11 +470,15 @@ mod tests {
         let batched = on.replace("# batch_blocks = 1 ", "batch_blocks = 4 ");
         let c = parse(&batched, "x").unwrap().certifier.calibration.unwrap();
         assert_eq!(c.batch_blocks, 4);
-        // A window below h (p + m + 2) has no calibrated bound: refused, naming the smallest.
+        // A window below h (p + m + 3) (the affine model's intercept is one more unknown) has
+        // no calibrated bound: refused, naming the smallest; h (p + m + 2) through the origin.
         let short = on.replace("window = 150 ", "window = 10 ");
         assert!(
-            parse(&short, "x").unwrap_err().to_string().contains("smallest valid window is 20")
+            parse(&short, "x").unwrap_err().to_string().contains("smallest valid window is 25")
         );
+        let origin = short.replace("model = \"affine\"", "model = \"through_origin\"");
+        let err = parse(&origin, "x").unwrap_err().to_string();
+        assert!(err.contains("smallest valid window is 20"), "{err}");
         let zero_margin = on.replace("margin = 0.05", "margin = 0.0");
         assert!(parse(&zero_margin, "x").unwrap_err().to_string().contains("margin"));
     }

@@ -115,8 +115,9 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
     let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
     let calibrated = cfg_text
         .replace("enabled = false\ndelta", "enabled = true\ndelta")
-        .replace("window = 150 ", "window = 20 ")
-        .replace("tail_window = 150", "tail_window = 20");
+        .replace("window = 150 ", "window = 25 ")
+        .replace("# max_window = 1200 ", "max_window = 100 ")
+        .replace("tail_window = 150", "tail_window = 25");
     let cfg = parse(&calibrated, "c").expect("corpus config");
     let damaged = if reseal {
         // Past the checksum: mutate the payload and seal it again.

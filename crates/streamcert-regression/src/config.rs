@@ -28,6 +28,34 @@ pub enum Estimator {
     Instrumented,
 }
 
+/// The model the window is fitted to.
+///
+/// A plant runs about an operating point `(y₀, u₀)`: `ẏ = J (y − y₀) + B (u − u₀)` is
+/// `ẏ = J y + B u + c` with `c = −J y₀ − B u₀`. Through the origin (`c = 0`, the paper's eq.
+/// regressor) the operating point enters `Θ̂` as if it were dynamics, so the verdict changes
+/// with the units of the sensor (°C or K) and with the set point. The affine model fits `c`
+/// beside `Θ` and its verdicts are invariant to constant offsets of `y` and `u`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Model {
+    /// `ΔY_q ≈ Θ Z_q + c τ_q`, with `τ_q` the time the column spans (the integral of `1`, so a
+    /// constant drift `c` is exact under irregular sampling too) and `c` not penalised by the
+    /// ridge. Solved by partialling `τ` out of every sum (Frisch–Waugh–Lovell): with
+    /// `a_z = Σ Z τ`, `a_y = Σ ΔY τ`, `T = Σ τ²`, the estimator sees `ZZᵀ − a_z a_zᵀ/T`,
+    /// `ΔY Zᵀ − a_y a_zᵀ/T`, `ΔYΔYᵀ − a_y a_yᵀ/T` (and `Z Wᵀ − a_z a_wᵀ/T`,
+    /// `ΔY Wᵀ − a_y a_wᵀ/T` with `a_w = Σ W τ` for the instrumented estimator), which gives
+    /// the same `Θ̂` as the fit with `τ` as an extra regressor. `ĉ = (a_y − Θ̂ a_z)/T`. The
+    /// samples are integrated relative to the first sample's `(y, u)` (kept across resets), so
+    /// the sums hold the plant's excursions, not its operating point: at `y₀ = 10⁶` the
+    /// digits are those of a centred record. Default.
+    #[default]
+    Affine,
+    /// `ΔY ≈ Θ Z` (the paper's eq. regressor): valid only when the operating point is the
+    /// origin of `y` and `u`. Kept for reproducing the paper and for loops known to run about
+    /// zero; an explicit choice.
+    ThroughOrigin,
+}
+
 /// The interval over which [`SlidingRegression::residual`](crate::SlidingRegression::residual) evaluates `ΔY − Θ̂ Z`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -49,7 +77,10 @@ pub struct RegressionConfig {
     pub outputs: usize,
     /// Number of inputs `m >= 1`.
     pub inputs: usize,
-    /// Window length `M` in columns (`M >= p + m`).
+    /// The model: [`Model::Affine`] (default) or [`Model::ThroughOrigin`] (the paper).
+    #[serde(default)]
+    pub model: Model,
+    /// Window length `M` in columns (`M >= p + m`, one more for the affine model).
     pub window: usize,
     /// Horizon `h >= 1` in samples: each column spans `h` sample intervals.
     pub horizon: usize,
@@ -78,6 +109,7 @@ impl RegressionConfig {
         Self {
             outputs,
             inputs,
+            model: Model::Affine,
             window,
             horizon,
             ridge,
@@ -97,7 +129,8 @@ impl RegressionConfig {
         let bad = |field: &'static str, reason: String| {
             Err(RegressionError::InvalidConfig { field, reason })
         };
-        let d = self.outputs + self.inputs;
+        // The affine model spends one more column on its intercept.
+        let d = self.outputs + self.inputs + usize::from(self.model == Model::Affine);
         if self.outputs == 0 {
             return bad("outputs", "must be at least 1".into());
         }
@@ -108,7 +141,13 @@ impl RegressionConfig {
             return bad("horizon", "must be at least 1 sample".into());
         }
         if self.window < d {
-            return bad("window", format!("must be at least p + m = {d}, got {}", self.window));
+            return bad(
+                "window",
+                format!(
+                    "must be at least p + m (+ 1 for the affine model) = {d}, got {}",
+                    self.window
+                ),
+            );
         }
         if !(self.ridge >= 0.0 && self.ridge.is_finite()) {
             return bad("ridge", format!("must be finite and >= 0, got {}", self.ridge));
@@ -117,7 +156,7 @@ impl RegressionConfig {
             return bad(
                 "min_columns",
                 format!(
-                    "must lie in [p + m, window] = [{d}, {}], got {}",
+                    "must lie in [p + m (+ 1 affine), window] = [{d}, {}], got {}",
                     self.window, self.min_columns
                 ),
             );

@@ -43,12 +43,18 @@ pub struct Estimate<'a> {
     pub outputs: usize,
     /// `m`.
     pub inputs: usize,
-    /// `RMS(R) = √(‖ΔY − Θ̂ Z‖²_F / (p M))`, computed from the sufficient statistics as
+    /// The affine model's intercept `ĉ` per output (`ΔY_q ≈ Θ̂ Z_q + ĉ τ_q`, a rate: units of
+    /// `y` per unit of time, in the working coordinates of
+    /// [`SlidingRegression::origin`](crate::SlidingRegression::origin)); empty through the
+    /// origin.
+    pub intercept: &'a [f64],
+    /// `RMS(R) = √(‖ΔY − Θ̂ Z‖²_F / (p M))` (`R = ΔY − Θ̂ Z − ĉ τ` under the affine model),
+    /// computed from the (centred) sufficient statistics as
     /// `tr S − 2 tr(Θ̂ Cᵀ) + tr(Θ̂ G Θ̂ᵀ)`, clamped at 0.
     pub rms_residual: f64,
-    /// `λ_min(Z Zᵀ / M)`.
+    /// `λ_min(Z Zᵀ / M)` (of the centred `Z Zᵀ − a_z a_zᵀ/T` under the affine model).
     pub gram_lambda_min: f64,
-    /// `λ_max(Z Zᵀ / M)`.
+    /// `λ_max(Z Zᵀ / M)` (centred likewise).
     pub gram_lambda_max: f64,
     /// Number of columns `M` currently in the window.
     pub columns: usize,

@@ -72,7 +72,7 @@ mod range;
 mod sliding;
 mod windows;
 
-pub use config::{Estimator, InputIntegral, RegressionConfig, ResidualSource};
+pub use config::{Estimator, InputIntegral, Model, RegressionConfig, ResidualSource};
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
 pub use range::{Interval, SlidingRange};

@@ -83,6 +83,45 @@ pub struct SlidingRegression {
     peaks: Vec<f64>,
     // Range of each output and input over the last `M + h` samples (the window's region).
     range: SlidingRange,
+    // The affine model (`Model::Affine`; untouched through the origin): the working origin
+    // `[y; u]` of the integrals (the first sample since construction, kept across resets),
+    // each column's span `τ`, the window sums `a_z = Σ Z τ_w`, `a_y = Σ ΔY τ_w`,
+    // `T = Σ τ τ_w`, `a_w = Σ W τ` (`τ_w = τ` for the ordinary estimator, the instrument's
+    // own span for the instrumented one), and the latest estimate's intercept `ĉ` (scratch).
+    origin: Vec<f64>,
+    origin_set: bool,
+    col_tau: Vec<f64>,
+    // The instrumented estimator's: each column's instrument's span `τ_w` (ring of `M`) and the
+    // spans of the regressors held for instruments (ring of `h + 1`, aligned with `zhist`).
+    col_tauw: Vec<f64>,
+    zhist_tau: Vec<f64>,
+    // The instrumented estimator's sums with the column's own span, `Σ Z τ`, `Σ ΔY τ`,
+    // `Σ τ²` (its Gram matrix and residual sum of squares are centred by these).
+    zto: Vec<f64>,
+    dyto: Vec<f64>,
+    tto: f64,
+    zt: Vec<f64>,
+    dyt: Vec<f64>,
+    tt: f64,
+    wt: Vec<f64>,
+    intercept: Vec<f64>,
+    // The span of the newest column (scratch of the general push).
+    tau: f64,
+    // The centred statistics the estimate solves (scratch; swapped with the running sums
+    // for the solve).
+    centred: Centred,
+}
+
+/// Scratch for the centred statistics `ZZᵀ − a_z a_zᵀ/T`, … (see [`Model::Affine`]).
+///
+/// [`Model::Affine`]: crate::Model::Affine
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct Centred {
+    g: Vec<f64>,
+    c: Vec<f64>,
+    s: Vec<f64>,
+    gw: Vec<f64>,
+    cw: Vec<f64>,
 }
 
 impl SlidingRegression {
@@ -134,6 +173,27 @@ impl SlidingRegression {
             built: 0,
             peaks: vec![0.0; d + p],
             range: SlidingRange::new(d, cfg.window + cfg.horizon)?,
+            origin: vec![0.0; d],
+            origin_set: false,
+            col_tau: vec![0.0; mm],
+            col_tauw: vec![0.0; mm],
+            zhist_tau: vec![0.0; h + 1],
+            zto: vec![0.0; d],
+            dyto: vec![0.0; p],
+            tto: 0.0,
+            zt: vec![0.0; d],
+            dyt: vec![0.0; p],
+            tt: 0.0,
+            wt: vec![0.0; d],
+            intercept: vec![0.0; p],
+            tau: 0.0,
+            centred: Centred {
+                g: vec![0.0; d * d],
+                c: vec![0.0; p * d],
+                s: vec![0.0; p * p],
+                gw: vec![0.0; d * d],
+                cw: vec![0.0; p * d],
+            },
         })
     }
 
@@ -253,6 +313,54 @@ impl SlidingRegression {
         for v in [&mut self.g, &mut self.c, &mut self.s, &mut self.gw, &mut self.cw] {
             v.fill(0.0);
         }
+        self.clear_affine();
+    }
+
+    /// Zero the affine model's window sums.
+    fn clear_affine(&mut self) {
+        for v in [&mut self.zt, &mut self.dyt, &mut self.wt, &mut self.zto, &mut self.dyto] {
+            v.fill(0.0);
+        }
+        self.tt = 0.0;
+        self.tto = 0.0;
+    }
+
+    /// `true` for [`Model::Affine`](crate::Model::Affine).
+    #[inline(always)]
+    pub(crate) fn affine(&self) -> bool {
+        self.cfg.model == crate::Model::Affine
+    }
+
+    /// The working origin `[y; u]` the integrals are taken relative to: the first sample
+    /// since construction for the affine model (kept across [`reset`](Self::reset)), zero
+    /// through the origin or before the first sample. `Z` from
+    /// [`newest_column`](Self::newest_column) and [`newest_interval`](Self::newest_interval)
+    /// is `∫ (y − y_o)` and `∫ (u − u_o)`; under the affine model every estimate is the same
+    /// for any origin (in exact arithmetic), and the origin keeps the sums' digits.
+    #[must_use]
+    pub fn origin(&self) -> &[f64] {
+        &self.origin
+    }
+
+    /// The span `τ = t_new − t_old` of the newest column, if any (the regressor of the
+    /// affine model's intercept).
+    #[must_use]
+    #[inline]
+    pub fn newest_column_span(&self) -> Option<f64> {
+        (self.col_len > 0).then(|| {
+            let q = if self.col_next == 0 { self.cfg.window - 1 } else { self.col_next - 1 };
+            self.col_tau[q]
+        })
+    }
+
+    /// The span `t_k − t_{k−1}` of the newest sample interval, once two samples are in.
+    #[must_use]
+    #[inline]
+    pub fn newest_interval_span(&self) -> Option<f64> {
+        let cap = self.cfg.horizon + 1;
+        let b = self.hist_head;
+        let a = if b == 0 { cap - 1 } else { b - 1 };
+        (self.hist_len >= 2).then(|| self.hist_t[b] - self.hist_t[a])
     }
 
     /// Check a sample without absorbing it.
@@ -313,9 +421,18 @@ impl SlidingRegression {
     }
 
     /// The sufficient statistics `(G = ZZᵀ, C = ΔY Zᵀ, S = ΔY ΔYᵀ)`, row-major; only the
-    /// upper triangles of `G` and `S` are maintained.
+    /// upper triangles of `G` and `S` are maintained. Raw sums of the working coordinates
+    /// (see [`origin`](Self::origin)); the affine model solves their centred form (see
+    /// [`affine_statistics`](Self::affine_statistics)).
     #[must_use]
     pub fn statistics(&self) -> (&[f64], &[f64], &[f64]) {
         (&self.g, &self.c, &self.s)
+    }
+
+    /// The affine model's window sums `(a_z = Σ Z τ, a_y = Σ ΔY τ, T = Σ τ²)` (zero through
+    /// the origin).
+    #[must_use]
+    pub fn affine_statistics(&self) -> (&[f64], &[f64], f64) {
+        (&self.zt, &self.dyt, self.tt)
     }
 }

@@ -84,17 +84,19 @@ impl Calibration {
         }
     }
 
-    /// The smallest base window with a calibrated bound: `h (p + m + 2)` columns, so that the
+    /// The smallest base window with a calibrated bound: `h (u + 2)` columns for `u`
+    /// unknowns per output (`p + m`, one more for the affine model's intercept), so that the
     /// window holds at least two non-overlapping intervals per unknown plus two
-    /// (`ν = ⌊M/h⌋ − (p + m) >= 2`).
+    /// (`ν = ⌊M/h⌋ − u >= 2`).
     #[must_use]
     pub fn min_window(horizon: usize, unknowns: usize) -> usize {
         horizon * (unknowns + 2)
     }
 
     /// The smallest base window with a calibrated bound for these settings:
-    /// `h (b (p + m + 1) + 1)` columns for batches of `b` blocks, so that the window holds at
-    /// least `p + m + 2` batches (`ν >= 2`); [`min_window`](Self::min_window) for `b = 1`.
+    /// `h (b (u + 1) + 1)` columns for batches of `b` blocks and `u` unknowns per output, so
+    /// that the window holds at least `u + 2` batches (`ν >= 2`);
+    /// [`min_window`](Self::min_window) for `b = 1`.
     #[must_use]
     pub fn smallest_window(&self, horizon: usize, unknowns: usize) -> usize {
         horizon * (self.batch_blocks * (unknowns + 1) + 1)
@@ -164,15 +166,18 @@ impl Calibration {
                 ),
             );
         }
-        let d = reg.outputs + reg.inputs;
+        // The affine model's intercept is one more unknown.
+        let d = reg.outputs
+            + reg.inputs
+            + usize::from(reg.model == streamcert_regression::Model::Affine);
         let min = self.smallest_window(reg.horizon, d);
         if reg.window < min && self.batch_blocks == 1 {
             return bad(
                 "window",
                 format!(
-                    "M = {} is too short for a calibrated bound with h = {} and p + m = {d}: \
-                     the smallest valid window is {min} columns (h · (p + m + 2), at least two \
-                     independent intervals per unknown plus two)",
+                    "M = {} is too short for a calibrated bound with h = {} and {d} unknowns \
+                     per output (p + m, + 1 for the affine model's intercept): the smallest \
+                     valid window is {min} columns (h · (unknowns + 2))",
                     reg.window, reg.horizon
                 ),
             );
@@ -181,10 +186,10 @@ impl Calibration {
             return bad(
                 "window",
                 format!(
-                    "M = {} is too short for a calibrated bound with h = {}, p + m = {d} and \
-                     batches of b = {} blocks: the smallest valid window is {min} columns \
-                     (h · (b (p + m + 1) + 1), at least p + m + 2 batches), or use fewer \
-                     blocks per batch",
+                    "M = {} is too short for a calibrated bound with h = {}, {d} unknowns per \
+                     output (p + m, + 1 for the affine model's intercept) and batches of \
+                     b = {} blocks: the smallest valid window is {min} columns \
+                     (h · (b (unknowns + 1) + 1)), or use fewer blocks per batch",
                     reg.window, reg.horizon, self.batch_blocks
                 ),
             );

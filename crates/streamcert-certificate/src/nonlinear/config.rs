@@ -160,16 +160,19 @@ impl NonlinearConfig {
             );
         }
         let e = self.check_features().len();
-        let d = self.regressors(reg.inputs) + e;
+        // The affine model's intercept is one more unknown (its `τ` an input with gain 0).
+        let affine = usize::from(reg.model == streamcert_regression::Model::Affine);
+        let d = self.regressors(reg.inputs + affine) + e;
         let min = crate::Calibration::min_window(reg.horizon, d);
         if reg.window < min && e > 0 {
             return bad(
                 "window",
                 format!(
                     "M = {} is too short for the nonlinear certificate with {} features, its \
-                     {e} lack-of-fit terms, h = {} and m = {}: the smallest valid window is \
-                     {min} columns (h · (D + e + m + 2)); or set check_terms = 0 (no check: \
-                     the library is then trusted to hold the drift)",
+                     {e} lack-of-fit terms, h = {} and m = {} (+ 1 for the affine model's \
+                     intercept): the smallest valid window is {min} columns \
+                     (h · (D + e + m + 2)); or set check_terms = 0 (no check: the library is \
+                     then trusted to hold the drift)",
                     reg.window,
                     self.library().len(),
                     reg.horizon,
@@ -182,7 +185,8 @@ impl NonlinearConfig {
                 "window",
                 format!(
                     "M = {} is too short for the nonlinear certificate with {} features, h = {} \
-                     and m = {}: the smallest valid window is {min} columns (h · (D + m + 2))",
+                     and m = {} (+ 1 for the affine model's intercept): the smallest valid window \
+                     is {min} columns (h · (D + m + 2))",
                     reg.window,
                     self.library().len(),
                     reg.horizon,

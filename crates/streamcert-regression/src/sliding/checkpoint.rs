@@ -34,6 +34,21 @@ impl SlidingRegression {
             ("hist_z1", self.hist_z1.len(), fresh.hist_z1.len()),
             ("dy1", self.dy1.len(), fresh.dy1.len()),
             ("peaks", self.peaks.len(), fresh.peaks.len()),
+            ("origin", self.origin.len(), fresh.origin.len()),
+            ("col_tau", self.col_tau.len(), fresh.col_tau.len()),
+            ("col_tauw", self.col_tauw.len(), fresh.col_tauw.len()),
+            ("zhist_tau", self.zhist_tau.len(), fresh.zhist_tau.len()),
+            ("zt", self.zt.len(), fresh.zt.len()),
+            ("dyt", self.dyt.len(), fresh.dyt.len()),
+            ("wt", self.wt.len(), fresh.wt.len()),
+            ("zto", self.zto.len(), fresh.zto.len()),
+            ("dyto", self.dyto.len(), fresh.dyto.len()),
+            ("intercept", self.intercept.len(), fresh.intercept.len()),
+            ("centred.g", self.centred.g.len(), fresh.centred.g.len()),
+            ("centred.c", self.centred.c.len(), fresh.centred.c.len()),
+            ("centred.s", self.centred.s.len(), fresh.centred.s.len()),
+            ("centred.gw", self.centred.gw.len(), fresh.centred.gw.len()),
+            ("centred.cw", self.centred.cw.len(), fresh.centred.cw.len()),
         ];
         if let Some((name, got, want)) = sizes.iter().find(|(_, g, w)| g != w) {
             return Err(RegressionError::CorruptState(format!(
@@ -48,7 +63,8 @@ impl SlidingRegression {
             && self.col_len <= self.cfg.window
             && self.col_next < self.cfg.window
             && self.since_refresh < self.cfg.refresh_period.max(1)
-            && self.inv_window == fresh.inv_window;
+            && self.inv_window == fresh.inv_window
+            && (self.affine() || (!self.origin_set && self.origin.iter().all(|&o| o == 0.0)));
         if !ok {
             return Err(RegressionError::CorruptState("ring counters out of range".into()));
         }
@@ -71,8 +87,19 @@ impl SlidingRegression {
             &self.gw,
             &self.cw,
             &self.peaks,
+            &self.origin,
+            &self.col_tau,
+            &self.col_tauw,
+            &self.zhist_tau,
+            &self.zt,
+            &self.dyt,
+            &self.wt,
+            &self.zto,
+            &self.dyto,
         ];
-        let all_finite = state.iter().all(|v| v.iter().all(|x| x.is_finite()));
+        let all_finite = state.iter().all(|v| v.iter().all(|x| x.is_finite()))
+            && self.tt.is_finite()
+            && self.tto.is_finite();
         if !all_finite {
             return Err(RegressionError::CorruptState("non-finite value in the window".into()));
         }
@@ -113,6 +140,20 @@ impl SlidingRegression {
         if self.cfg.estimator == crate::Estimator::Instrumented {
             check("ZWᵀ", &self.gw, &exact.gw, &sg, &sg)?;
             check("ΔY Wᵀ", &self.cw, &exact.cw, &ss, &sg)?;
+        }
+        if self.affine() {
+            // Σ τ² and the τ-weighted sums, on the scales √T · √G_ii and √T · √S_ii.
+            let st = [exact.tt.abs().sqrt()];
+            check("Σ τ²", &[self.tt], &[exact.tt], &st, &st)?;
+            check("Σ Z τ", &self.zt, &exact.zt, &sg, &st)?;
+            check("Σ ΔY τ", &self.dyt, &exact.dyt, &ss, &st)?;
+            if self.cfg.estimator == crate::Estimator::Instrumented {
+                let so = [exact.tto.abs().sqrt()];
+                check("Σ W τ", &self.wt, &exact.wt, &sg, &so)?;
+                check("Σ τ²", &[self.tto], &[exact.tto], &so, &so)?;
+                check("Σ Z τ", &self.zto, &exact.zto, &sg, &so)?;
+                check("Σ ΔY τ", &self.dyto, &exact.dyto, &ss, &so)?;
+            }
         }
         Ok(())
     }

@@ -37,12 +37,40 @@ impl SlidingRegression {
         for ((o, &dyi), th) in out[..p].iter_mut().zip(dy).zip(theta.chunks_exact(d)) {
             *o = dyi - th.iter().zip(z).map(|(a, b)| a * b).sum::<f64>();
         }
+        if self.affine() {
+            // − ĉ τ over the same interval.
+            let span = match source {
+                ResidualSource::OneStep => self.newest_interval_span(),
+                ResidualSource::Horizon => self.newest_column_span(),
+            };
+            let tau = span.unwrap_or(0.0);
+            for (o, &c) in out[..p].iter_mut().zip(&self.intercept[..p]) {
+                *o -= c * tau;
+            }
+        }
         true
     }
 
-    /// Solve the window: `O(d³ + p d²)`, no allocation.
+    /// Solve the window: `O(d³ + p d²)`, no allocation. Under the affine model the solve
+    /// sees the centred statistics (see [`Model::Affine`](crate::Model::Affine)) and
+    /// [`Estimate::intercept`] is `ĉ = (a_y − Θ̂ a_z)/T`.
     #[inline]
     pub fn estimate(&mut self) -> Estimate<'_> {
+        let affine = self.affine();
+        if affine {
+            self.enter_centred();
+        }
+        let mut out = self.estimate_raw();
+        if affine {
+            self.leave_centred(&mut out);
+        }
+        self.attach(out)
+    }
+
+    /// The estimate without its borrowed vectors (the solve on whatever statistics are in
+    /// place).
+    #[inline(always)]
+    fn estimate_raw(&mut self) -> Estimate<'static> {
         if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
             self.estimate_dims(1, 1)
         } else {
@@ -50,10 +78,97 @@ impl SlidingRegression {
         }
     }
 
+    /// `out` with `Θ̂` and `ĉ` attached when it is ready.
+    #[inline(always)]
+    fn attach(&self, out: Estimate<'static>) -> Estimate<'_> {
+        if out.status != EstimateStatus::Ready {
+            return out;
+        }
+        let (p, d) = (self.cfg.outputs, self.d());
+        let intercept: &[f64] = if self.affine() { &self.intercept[..p] } else { &[] };
+        Estimate { theta: &self.theta[..p * d], intercept, ..out }
+    }
+
+    /// Put the centred statistics `G − a_z a_zᵀ/T`, `C − a_y a_zᵀ/T`, `S − a_y a_yᵀ/T` (and
+    /// the instrumented `ZWᵀ − a_z a_wᵀ/T`, `ΔYWᵀ − a_y a_wᵀ/T`) where the solve reads the
+    /// running sums (the buffers are swapped, no copy back). `O(d²)`. With `T = 0` (no
+    /// column) the sums are left as they are (the estimate is then warming up).
+    #[inline(always)]
+    fn enter_centred(&mut self) {
+        let (p, d) = (self.cfg.outputs, self.d());
+        let tt = self.tt;
+        let inv = if tt > 0.0 { 1.0 / tt } else { 0.0 };
+        let (zt, dyt, wt) = (&self.zt[..d], &self.dyt[..p], &self.wt[..d]);
+        let instrumented = self.cfg.estimator == crate::Estimator::Instrumented;
+        // `G`, `C`, `S` by the column's own span (the ordinary sums are those already).
+        let (zo, dyo, inv_o) = if instrumented {
+            (&self.zto[..d], &self.dyto[..p], if self.tto > 0.0 { 1.0 / self.tto } else { 0.0 })
+        } else {
+            (zt, dyt, inv)
+        };
+        let c = &mut self.centred;
+        let centre = |out: &mut [f64], raw: &[f64], a: &[f64], b: &[f64], inv: f64| {
+            for (i, &ai) in a.iter().enumerate() {
+                let ai = ai * inv;
+                let (o, r) = (&mut out[i * b.len()..(i + 1) * b.len()], &raw[i * b.len()..]);
+                for ((o, &r), &bj) in o.iter_mut().zip(r).zip(b) {
+                    *o = r - ai * bj;
+                }
+            }
+        };
+        centre(&mut c.g, &self.g, zo, zo, inv_o);
+        centre(&mut c.c, &self.c, dyo, zo, inv_o);
+        centre(&mut c.s, &self.s, dyo, dyo, inv_o);
+        if instrumented {
+            centre(&mut c.gw, &self.gw, zt, wt, inv);
+            centre(&mut c.cw, &self.cw, dyt, wt, inv);
+        }
+        self.swap_centred();
+    }
+
+    /// Swap the running sums back in; with a ready estimate, `ĉ = (a_y − Θ̂ a_z)/T`, and
+    /// for the instrumented estimator `RMS(R)` with that `ĉ`: the centred sums give the
+    /// residual sum of squares at the least-squares intercept given `Θ̂`,
+    /// `c_LS = (Σ ΔY τ − Θ̂ Σ Z τ)/Σ τ²`, and `RSS = RSS_LS + Σ_i (c_LS,i − ĉ_i)² Σ τ²`.
+    #[inline(always)]
+    fn leave_centred(&mut self, out: &mut Estimate<'static>) {
+        self.swap_centred();
+        if out.status != EstimateStatus::Ready {
+            return;
+        }
+        let (p, d) = (self.cfg.outputs, self.d());
+        let inv = 1.0 / self.tt;
+        let instrumented = self.cfg.estimator == crate::Estimator::Instrumented;
+        let mut extra = 0.0;
+        for i in 0..p {
+            let th = &self.theta[i * d..(i + 1) * d];
+            let fitted: f64 = th.iter().zip(&self.zt[..d]).map(|(a, b)| a * b).sum();
+            self.intercept[i] = (self.dyt[i] - fitted) * inv;
+            if instrumented {
+                let own: f64 = th.iter().zip(&self.zto[..d]).map(|(a, b)| a * b).sum();
+                let c_ls = (self.dyto[i] - own) / self.tto;
+                extra += (c_ls - self.intercept[i]).powi(2) * self.tto;
+            }
+        }
+        if instrumented {
+            let n = (p * out.columns) as f64;
+            out.rms_residual = (out.rms_residual.powi(2) + extra / n).sqrt();
+        }
+    }
+
+    fn swap_centred(&mut self) {
+        let c = &mut self.centred;
+        std::mem::swap(&mut self.g, &mut c.g);
+        std::mem::swap(&mut self.c, &mut c.c);
+        std::mem::swap(&mut self.s, &mut c.s);
+        std::mem::swap(&mut self.gw, &mut c.gw);
+        std::mem::swap(&mut self.cw, &mut c.cw);
+    }
+
     /// [`estimate`](Self::estimate) with the dimensions passed in (literals at the call site
     /// for the paper's `p = m = 1` unroll the small kernels).
     #[inline(always)]
-    fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'_> {
+    fn estimate_dims(&mut self, p: usize, m: usize) -> Estimate<'static> {
         let d = p + m;
         let n = self.col_len;
         let mut out = Self::pending(p, m, n);
@@ -96,7 +211,6 @@ impl SlidingRegression {
                 }
                 if d >= WIDE_FROM {
                     out.rms_residual = self.solve_wide(p, d, inv_n);
-                    out.theta = &self.theta;
                     return out;
                 }
                 for i in 0..p {
@@ -143,7 +257,6 @@ impl SlidingRegression {
             rss += quad;
         }
         out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
-        out.theta = &self.theta;
         out
     }
 
@@ -165,17 +278,37 @@ impl SlidingRegression {
         sym_work: &mut [f64],
         form: impl FnOnce(&[f64], &mut [f64]),
     ) -> (Estimate<'_>, f64) {
+        let affine = self.affine();
+        if affine {
+            self.enter_centred();
+        }
+        let (mut out, top) = self.estimate_and_sym_max_raw(sym, m, sym_work, form);
+        if affine {
+            self.leave_centred(&mut out);
+        }
+        (self.attach(out), top)
+    }
+
+    /// [`estimate_and_sym_max`](Self::estimate_and_sym_max) on whatever statistics are in
+    /// place, without the borrowed vectors.
+    fn estimate_and_sym_max_raw(
+        &mut self,
+        sym: &mut [f64],
+        m: usize,
+        sym_work: &mut [f64],
+        form: impl FnOnce(&[f64], &mut [f64]),
+    ) -> (Estimate<'static>, f64) {
         let (p, inputs) = (self.cfg.outputs, self.cfg.inputs);
         let (d, n) = (p + inputs, self.col_len);
         if !(self.cfg.estimator == Estimator::Ordinary
             && d >= WIDE_FROM
             && n >= self.cfg.min_columns)
         {
-            let est = self.estimate();
+            let est = self.estimate_raw();
             if est.status != EstimateStatus::Ready {
                 return (est, f64::NAN);
             }
-            form(est.theta, sym);
+            form(&self.theta[..p * d], sym);
             let top = linalg::sym_eig_max(sym, m, sym_work);
             return (est, top);
         }
@@ -199,7 +332,6 @@ impl SlidingRegression {
             return (out, f64::NAN);
         }
         out.rms_residual = rms;
-        out.theta = &self.theta;
         (out, top)
     }
 
@@ -210,6 +342,7 @@ impl SlidingRegression {
         Estimate {
             status: EstimateStatus::Ready,
             theta: &[],
+            intercept: &[],
             outputs: p,
             inputs: m,
             rms_residual: f64::NAN,

@@ -34,6 +34,10 @@ impl SlidingRegression {
         }
         let cap = self.cfg.horizon + 1;
         let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
+        if !self.origin_set {
+            self.set_origin(&[y], &[u]);
+        }
+        let (oy, ou) = (self.origin[0], self.origin[1]);
         // This sample's interval regressors, kept in registers for the column below.
         let mut newest = [0.0; 2];
         if self.hist_len == 0 {
@@ -48,7 +52,9 @@ impl SlidingRegression {
             let k = next(prev, cap);
             let dt = t - t0;
             let half = 0.5 * dt;
-            let z1 = [half * (y0 + y), if zoh { dt * u0 } else { half * (u0 + u) }];
+            // Relative to the working origin (zero through the origin: the same bits).
+            let (ya, yb, ua, ub) = (y0 - oy, y - oy, u0 - ou, u - ou);
+            let z1 = [half * (ya + yb), if zoh { dt * ua } else { half * (ua + ub) }];
             self.hist_z1[2 * k..2 * k + 2].copy_from_slice(&z1);
             self.hist_z1[2 * (k + cap)..2 * (k + cap) + 2].copy_from_slice(&z1);
             self.dy1[0] = y - y0;
@@ -84,6 +90,10 @@ impl SlidingRegression {
             return Err(RegressionError::Overflow);
         }
         let q = self.col_next;
+        let affine = self.affine();
+        if affine && self.col_len == self.cfg.window {
+            self.affine_column(q, -1.0);
+        }
         let (g, c, s) = (&mut self.g[..4], &mut self.c[..2], &mut self.s[..1]);
         let zo = &mut self.col_z[2 * q..2 * q + 2];
         let dyo = &mut self.col_dy[q..=q];
@@ -105,11 +115,17 @@ impl SlidingRegression {
         }
         zo.copy_from_slice(&[zy, zu]);
         dyo[0] = dy;
-        if !finite3(g[0], g[3], s[0]) {
+        let finite = finite3(g[0], g[3], s[0]);
+        let diagonals = [g[0], g[3], s[0]];
+        if affine {
+            self.col_tau[q] = t - self.hist_t[oldest];
+            self.affine_column(q, 1.0);
+        }
+        if !(finite && self.tt.is_finite()) {
             self.reset();
             return Err(RegressionError::Overflow);
         }
-        let dropped = dropped_below_peak(&mut self.peaks[..3], [g[0], g[3], s[0]]);
+        let dropped = dropped_below_peak(&mut self.peaks[..3], diagonals);
         self.finish_column(q, dropped)
     }
 
@@ -124,6 +140,9 @@ impl SlidingRegression {
         m: usize,
     ) -> Result<(), RegressionError> {
         self.check_sample(t, y, u)?;
+        if !self.origin_set {
+            self.set_origin(y, u);
+        }
         let h = self.cfg.horizon;
         let d = p + m;
         let cap = h + 1;
@@ -153,6 +172,7 @@ impl SlidingRegression {
             self.zhist_head = if self.zhist_len == 0 { 0 } else { next(self.zhist_head, cap) };
             let q = self.zhist_head;
             self.zhist[q * d..(q + 1) * d].copy_from_slice(&self.z);
+            self.zhist_tau[q] = self.tau;
             self.zhist_len = (self.zhist_len + 1).min(cap);
             if self.zhist_len < cap {
                 return Ok(());
@@ -172,14 +192,17 @@ impl SlidingRegression {
         let half = 0.5 * dt;
         let (first, mirror) = self.hist_z1.split_at_mut(cap * d);
         let z1 = &mut first[b * d..(b + 1) * d];
+        // Relative to the working origin (zero through the origin: the same bits).
+        let origin = &self.origin[..d];
         for i in 0..p {
             let (ya, yb) = (self.hist_y[a * p + i], self.hist_y[b * p + i]);
-            z1[i] = half * (ya + yb);
+            z1[i] = half * ((ya - origin[i]) + (yb - origin[i]));
             self.dy1[i] = yb - ya;
         }
         let zoh = self.cfg.input_integral == InputIntegral::ZeroOrderHold;
         for j in 0..m {
-            let (ua, ub) = (self.hist_u[a * m + j], self.hist_u[b * m + j]);
+            let (ua, ub) =
+                (self.hist_u[a * m + j] - origin[p + j], self.hist_u[b * m + j] - origin[p + j]);
             z1[p + j] = if zoh { dt * ua } else { half * (ua + ub) };
         }
         mirror[b * d..(b + 1) * d].copy_from_slice(z1);
@@ -202,9 +225,55 @@ impl SlidingRegression {
                 *zi += vi;
             }
         }
+        self.tau = self.hist_t[newest] - self.hist_t[oldest];
         let (yn, yo) = (&self.hist_y[newest * p..(newest + 1) * p], &self.hist_y[oldest * p..]);
         for ((d, &vn), &vo) in self.dy[..p].iter_mut().zip(yn).zip(yo) {
             *d = vn - vo;
+        }
+    }
+
+    /// Set the working origin to this sample's `[y; u]` (affine model; once since
+    /// construction).
+    #[cold]
+    fn set_origin(&mut self, y: &[f64], u: &[f64]) {
+        if self.affine() {
+            for (o, &v) in self.origin.iter_mut().zip(y.iter().chain(u)) {
+                *o = v;
+            }
+            self.origin_set = true;
+        }
+    }
+
+    /// Add `sign ×` the column in slot `q`'s affine sums: `Z τ_w`, `ΔY τ_w`, `τ τ_w`, and
+    /// `W τ` for the instrumented estimator, whose intercept regressor `τ` is instrumented by
+    /// the instrument's own span `τ_w` (so that `W` in working coordinates,
+    /// `W − origin · τ_w`, spans what the recorded `W` spans, and the estimate does not depend
+    /// on the origin under irregular sampling); `τ_w = τ` for the ordinary estimator.
+    #[inline(always)]
+    fn affine_column(&mut self, q: usize, sign: f64) {
+        let (p, d) = (self.cfg.outputs, self.d());
+        let instrumented = self.cfg.estimator == Estimator::Instrumented;
+        let tau = self.col_tau[q];
+        let tau_w = if instrumented { self.col_tauw[q] } else { tau };
+        let (tz, tw) = (sign * tau, sign * tau_w);
+        for (a, &z) in self.zt.iter_mut().zip(&self.col_z[q * d..(q + 1) * d]) {
+            *a += z * tw;
+        }
+        for (a, &v) in self.dyt.iter_mut().zip(&self.col_dy[q * p..(q + 1) * p]) {
+            *a += v * tw;
+        }
+        self.tt += tz * tau_w;
+        if instrumented {
+            for (a, &w) in self.wt.iter_mut().zip(&self.col_w[q * d..(q + 1) * d]) {
+                *a += w * tz;
+            }
+            for (a, &z) in self.zto.iter_mut().zip(&self.col_z[q * d..(q + 1) * d]) {
+                *a += z * tz;
+            }
+            for (a, &v) in self.dyto.iter_mut().zip(&self.col_dy[q * p..(q + 1) * p]) {
+                *a += v * tz;
+            }
+            self.tto += tz * tau;
         }
     }
 
@@ -252,6 +321,7 @@ impl SlidingRegression {
     fn statistics_finite(&self, p: usize, d: usize) -> bool {
         (0..d).all(|i| self.g[i * d + i].is_finite())
             && (0..p).all(|i| self.s[i * p + i].is_finite())
+            && self.tt.is_finite()
             && (self.cfg.estimator == Estimator::Ordinary
                 || self.gw.iter().chain(self.cw.iter()).all(|v| v.is_finite()))
     }
@@ -261,6 +331,10 @@ impl SlidingRegression {
         let mm = self.cfg.window;
         let q = self.col_next;
         let instrumented = self.cfg.estimator == Estimator::Instrumented;
+        let affine = self.affine();
+        if affine && self.col_len == mm {
+            self.affine_column(q, -1.0);
+        }
         if instrumented {
             let cap = self.cfg.horizon + 1;
             let oldest = next(self.zhist_head, cap);
@@ -272,6 +346,7 @@ impl SlidingRegression {
             self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
             self.col_w[q * d..(q + 1) * d]
                 .copy_from_slice(&self.zhist[oldest * d..(oldest + 1) * d]);
+            self.col_tauw[q] = self.zhist_tau[oldest];
             self.accumulate(q, 1.0);
         } else if self.col_len == mm {
             self.replace_column(q, p, d);
@@ -279,6 +354,10 @@ impl SlidingRegression {
             self.col_z[q * d..(q + 1) * d].copy_from_slice(&self.z);
             self.col_dy[q * p..(q + 1) * p].copy_from_slice(&self.dy);
             self.accumulate(q, 1.0);
+        }
+        if affine {
+            self.col_tau[q] = self.tau;
+            self.affine_column(q, 1.0);
         }
         if !self.statistics_finite(p, d) {
             self.reset();
@@ -354,6 +433,7 @@ impl SlidingRegression {
         for v in [&mut self.g, &mut self.c, &mut self.s, &mut self.gw, &mut self.cw] {
             v.fill(0.0);
         }
+        self.clear_affine();
         let mm = self.cfg.window;
         // Oldest to newest, so the sums are formed in a fixed order: the ring holds the
         // window as [start, mm) followed by [0, start) when it has wrapped.
@@ -371,6 +451,11 @@ impl SlidingRegression {
         } else {
             for k in 0..self.col_len {
                 self.accumulate((start + k) % mm, 1.0);
+            }
+        }
+        if self.affine() {
+            for k in 0..self.col_len {
+                self.affine_column((start + k) % mm, 1.0);
             }
         }
         self.since_refresh = 0;

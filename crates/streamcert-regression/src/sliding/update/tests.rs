@@ -1,6 +1,6 @@
 //! The scalar path against the general path and the ordered sums.
 
-use crate::{InputIntegral, RegressionConfig, SlidingRegression};
+use crate::{InputIntegral, Model, RegressionConfig, SlidingRegression};
 
 /// The scalar path (`push`, `p = m = 1`) promises the general path's arithmetic in the
 /// same order: the statistics, the peaks that trigger a recompute, the column and interval
@@ -9,8 +9,12 @@ use crate::{InputIntegral, RegressionConfig, SlidingRegression};
 /// for both input integrals.
 #[test]
 fn the_scalar_push_is_the_general_push_bit_for_bit() {
-    for integral in [InputIntegral::Trapezoidal, InputIntegral::ZeroOrderHold] {
+    let cases = [InputIntegral::Trapezoidal, InputIntegral::ZeroOrderHold]
+        .into_iter()
+        .flat_map(|i| [(i, Model::Affine), (i, Model::ThroughOrigin)]);
+    for (integral, model) in cases {
         let mut cfg = RegressionConfig::new(1, 1, 20, 3, 1e-4);
+        cfg.model = model;
         cfg.refresh_period = 17;
         cfg.input_integral = integral;
         let (mut scalar, mut general) =
@@ -19,7 +23,7 @@ fn the_scalar_push_is_the_general_push_bit_for_bit() {
         for k in 0..400 {
             x = 3.9 * x * (1.0 - x);
             let burst = if (100..104).contains(&k) { 1e5 } else { 1.0 };
-            let (t, y, u) = (0.01 * k as f64 + 1e-3 * x, burst * (x - 0.5), 0.7 - x);
+            let (t, y, u) = (0.01 * k as f64 + 1e-3 * x, burst * (x - 0.5) + 40.0, 0.7 - x);
             scalar.push(t, &[y], &[u]).unwrap();
             general.push_dims(t, &[y], &[u], 1, 1).unwrap();
             let bits = |r: &SlidingRegression| {
@@ -33,12 +37,17 @@ fn the_scalar_push_is_the_general_push_bit_for_bit() {
                     .chain(&r.col_dy)
                     .chain(&r.hist_z1)
                     .chain(&r.dy1)
+                    .chain(&r.zt)
+                    .chain(&r.dyt)
+                    .chain(&r.col_tau)
+                    .chain(&r.origin)
+                    .chain([&r.tt])
                     .copied()
                     .chain(ranges)
                     .map(f64::to_bits)
                     .collect::<Vec<_>>()
             };
-            assert_eq!(bits(&scalar), bits(&general), "sample {k}, {integral:?}");
+            assert_eq!(bits(&scalar), bits(&general), "sample {k}, {integral:?}, {model:?}");
             assert_eq!(scalar.columns(), general.columns());
         }
     }

@@ -509,7 +509,8 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
     }
     assert!(all.iter().any(|e| e.calibrated.value.is_some()), "the calibrated looks ran");
     let payload = streamcert::certificate::unseal::<CertifierConfig>(&text, None).expect("sealed");
-    assert_eq!(payload.matches("\"batch\":4").count(), 1, "the windows' batch is written");
+    // The calibrated windows' and the hidden-dynamics guard's.
+    assert_eq!(payload.matches("\"batch\":4").count(), 2, "the windows' batch is written");
     assert!(payload.contains("\"batch_blocks\":4"));
     let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
     let err = Certifier::restore(&reseal(payload.replace("\"batch\":4", "\"batch\":2")))

@@ -9,6 +9,7 @@ mod dynamics;
 mod network;
 mod network_coupling;
 mod nonlinear;
+mod order;
 mod regression;
 mod reliability;
 mod support;

@@ -160,6 +160,7 @@ use streamcert_regression::{
 };
 
 use crate::nonlinear::{LookAt, NonlinearLook, NonlinearState};
+use crate::order::OrderGuard;
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use streamcert_regression::Model;
 
@@ -246,6 +247,8 @@ pub(crate) struct CalibratedState {
     affine: bool,
     zaug: Vec<f64>,
     nl_origin: f64,
+    /// The hidden-dynamics guard on the same columns and looks, when configured.
+    order: Option<OrderGuard>,
     // Scratch: the newest column's samples (times, outputs) and output ranges.
     ts: Vec<f64>,
     ys: Vec<f64>,
@@ -327,6 +330,13 @@ impl CalibratedState {
             affine,
             zaug: vec![0.0; d],
             nl_origin: 0.0,
+            order: cal
+                .hidden_dynamics
+                .then(|| {
+                    let shape = (cal.instrument_lag, cal.instrument_intervals, cal.batch_blocks);
+                    OrderGuard::new(p, d, reg.horizon, shape, &lengths, cal.delta)
+                })
+                .transpose()?,
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],
@@ -346,6 +356,11 @@ impl CalibratedState {
             .map_or(&[], |w| &self.regions[w * p..(w + 1) * p])
     }
 
+    /// The hidden-dynamics guard's latest test per window (empty without the guard).
+    pub(crate) fn order_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.order.as_ref().map_or(&[], |o| o.tests())
+    }
+
     /// The latest look of each window.
     pub(crate) fn looks(&self) -> &[Option<WindowLook>] {
         &self.latest
@@ -363,6 +378,9 @@ impl CalibratedState {
         }
         if let Some(c) = &mut self.coupling {
             c.reset();
+        }
+        if let Some(o) = &mut self.order {
+            o.reset();
         }
     }
 
@@ -410,6 +428,9 @@ impl CalibratedState {
                         }
                         n.push(z, dy, &self.ts, &self.ys);
                     }
+                    if let Some(o) = &mut self.order {
+                        o.push(z, dy);
+                    }
                     self.windows.push_column_ranged(z, dy, &self.col_range)
                 }
                 _ => false,
@@ -446,6 +467,9 @@ impl CalibratedState {
             let (delta, ridge, min_pivot) = (self.cal.delta, self.ridge, self.min_pivot);
             let origin = self.nl_origin;
             n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });
+        }
+        if let Some(o) = &mut self.order {
+            o.look(w, &self.tmat, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
@@ -505,7 +529,20 @@ impl CalibratedState {
     fn verdict(&self, margin: f64) -> CalibratedVerdict {
         let mut varying = None;
         let nonlinear = self.nonlinear_looks();
+        let mut order = None;
         let (best, contradicted) = standing(&self.latest, margin, |w, look| {
+            // The hidden-dynamics guard: the window's larger fit must have run and found no
+            // past-increment term.
+            if let Some(guard) = &self.order {
+                if let Err(reason) = guard.admits(w, look.window) {
+                    // A significant test is the stronger reason.
+                    let stronger = matches!(reason, NotCertified::HiddenDynamics { .. });
+                    if stronger || order.is_none() {
+                        order = Some(reason);
+                    }
+                    return false;
+                }
+            }
             // With a nonlinear model, the same window's nonlinearity test must have run and
             // found no variation: a significant test says the linear model does not hold over
             // the region, and a missing one (no feature fit yet) cannot say that it does.
@@ -532,10 +569,13 @@ impl CalibratedState {
         } else {
             NotCertified::WeakInstruments
         };
-        let blocked =
-            if best.is_some() { None } else { Some(contradicted.or(varying).unwrap_or(warming)) };
+        let blocked = if best.is_some() {
+            None
+        } else {
+            Some(contradicted.or(order).or(varying).unwrap_or(warming))
+        };
         let (nonlinear, nonlinear_blocked) = match &self.nonlinear {
-            Some(n) => n.verdict(margin, warming),
+            Some(n) => n.verdict(margin, warming, self.order.as_ref()),
             None => (None, None),
         };
         CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked }

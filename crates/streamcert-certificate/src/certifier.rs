@@ -141,6 +141,15 @@ impl Certifier {
         self.calibrated.as_ref().map_or(&[], |c| c.nonlinear_looks())
     }
 
+    /// The hidden-dynamics guard's latest test of each calibrated window (the Wald statistic
+    /// of the past increment's coefficients and its threshold; `None` where it has not run
+    /// or its fit was not ready); empty without the guard
+    /// ([`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics)).
+    #[must_use]
+    pub fn hidden_dynamics_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.order_tests())
+    }
+
     /// The region of the paper's certificates: the range of each output, then each input,
     /// over the samples of the regression window (`M + h` samples; see
     /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the

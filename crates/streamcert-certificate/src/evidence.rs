@@ -69,6 +69,25 @@ pub enum NotCertified {
         /// Its threshold at the test's risk.
         threshold: f64,
     },
+    /// Calibrated certificate: the hidden-dynamics guard says the output has dynamics the
+    /// first-order model does not hold (the past increment predicts the next one; see the
+    /// [`order`](crate::Calibration::hidden_dynamics) guard), so the window's rate speaks for
+    /// a model that does not describe the plant.
+    HiddenDynamics {
+        /// The window length.
+        window: usize,
+        /// The Wald statistic of the past increment's coefficients.
+        statistic: f64,
+        /// Its threshold at the guard's risk.
+        threshold: f64,
+    },
+    /// Calibrated certificate: the hidden-dynamics guard's larger fit has no estimate for the
+    /// window yet (too few columns, or a singular fit), so the model order is not checked and
+    /// the window's certificate does not stand.
+    OrderUntested {
+        /// The window length.
+        window: usize,
+    },
     /// Calibrated certificate with a nonlinear model: the window's nonlinearity test has no
     /// estimate yet (too few columns for the feature fit, or a singular one), so the linear
     /// model is not checked and the window's linear certificate does not stand.
@@ -131,6 +150,16 @@ impl std::fmt::Display for NotCertified {
                 Fixed::<3>(*statistic),
                 Fixed::<3>(*threshold)
             ),
+            Self::HiddenDynamics { window, statistic, threshold } => write!(
+                f,
+                "the output has dynamics the model does not hold (window {window}: past \
+                 increment, Wald {} > {})",
+                Fixed::<3>(*statistic),
+                Fixed::<3>(*threshold)
+            ),
+            Self::OrderUntested { window } => {
+                write!(f, "window {window}: model order not yet tested (no larger fit)")
+            }
             Self::LinearityUntested { window } => {
                 write!(f, "window {window}: linearity not yet tested (no feature fit)")
             }

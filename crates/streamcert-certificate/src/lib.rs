@@ -64,6 +64,7 @@ mod fixed;
 mod gap;
 mod gate;
 pub mod nonlinear;
+mod order;
 mod radius;
 mod row;
 

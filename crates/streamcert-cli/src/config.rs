@@ -73,6 +73,10 @@ delta = 0.01
 # instrument_lag = 1     # samples between the instrument's interval and the column's
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
 # batch_blocks = 1       # blocks of h per batch of the variance (4 or 8 with sensor noise)
+# hidden_dynamics = true # the model-order guard: a window whose output's past increment
+                         # predicts its next one (a hidden state: a mass measured by its
+                         # position) does not stand; false certifies on the first-order
+                         # model without checking it
 
 [nonlinear]
 # The calibrated certificate above assumes one Jacobian over its window. For a nonlinear
@@ -170,6 +174,8 @@ struct CalibrationSection {
     instrument_intervals: Option<usize>,
     #[serde(default)]
     batch_blocks: Option<usize>,
+    #[serde(default)]
+    hidden_dynamics: Option<bool>,
 }
 
 fn default_delta() -> f64 {
@@ -187,6 +193,7 @@ impl Default for CalibrationSection {
             instrument_lag: None,
             instrument_intervals: None,
             batch_blocks: None,
+            hidden_dynamics: None,
         }
     }
 }
@@ -202,6 +209,7 @@ impl CalibrationSection {
             instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
             instrument_intervals: self.instrument_intervals.unwrap_or(d.instrument_intervals),
             batch_blocks: self.batch_blocks.unwrap_or(d.batch_blocks),
+            hidden_dynamics: self.hidden_dynamics.unwrap_or(d.hidden_dynamics),
             ..d
         }
     }

@@ -22,6 +22,8 @@ enum ReasonDef {
     RateDropped { window: usize, upper: f64 },
     VaryingDynamics { window: usize, statistic: f64, threshold: f64 },
     LinearityUntested { window: usize },
+    HiddenDynamics { window: usize, statistic: f64, threshold: f64 },
+    OrderUntested { window: usize },
     NoNonlinearModel,
     LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
     LibraryUntested { window: usize },

@@ -31,7 +31,16 @@ impl CalibratedState {
             }
         }
         self.windows.check_state()?;
+        let order_ok = match (&self.order, &fresh.order) {
+            (Some(a), Some(b)) => a.matches(b),
+            (None, None) => true,
+            _ => false,
+        };
         let ok = coupling_ok
+            && order_ok
+            && self.affine == fresh.affine
+            && self.zaug.len() == fresh.zaug.len()
+            && self.nl_origin.is_finite()
             && self.horizon == fresh.horizon
             && self.ridge == fresh.ridge
             && self.min_pivot == fresh.min_pivot

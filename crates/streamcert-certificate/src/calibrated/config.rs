@@ -49,6 +49,18 @@ pub struct Calibration {
     /// certificate keeps batches of one block.
     #[serde(default = "default_batch", skip_serializing_if = "is_default_batch")]
     pub batch_blocks: usize,
+    /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
+    /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
+    /// at risk `δ` per look; a window whose test rejects, or could not run, does not stand
+    /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
+    /// certified on the first-order model even when the output carries a hidden state (a
+    /// mass measured by its position), which the certificate's risk does not cover.
+    #[serde(default = "default_true")]
+    pub hidden_dynamics: bool,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 fn default_batch() -> usize {
@@ -81,6 +93,7 @@ impl Calibration {
             instrument_lag: default_lag(),
             instrument_intervals: default_intervals(),
             batch_blocks: default_batch(),
+            hidden_dynamics: true,
         }
     }
 

@@ -74,6 +74,7 @@ fn number_bits(r: &NotCertified) -> [u64; 3] {
         N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
         N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
         N::VaryingDynamics { statistic, threshold, .. }
+        | N::HiddenDynamics { statistic, threshold, .. }
         | N::LibraryMisfit { statistic, threshold, .. } => {
             [statistic.to_bits(), threshold.to_bits(), 0]
         }
@@ -85,6 +86,7 @@ fn number_bits(r: &NotCertified) -> [u64; 3] {
         | N::NoAmbiguityModel
         | N::NoCalibration
         | N::LinearityUntested { .. }
+        | N::OrderUntested { .. }
         | N::LibraryUntested { .. }
         | N::NoNonlinearModel => [0; 3],
     }
@@ -280,6 +282,9 @@ mod tests {
             )),
             (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
                 NotCertified::LibraryMisfit { window, statistic, threshold }
+            )),
+            (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
+                NotCertified::HiddenDynamics { window, statistic, threshold }
             )),
         ]
         .prop_map(|r| r.map(ReasonText))

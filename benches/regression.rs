@@ -13,7 +13,7 @@ use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
     Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, certificate_value,
 };
-use streamcert::regression::{EstimateStatus, RegressionConfig, SlidingRegression};
+use streamcert::regression::{EstimateStatus, Model, RegressionConfig, SlidingRegression};
 
 /// A pre-generated stream of `len` samples with `p` outputs and `m` inputs.
 fn stream(p: usize, m: usize, len: usize) -> Vec<f64> {
@@ -119,17 +119,24 @@ fn certifier_step(c: &mut Criterion) {
     // whole window at every sample (`O(M d²)`).
     // Variant 4 adds the nonlinear certificate of degree 3 to the calibrated one (variant 2 is
     // its baseline in the same run).
+    // Variants 0 to 4 run the defaults (the affine model; with a calibration, the
+    // hidden-dynamics guard). Variants 5 and 6 are their baselines in the same run: the
+    // paper's model through the origin, and the calibrated certificate without the guard (the
+    // step as it was before the intercept and the guard).
     let cases = [
         (1usize, 1usize, 0u8),
         (1, 1, 1),
         (1, 1, 2),
         (1, 1, 3),
         (1, 1, 4),
+        (1, 1, 5),
+        (1, 1, 6),
         (10, 10, 0),
         (10, 10, 1),
+        (10, 10, 5),
     ];
     for (p, m, variant) in cases {
-        let wasserstein = variant == 1 || variant == 3;
+        let wasserstein = variant == 1 || variant == 3 || variant == 5;
         let d = p + m;
         let len = 4096;
         let data = stream(p, m, len);
@@ -143,6 +150,13 @@ fn certifier_step(c: &mut Criterion) {
         if variant == 2 || variant == 4 {
             cfg.calibration = Some(Calibration::new(0.01));
         }
+        if variant == 5 || variant == 6 {
+            cfg.regression.model = Model::ThroughOrigin;
+        }
+        if variant == 6 {
+            cfg.calibration =
+                Some(Calibration { hidden_dynamics: false, ..Calibration::new(0.01) });
+        }
         if variant == 4 {
             cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
         }
@@ -155,6 +169,8 @@ fn certifier_step(c: &mut Criterion) {
             "gaussian_and_calibrated",
             "naive_gaussian_and_wasserstein",
             "gaussian_calibrated_and_nonlinear_degree3",
+            "through_origin_gaussian_and_wasserstein",
+            "through_origin_gaussian_and_calibrated_unguarded",
         ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;

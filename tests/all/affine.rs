@@ -148,3 +148,66 @@ fn an_operating_point_below_the_margin_is_not_certified() {
     let (lower, _) = crate::calibrated::clopper_pearson(affine, runs as usize);
     assert!(lower <= 0.01, "affine: {affine} of {runs} opened");
 }
+
+/// Units and the metric (`p = 2`): the same plant logged with its second output in other
+/// units (`y_B = D y`, `D = diag(1, 1000)`, the controller `K_B = K D⁻¹`) is certified as in
+/// the first units when the metric `w = (1, 1/1000)` is stated, and differently when not: the
+/// identity metric of the new units is another metric of the plant.
+#[test]
+fn a_stated_metric_undoes_a_change_of_units() {
+    let scenario = LinearScenario {
+        n: 2,
+        m: 2,
+        a: vec![0.5, 0.3, -0.2, 0.2],
+        b: vec![1.0, 0.0, 0.0, 1.0],
+        k_explore: vec![-1.0, 0.0, 0.0, -1.0],
+        steps: 3000,
+        ..loop_about_zero()
+    };
+    let traj = run_scenario(&scenario, 12);
+    let gain = vec![-2.0, 0.0, 0.0, -2.0];
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(2, 2, 150, H, 1e-4)
+    };
+    let cfg = |gain: Vec<f64>, metric: Option<Vec<f64>>| CertifierConfig {
+        calibration: Some(Calibration::new(0.01)),
+        metric,
+        ..CertifierConfig::new(reg, gain, 0.1, 0.05, 1)
+    };
+    let d = [1.0, 1000.0];
+    let run = |cfg: CertifierConfig, scale: [f64; 2]| {
+        let mut cert = Certifier::new(cfg).expect("valid");
+        (0..traj.len())
+            .map(|i| {
+                let y = traj.output(i);
+                cert.push(traj.t[i], &[scale[0] * y[0], scale[1] * y[1]], traj.input(i))
+                    .expect("finite")
+            })
+            .collect::<Vec<_>>()
+    };
+    let gain_b = vec![gain[0] / d[0], gain[1] / d[1], gain[2] / d[0], gain[3] / d[1]];
+    let first = run(cfg(gain.clone(), None), [1.0, 1.0]);
+    let stated = run(cfg(gain_b.clone(), Some(vec![1.0 / d[0], 1.0 / d[1]])), d);
+    let unstated = run(cfg(gain_b, None), d);
+    let mut differ = 0;
+    for ((a, b), c) in first.iter().zip(&stated).zip(&unstated) {
+        assert!(close(a.beta_hat(), b.beta_hat(), 1e-6), "t {}", a.t);
+        assert!(same_verdict(&a.calibrated, &b.calibrated, 1e-6, 0.05), "t {}", a.t);
+        differ += usize::from(!close(a.beta_hat(), c.beta_hat(), 1e-3));
+    }
+    assert!(differ > first.len() / 2, "the unstated metric changed β̂ at {differ} samples");
+    // The regions are reported in the logged units.
+    let mut cert =
+        Certifier::new(cfg(vec![-2.0, 0.0, 0.0, -2.0], Some(vec![1.0, 1000.0]))).expect("valid");
+    for i in 0..200 {
+        cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("finite");
+    }
+    // The paper window's region: the last M + h = 155 samples.
+    let hi = (45..200).map(|i| traj.output(i)[1]).fold(f64::MIN, f64::max);
+    let region: Vec<_> = cert.region().collect();
+    assert!((region[1].hi - hi).abs() <= 1e-12 * hi.abs().max(1.0), "{region:?} vs {hi}");
+    // One output's rate does not depend on its unit: a metric there is refused.
+    let one = CertifierConfig { metric: Some(vec![2.0]), ..config(-1.5, Model::Affine, false) };
+    assert!(Certifier::new(one).is_err());
+}

@@ -152,7 +152,7 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
             let Some(value) = v.value else { continue };
             let region = match kind {
                 CertificateKind::Gaussian => cert.region().next(),
-                CertificateKind::Calibrated => cert.calibrated_region().first().copied(),
+                CertificateKind::Calibrated => cert.calibrated_region().next(),
                 _ => ev.nonlinear_region,
             };
             let Some(region) = region.filter(Interval::is_proper) else { continue };

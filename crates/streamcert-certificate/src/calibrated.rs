@@ -334,7 +334,10 @@ impl CalibratedState {
                 .hidden_dynamics
                 .then(|| {
                     let shape = (cal.instrument_lag, cal.instrument_intervals, cal.batch_blocks);
-                    OrderGuard::new(p, d, reg.horizon, shape, &lengths, cal.delta)
+                    // Any window's rejection closes every look: δ split over the windows
+                    // keeps the false closings of a look at about δ.
+                    let alpha = cal.delta / lengths.len() as f64;
+                    OrderGuard::new(p, d, reg.horizon, shape, &lengths, alpha)
                 })
                 .transpose()?,
             ts: vec![0.0; reg.horizon + 1],

@@ -41,6 +41,10 @@ pub struct Certifier {
     jcl: Vec<f64>,
     work: Vec<f64>,
     eig_work: Vec<f64>,
+    /// The gain in the metric's units, `K W⁻¹` ([`CertifierConfig::metric_gain`]).
+    gain: Vec<f64>,
+    /// Scratch: one sample's outputs in the metric's units (empty without a metric).
+    scaled: Vec<f64>,
 }
 
 /// The regression's outcome, reduced to what the certificate needs.
@@ -72,9 +76,10 @@ impl Certifier {
     pub fn new(cfg: CertifierConfig) -> Result<Self, CertifyError> {
         cfg.validate()?;
         let (p, m) = (cfg.regression.outputs, cfg.regression.inputs);
+        let gain = cfg.metric_gain();
         Ok(Self {
             regression: SlidingRegression::new(cfg.regression)?,
-            gain_norm: linalg::spectral_norm(&cfg.gain, m, p),
+            gain_norm: linalg::spectral_norm(&gain, m, p),
             gauss: Gate::new(cfg.margin, cfg.consecutive),
             wass: Gate::new(cfg.margin, cfg.consecutive),
             calibrated_gate: Gate::new(cfg.margin, cfg.consecutive),
@@ -84,7 +89,7 @@ impl Certifier {
                 .calibration
                 .map(|c| {
                     let coupling = cfg.couplings.as_ref();
-                    CalibratedState::new(c, cfg.nonlinear, coupling, &cfg.regression, &cfg.gain)
+                    CalibratedState::new(c, cfg.nonlinear, coupling, &cfg.regression, &gain)
                 })
                 .transpose()?,
             gap: GapDetector::new(cfg.gap_factor),
@@ -98,6 +103,8 @@ impl Certifier {
             jcl: vec![0.0; p * p],
             work: vec![0.0; p * p],
             eig_work: vec![0.0; linalg::eig_work_len(p)],
+            scaled: vec![0.0; if cfg.metric.is_some() { p } else { 0 }],
+            gain,
             cfg,
         })
     }
@@ -155,7 +162,16 @@ impl Certifier {
     /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the
     /// averaged linearisation over this region, nothing more. Formed on each call (`O(p + m)`).
     pub fn region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
-        self.regression.ranges()
+        self.regression.ranges().enumerate().map(|(i, r)| self.logged_units(i, r))
+    }
+
+    /// An output range in the metric's units back in the logged units (`/ w_i`; inputs and
+    /// the identity metric unchanged).
+    fn logged_units(&self, i: usize, r: Interval) -> Interval {
+        match self.cfg.metric.as_ref().and_then(|w| w.get(i)) {
+            Some(&w) => Interval { lo: r.lo / w, hi: r.hi / w },
+            None => r,
+        }
     }
 
     /// The current upper bound on each coupling block's gain `‖C_ij‖₂`
@@ -169,11 +185,12 @@ impl Certifier {
     /// The region of the standing calibrated certificate: the range of each output over the
     /// samples of its window at its look (empty when none stands).
     #[must_use]
-    pub fn calibrated_region(&self) -> &[Interval] {
-        match (&self.calibrated, self.calibrated_window) {
+    pub fn calibrated_region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
+        let region = match (&self.calibrated, self.calibrated_window) {
             (Some(c), Some(w)) => c.region(w),
             _ => &[],
-        }
+        };
+        region.iter().enumerate().map(|(i, &r)| self.logged_units(i, r))
     }
 
     /// The underlying regression.
@@ -194,6 +211,24 @@ impl Certifier {
     ///
     /// [`RegressionError::Overflow`]: streamcert_regression::RegressionError::Overflow
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
+        if let Some(w) = &self.cfg.metric {
+            // The outputs in the metric's units, `w_i y_i` (a wrong length is the
+            // regression's error below).
+            let mut scaled = std::mem::take(&mut self.scaled);
+            let n = y.len().min(scaled.len());
+            for ((s, &v), &wi) in scaled[..n].iter_mut().zip(y).zip(w) {
+                *s = wi * v;
+            }
+            let ev = self.push_scaled(t, if y.len() == scaled.len() { &scaled } else { y }, u);
+            self.scaled = scaled;
+            return ev;
+        }
+        self.push_scaled(t, y, u)
+    }
+
+    /// [`push`](Self::push) of outputs already in the metric's units.
+    #[inline(always)]
+    fn push_scaled(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
         let previous = self.regression.last_time();
         if let Err(e) = self.regression.push(t, y, u) {
             return match self.cfg.bad_samples {
@@ -383,7 +418,7 @@ impl Certifier {
         // Below, the plain estimate: routing p = 1 through the callback cost its step about
         // 15 ns (criterion, `certifier_step/`), the inlining lost.
         let (est, wide_top) = if p >= 10 {
-            let (gain, jcl) = (&self.cfg.gain[..m * p], &mut self.jcl[..p * p]);
+            let (gain, jcl) = (&self.gain[..m * p], &mut self.jcl[..p * p]);
             let (sym, eig_work) = (&mut self.work[..p * p], &mut self.eig_work[..]);
             self.regression.estimate_and_sym_max(sym, p, eig_work, |theta, sym| {
                 form_sym_jcl(theta, gain, jcl, sym, p, m);
@@ -407,7 +442,7 @@ impl Certifier {
         }
         let (rms, lambda_min) = (est.rms_residual, est.gram_lambda_min);
         if p < 10 {
-            let (gain, jcl) = (&self.cfg.gain[..m * p], &mut self.jcl[..p * p]);
+            let (gain, jcl) = (&self.gain[..m * p], &mut self.jcl[..p * p]);
             form_sym_jcl(est.theta, gain, jcl, &mut self.work[..p * p], p, m);
         }
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.

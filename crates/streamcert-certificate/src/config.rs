@@ -60,6 +60,14 @@ pub struct CertifierConfig {
     /// [`CouplingConfig`].
     #[serde(default)]
     pub couplings: Option<CouplingConfig>,
+    /// The metric the rate is measured in, for `p >= 2`: weights `w_i > 0`, one per output
+    /// (`P = diag(w)²`): every certificate is that of the outputs `w_i y_i`, so
+    /// `β̂ = −λ_max(sym(W Ĵ_cl W⁻¹))`, `W = diag(w)` (the gain seen in those units is
+    /// `K W⁻¹`). A contraction rate in the identity metric depends on the units of each
+    /// output: an output logged in mm instead of m is the metric `w = 1000` on it. `None`:
+    /// the identity metric of the units as logged. Regions are reported in the logged units.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metric: Option<Vec<f64>>,
 }
 
 fn default_gap_factor() -> f64 {
@@ -91,6 +99,17 @@ impl CertifierConfig {
             calibration: None,
             nonlinear: None,
             couplings: None,
+            metric: None,
+        }
+    }
+
+    /// The gain in the metric's units, `K W⁻¹` (`K` itself without a metric).
+    #[must_use]
+    pub fn metric_gain(&self) -> Vec<f64> {
+        let p = self.regression.outputs;
+        match &self.metric {
+            Some(w) => self.gain.iter().enumerate().map(|(i, k)| k / w[i % p]).collect(),
+            None => self.gain.clone(),
         }
     }
 
@@ -104,6 +123,22 @@ impl CertifierConfig {
         let bad = |field: &'static str, reason: String| {
             Err(CertifyError::InvalidConfig { field, reason })
         };
+        if let Some(w) = &self.metric {
+            if p < 2 {
+                return bad(
+                    "metric",
+                    "needs at least two outputs: one output's rate does not depend on its unit \
+                     (omit the metric)"
+                        .into(),
+                );
+            }
+            if w.len() != p || w.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+                return bad(
+                    "metric",
+                    format!("must hold p = {p} finite weights > 0 (one per output), got {w:?}"),
+                );
+            }
+        }
         if self.gain.len() != m * p {
             return bad(
                 "gain",

@@ -23,10 +23,11 @@
 //! ```
 //!
 //! (Hotelling's quantile, `Ω̂` the batch-means coefficient covariance of the larger fit, `ν`
-//! its effective number of batches less its unknowns per output, `α` the guard's risk per
-//! look), rejects at risk about `α` when the model holds. Where it rejects, the window's
-//! calibrated look does not stand (`NotCertified::HiddenDynamics`); where it could not run
-//! (the larger fit not ready), the look does not stand either
+//! its effective number of batches less its unknowns per output, `α = δ/W` the guard's risk
+//! per look of each of the `W` windows), rejects at risk about `α` when the model holds. Where any window's latest test
+//! rejects, no calibrated look stands (`NotCertified::HiddenDynamics`: a hidden state seen on
+//! one window is a hidden state of the plant, and the longest windows have the power); where a
+//! window's test could not run (the larger fit not ready), that window's look does not stand
 //! (`NotCertified::OrderUntested`): the certificate's model is then unchecked.
 //!
 //! **What it sees**: dynamics whose effect on the next `h` samples is carried by the past
@@ -175,9 +176,22 @@ impl OrderGuard {
             threshold.is_finite().then_some(NonlinearityTest { statistic: stat, threshold });
     }
 
-    /// Whether window `w`'s look may stand: `Ok` when its latest test ran and found nothing,
-    /// else the reason.
+    /// Whether window `w`'s look may stand: `Ok` when its latest test ran and found nothing
+    /// and no window's latest test rejects (the longer windows' tests have the power: a hidden
+    /// state seen on any window is a hidden state of the plant), else the reason.
     pub(crate) fn admits(&self, w: usize, window: usize) -> Result<(), NotCertified> {
+        if let Some((v, t)) = self
+            .latest
+            .iter()
+            .enumerate()
+            .find_map(|(v, t)| t.filter(NonlinearityTest::significant).map(|t| (v, t)))
+        {
+            return Err(NotCertified::HiddenDynamics {
+                window: self.windows.window(v),
+                statistic: t.statistic,
+                threshold: t.threshold,
+            });
+        }
         match self.latest.get(w).copied().flatten() {
             Some(t) if t.significant() => Err(NotCertified::HiddenDynamics {
                 window,

@@ -79,6 +79,9 @@ pub struct Summary {
     pub first_deploy_nonlinear: Option<f64>,
     /// Time of the last accepted row.
     pub last_time: Option<f64>,
+    /// The range `(lo, hi)` of each output over the accepted rows (for the units warning).
+    #[serde(default)]
+    pub output_ranges: Vec<(f64, f64)>,
 }
 
 impl Summary {
@@ -96,6 +99,25 @@ impl Summary {
     #[must_use]
     pub fn share_calibrated(&self) -> f64 {
         if self.rows == 0 { 0.0 } else { self.calibrated_open as f64 / self.rows as f64 }
+    }
+
+    /// With two or more outputs, the ratio of the widest output range to the narrowest over
+    /// the run (`None` with one output, or while an output has not varied). A contraction
+    /// rate in the identity metric depends on the units of each output: past `100` the
+    /// outputs' units, not the plant, decide the metric, and the summary says to state one
+    /// (`[certificate] metric`).
+    #[must_use]
+    pub fn output_scale_ratio(&self) -> Option<f64> {
+        if self.output_ranges.len() < 2 {
+            return None;
+        }
+        let spans = self.output_ranges.iter().map(|(lo, hi)| hi - lo);
+        let (mut small, mut large) = (f64::INFINITY, 0.0f64);
+        for v in spans {
+            small = small.min(v);
+            large = large.max(v);
+        }
+        (small > 0.0).then(|| large / small)
     }
 
     /// Share of rows with the nonlinear gate open.
@@ -409,6 +431,12 @@ impl Step<'_> {
             }
         };
         summary.rows += 1;
+        if summary.output_ranges.len() != s.y.len() {
+            summary.output_ranges = s.y.iter().map(|&v| (v, v)).collect();
+        }
+        for (r, &v) in summary.output_ranges.iter_mut().zip(&s.y) {
+            *r = (r.0.min(v), r.1.max(v));
+        }
         summary.gaps += u64::from(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
         let first = |open: bool, first: Option<f64>| first.or(open.then_some(s.t));
         summary.gauss_open += u64::from(ev.gaussian.open);
@@ -424,8 +452,8 @@ impl Step<'_> {
         region.extend(self.cert.region());
         if self.cert.config().calibration.is_some() {
             let p = self.cert.config().regression.outputs;
-            let cal = self.cert.calibrated_region();
-            region.extend((0..p).map(|i| cal.get(i).copied().unwrap_or(Interval::EMPTY)));
+            let mut cal = self.cert.calibrated_region();
+            region.extend((0..p).map(|_| cal.next().unwrap_or(Interval::EMPTY)));
         }
         Ok(Some(ev))
     }

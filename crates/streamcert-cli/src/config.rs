@@ -34,6 +34,11 @@ consecutive = 10
 # A step above gap_factor times the median of the last 32 steps is a gap: the window
 # restarts there and the gates close (the row's reason says so).
 # gap_factor = 5.0
+# With two or more outputs, the metric the rate is measured in: one weight per output
+# (the rate of w1 y1, w2 y2, ...). Without it the units as logged decide (an output in mm
+# instead of m changes the verdict); the summary warns when the outputs' ranges differ by
+# more than 100x. For example the inverse of each output's typical range:
+# metric = [1.0, 0.01]
 
 [regression]
 # The model: "affine" fits an intercept beside the dynamics (dY = Theta Z + c tau), so the
@@ -265,6 +270,8 @@ struct Certificate {
     consecutive: usize,
     #[serde(default)]
     gap_factor: Option<f64>,
+    #[serde(default)]
+    metric: Option<Vec<f64>>,
 }
 
 /// Every key may be omitted: the defaults are the ones `--print-config` shows.
@@ -378,6 +385,7 @@ pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     if let Some(g) = f.certificate.gap_factor {
         certifier.gap_factor = g;
     }
+    certifier.metric.clone_from(&f.certificate.metric);
     let a = &f.ambiguity;
     if a.enabled {
         certifier.ambiguity = Some(AmbiguityConfig {

@@ -253,6 +253,8 @@ fn run(cli: Cli) -> Result<(), CliError> {
                         "share_nonlinear_gate_open": s.share_nonlinear(),
                         "first_deploy_nonlinear": s.first_deploy_nonlinear,
                         "last_time": s.last_time,
+                        "output_scale_ratio": s.output_scale_ratio(),
+                        "warning": units_warning(&cfg.certifier, &s),
                     });
                     std::fs::write(&file, format!("{v}\n"))
                         .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
@@ -282,6 +284,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
                             100.0 * s.share_nonlinear(),
                             s.first_deploy_nonlinear.map_or("never".into(), |t| format!("t = {t}")),
                         );
+                    }
+                    if let Some(w) = units_warning(&cfg.certifier, &s) {
+                        eprintln!("warning: {w}");
                     }
                 }
             }
@@ -370,4 +375,21 @@ fn main() -> ExitCode {
             ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1))
         }
     }
+}
+
+/// The warning when two or more outputs' ranges differ by more than `100×` and no metric was
+/// stated: the rate is then that of the units as logged.
+fn units_warning(
+    cfg: &streamcert_certificate::CertifierConfig,
+    s: &streamcert_cli::certify::Summary,
+) -> Option<String> {
+    let ratio = s.output_scale_ratio().filter(|r| *r > 100.0)?;
+    cfg.metric.is_none().then(|| {
+        format!(
+            "the outputs' ranges differ by a factor of {ratio:.0}: the contraction rate is in \
+             the identity metric of the units as logged, which then decide the verdict; state \
+             the metric you mean ([certificate] metric = [w1, w2, ...], for example the inverse \
+             of each output's typical range)"
+        )
+    })
 }

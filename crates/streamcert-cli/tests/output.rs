@@ -51,7 +51,7 @@ fn library_with_regions(cfg: &config::Config, input: &str) -> Vec<(Evidence, Vec
             let e = cert.push(v[0], &v[1..2], &v[2..3]).expect("sample");
             let mut region: Vec<Interval> = cert.region().collect();
             if cfg.certifier.calibration.is_some() {
-                region.push(cert.calibrated_region().first().copied().unwrap_or(Interval::EMPTY));
+                region.push(cert.calibrated_region().next().unwrap_or(Interval::EMPTY));
             }
             (e, region)
         })

@@ -17,17 +17,48 @@ pub(super) struct Cell {
     pub(super) consecutive: usize,
     /// Blocks per batch of the calibrated certificate's variance (`batch_blocks`).
     pub(super) batch: usize,
+    /// Constant offsets `(y₀, u₀)` added to every output and input (an operating point).
+    pub(super) offset: (f64, f64),
+    /// Outputs the sensor sees: the first `observed` states (fewer than `n` hides states).
+    pub(super) observed: usize,
+    /// The true rate where it is not `−λ_max(sym(A + B K))` of the observed loop: a hidden
+    /// state's plant, `−max Re λ(A + B K)` (the rate in its best metric).
+    pub(super) truth: Option<f64>,
+}
+
+/// A cell with the defaults for the fields most cells leave alone.
+pub(super) fn plain(
+    family: String,
+    scenario: LinearScenario,
+    gain: Vec<f64>,
+    window: usize,
+    consecutive: usize,
+) -> Cell {
+    let observed = scenario.n;
+    Cell {
+        family,
+        scenario,
+        gain,
+        window,
+        consecutive,
+        batch: 1,
+        offset: (0.0, 0.0),
+        observed,
+        truth: None,
+    }
 }
 
 impl Cell {
     pub(super) fn truth(&self) -> f64 {
-        true_rate(&self.scenario.a, &self.scenario.b, &self.gain, self.scenario.n)
+        self.truth.unwrap_or_else(|| {
+            true_rate(&self.scenario.a, &self.scenario.b, &self.gain, self.scenario.n)
+        })
     }
     pub(super) fn config(&self, c: Option<f64>) -> CertifierConfig {
-        let n = self.scenario.n;
+        let (p, m) = (self.observed, self.scenario.m);
         let reg = RegressionConfig {
             input_integral: InputIntegral::ZeroOrderHold,
-            ..RegressionConfig::new(n, n, self.window, H, 1e-4)
+            ..RegressionConfig::new(p, m, self.window, H, 1e-4)
         };
         let mut cfg = CertifierConfig::new(
             reg,
@@ -101,16 +132,12 @@ fn noises(sigma: f64) -> [(&'static str, Process); 3] {
 pub(super) fn near_margin_cells() -> Vec<Cell> {
     let mut cells = Vec::new();
     let scalar = |noise| scenario(1, vec![0.5], -1.0, noise);
-    let cell = |family: String, scenario: LinearScenario, gain: Vec<f64>, window| Cell {
-        family,
-        scenario,
-        gain,
-        window,
-        consecutive: 1,
-        batch: 1,
+    let cell = |family: String, scenario: LinearScenario, gain: Vec<f64>, window| {
+        plain(family, scenario, gain, window, 1)
     };
-    // Window sweep, M/h = 2 … 30, the issue's short-window case (β* = 0.04).
-    for window in [10, 15, 20, 30, 50, 75, 150] {
+    // Window sweep, M/h = 2 … 30, the issue's short-window case (β* = 0.04); 25 is the
+    // smallest window with the intercept (h (p + m + 3)).
+    for window in [10, 15, 20, 25, 30, 50, 75, 150] {
         let s = scalar(Process::Gaussian { sigma: 0.1 });
         cells.push(cell("scalar, Gaussian".into(), s, vec![-0.54], window));
     }
@@ -153,8 +180,42 @@ pub(super) fn near_margin_cells() -> Vec<Cell> {
     let three = scenario(3, a3, -1.0, Process::Gaussian { sigma: 0.1 });
     let k = diagonal_candidate(&three, 0.04);
     cells.push(cell("p = 3".into(), three, k, 150));
+    // An operating point (the real-plant-data issue): `ẏ = −0.02 (y − y₀) + (u − 10) + w`,
+    // explored by `u = 10 + PRBS`, candidate K = 0 (β* = 0.02, below the margin).
+    for y0 in [50.0, 1e6] {
+        let s = scenario(1, vec![-0.02], 0.0, Process::Gaussian { sigma: 0.1 });
+        cells.push(Cell {
+            offset: (y0, 10.0),
+            ..cell(format!("operating point y₀ = {y0:e}, u₀ = 10"), s, vec![0.0], 150)
+        });
+    }
+    // Hidden dynamics: a two-state plant measured by its first state, `u = PRBS(±1, held
+    // 0.5 s)`, noise into the second state, K = 0: a damped mass (`ẍ = −2 ẋ + u + w`, the
+    // position does not contract: β* = 0) and a lightly damped oscillator
+    // (`ẍ = −x − 0.05 ẋ + u + w`, its state decays at 0.025).
+    for (name, a, truth) in [
+        ("hidden state: damped mass by position", vec![0.0, 1.0, 0.0, -2.0], 0.0),
+        ("hidden state: oscillator by position", vec![0.0, 1.0, -1.0, -0.05], 0.025),
+    ] {
+        let s = LinearScenario {
+            n: 2,
+            m: 1,
+            a,
+            b: vec![0.0, 1.0],
+            k_explore: vec![0.0, 0.0],
+            noise_gain: Some(vec![0.0, 1.0]),
+            dither_hold: 0.5,
+            ..scenario(1, vec![0.0], 0.0, Process::Gaussian { sigma: 0.1 })
+        };
+        cells.push(Cell {
+            observed: 1,
+            truth: Some(truth),
+            ..cell(name.into(), s, vec![0.0], 150)
+        });
+    }
     // Batches of 4 and 8 blocks (`batch_blocks`): the sensor-noise cell, and the smallest
-    // window each setting accepts (h (b (p + m + 1) + 1): 65 and 125) and one below it.
+    // window each setting accepts (h (b (u + 1) + 1), u = p + m + 1 unknowns with the
+    // intercept: 85 and 165) and one below it.
     let sensor = LinearScenario {
         sensor_noise: 0.05,
         ..scenario(1, vec![0.5], -1.5, Process::Gaussian { sigma: 0.1 })
@@ -163,8 +224,10 @@ pub(super) fn near_margin_cells() -> Vec<Cell> {
         batch,
         ..cell(format!("{family}, batches of {batch} blocks"), scenario, vec![-0.54], window)
     };
-    for (batch, smallest) in [(4, 65), (8, 125)] {
-        cells.push(batched("scalar, sensor noise σ_v = 0.05", sensor.clone(), 150, batch));
+    for (batch, smallest) in [(4, 85), (8, 165)] {
+        // M = 150, or the smallest window the setting accepts when that is longer.
+        let window = smallest.max(150);
+        cells.push(batched("scalar, sensor noise σ_v = 0.05", sensor.clone(), window, batch));
         for window in [smallest - H, smallest] {
             let s = scalar(Process::Gaussian { sigma: 0.1 });
             cells.push(batched("scalar, Gaussian", s, window, batch));
@@ -179,41 +242,23 @@ pub(super) fn power_cells() -> Vec<Cell> {
     for multiple in [2.0, 5.0, 20.0] {
         let s = scenario(1, vec![0.5], -1.0, Process::Gaussian { sigma: 0.1 });
         let gain = diagonal_candidate(&s, multiple * MARGIN);
-        cells.push(Cell {
-            family: format!("scalar, β* = {multiple}× margin"),
-            scenario: s,
-            gain,
-            window: 150,
-            consecutive: 10,
-            batch: 1,
-        });
+        cells.push(plain(format!("scalar, β* = {multiple}× margin"), s, gain, 150, 10));
     }
     let p2 = scenario(2, vec![0.5, 0.3, -0.2, 0.2], -1.0, Process::Gaussian { sigma: 0.1 });
-    cells.push(Cell {
-        family: "p = 2, K = −2I (β* = 1.49)".into(),
-        gain: eye(2, -2.0),
-        scenario: p2,
-        window: 150,
-        consecutive: 10,
-        batch: 1,
-    });
+    cells.push(plain("p = 2, K = −2I (β* = 1.49)".into(), p2, eye(2, -2.0), 150, 10));
     let sensor = LinearScenario {
         sensor_noise: 0.05,
         ..scenario(1, vec![-1.0], -2.0, Process::Gaussian { sigma: 0.02 })
     };
-    let sensor_cell = Cell {
-        family: "scalar, sensor noise σ_v = 0.05, β* = 3".into(),
-        scenario: sensor,
-        gain: vec![-2.0],
-        window: 150,
-        consecutive: 10,
-        batch: 1,
-    };
+    let sensor_cell =
+        plain("scalar, sensor noise σ_v = 0.05, β* = 3".into(), sensor, vec![-2.0], 150, 10);
     cells.push(sensor_cell.clone());
-    for batch in [4, 8] {
+    // M = 150, or the smallest window the setting accepts with the intercept (165 at b = 8).
+    for (batch, window) in [(4, 150), (8, 165)] {
         cells.push(Cell {
-            family: format!("{}, batches of {batch} blocks", sensor_cell.family),
+            family: format!("{}, batches of {batch} blocks, M = {window}", sensor_cell.family),
             batch,
+            window,
             ..sensor_cell.clone()
         });
     }

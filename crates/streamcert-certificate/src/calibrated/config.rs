@@ -51,7 +51,8 @@ pub struct Calibration {
     pub batch_blocks: usize,
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
     /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
-    /// at risk `δ` per look; a window whose test rejects, or could not run, does not stand
+    /// at risk `δ / W` per look of each of the `W` windows; where any window's latest test
+    /// rejects no look stands, and a window whose test could not run does not stand
     /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
     /// certified on the first-order model even when the output carries a hidden state (a
     /// mass measured by its position), which the certificate's risk does not cover.

@@ -167,26 +167,24 @@ impl Certifier {
                 "ambiguity state does not match its configuration".into(),
             ));
         }
+        let gain = c.cfg.metric_gain();
         let gain_norm =
-            streamcert_regression::linalg::spectral_norm(&c.cfg.gain, c.cfg.regression.inputs, p);
+            streamcert_regression::linalg::spectral_norm(&gain, c.cfg.regression.inputs, p);
         if c.regression.config() != &c.cfg.regression
             || c.jcl.len() != p * p
             || c.work.len() != p * p
             || c.resid.len() != p
             || c.eig_work.len() != streamcert_regression::linalg::eig_work_len(p)
             || c.gain_norm.to_bits() != gain_norm.to_bits()
+            || c.gain != gain
+            || c.scaled.len() != if c.cfg.metric.is_some() { p } else { 0 }
             || c.calibrated.is_some() != c.cfg.calibration.is_some()
             || !c.gap.is_consistent(c.cfg.gap_factor)
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }
         if let Some(state) = &c.calibrated {
-            state.check(
-                c.cfg.nonlinear,
-                c.cfg.couplings.as_ref(),
-                &c.cfg.regression,
-                &c.cfg.gain,
-            )?;
+            state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
         }
         Ok(c)
     }

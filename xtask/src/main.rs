@@ -25,6 +25,7 @@ mod exp2;
 mod network;
 mod nonlinear;
 mod plot;
+mod real;
 mod reliability;
 mod report;
 mod sensitivity;
@@ -63,6 +64,17 @@ enum Command {
         runs: usize,
         /// Output folder.
         #[arg(long, default_value = "target/validity")]
+        out: PathBuf,
+    },
+    /// The two public plant records of examples/real/ (the heat exchanger and the cascaded
+    /// tanks), checked by SHA-256, converted, certified, and the exchanger compared in °C
+    /// and in K (REAL.md).
+    Real {
+        /// Folder holding `exchanger.csv` and `tanque.csv` (see examples/real/README.md).
+        #[arg(long)]
+        from: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "target/real")]
         out: PathBuf,
     },
     /// The paper's, the linear calibrated and the nonlinear certificates on the same runs of
@@ -222,6 +234,7 @@ fn main() -> Result<()> {
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { runs, out } => validity::run(runs, &out),
+        Command::Real { from, out } => real::run(&from, &out),
         Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)

@@ -346,15 +346,23 @@ impl InstrumentedWindows {
     /// configuration).
     pub fn push_column(&mut self, z: &[f64], dy: &[f64]) -> bool {
         // Literal dimensions for p = m = 1 with one instrument interval.
-        if self.p == 1 && self.m == 1 && self.intervals == 1 {
+        // One output and one instrument interval: literal dimensions for `d = 2` (p = m = 1),
+        // 3 (with the affine model's `τ`), 4 (the hidden-dynamics guard's larger fit; the
+        // nonlinear certificate's cubic library and one input), 5 (that with `τ`), 6 (the
+        // cubic library, its two lack-of-fit terms and one input) and 7 (that with `τ`).
+        let one = self.p == 1 && self.intervals == 1;
+        if one && self.m == 1 {
             self.push_column_dims(z, dy, 1, 2, 2)
-        } else if self.p == 1 && self.m == 3 && self.intervals == 1 {
-            // One output with four regressors (the nonlinear certificate's cubic library and
-            // one input).
+        } else if one && self.m == 2 {
+            self.push_column_dims(z, dy, 1, 3, 3)
+        } else if one && self.m == 3 {
             self.push_column_dims(z, dy, 1, 4, 4)
-        } else if self.p == 1 && self.m == 5 && self.intervals == 1 {
-            // Six regressors: the cubic library, its two lack-of-fit terms and one input.
+        } else if one && self.m == 4 {
+            self.push_column_dims(z, dy, 1, 5, 5)
+        } else if one && self.m == 5 {
             self.push_column_dims(z, dy, 1, 6, 6)
+        } else if one && self.m == 6 {
+            self.push_column_dims(z, dy, 1, 7, 7)
         } else {
             let lay = self.layout();
             self.push_column_dims(z, dy, lay.p, lay.d, lay.k)

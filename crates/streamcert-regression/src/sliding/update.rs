@@ -91,8 +91,26 @@ impl SlidingRegression {
         }
         let q = self.col_next;
         let affine = self.affine();
-        if affine && self.col_len == self.cfg.window {
-            self.affine_column(q, -1.0);
+        if affine {
+            // The affine sums in registers: the evicted column's products out, the new
+            // column's in (the same operations as `affine_column`: the same bits).
+            let tau = t - self.hist_t[oldest];
+            let (mut z0, mut z1, mut d0, mut tt) = (self.zt[0], self.zt[1], self.dyt[0], self.tt);
+            if self.col_len == self.cfg.window {
+                let ot = self.col_tau[q];
+                let (o0, o1, od) = (self.col_z[2 * q], self.col_z[2 * q + 1], self.col_dy[q]);
+                let mt = -ot;
+                z0 += o0 * mt;
+                z1 += o1 * mt;
+                d0 += od * mt;
+                tt += mt * ot;
+            }
+            z0 += zy * tau;
+            z1 += zu * tau;
+            d0 += dy * tau;
+            tt += tau * tau;
+            (self.zt[0], self.zt[1], self.dyt[0], self.tt) = (z0, z1, d0, tt);
+            self.col_tau[q] = tau;
         }
         let (g, c, s) = (&mut self.g[..4], &mut self.c[..2], &mut self.s[..1]);
         let zo = &mut self.col_z[2 * q..2 * q + 2];
@@ -117,10 +135,6 @@ impl SlidingRegression {
         dyo[0] = dy;
         let finite = finite3(g[0], g[3], s[0]);
         let diagonals = [g[0], g[3], s[0]];
-        if affine {
-            self.col_tau[q] = t - self.hist_t[oldest];
-            self.affine_column(q, 1.0);
-        }
         if !(finite && self.tt.is_finite()) {
             self.reset();
             return Err(RegressionError::Overflow);

@@ -230,7 +230,9 @@ impl InstrumentedWindows {
         }
         let (sum_w, sum_w2) = match (p, d, k) {
             (1, 2, 2) => self.block_scores(w, out, 1, 2, 2),
+            (1, 3, 3) => self.block_scores(w, out, 1, 3, 3),
             (1, 4, 4) => self.block_scores(w, out, 1, 4, 4),
+            (1, 5, 5) => self.block_scores(w, out, 1, 5, 5),
             (1, 6, 6) => self.block_scores(w, out, 1, 6, 6),
             _ => self.block_scores(w, out, p, d, k),
         };
@@ -379,7 +381,9 @@ impl InstrumentedWindows {
         // Literal dimensions for the common shapes let the compiler unroll the kernels.
         match (lay.p, lay.d, lay.k) {
             (1, 2, 2) => self.coefficient_covariance_dims(w, out, cov, 1, 2, 2),
+            (1, 3, 3) => self.coefficient_covariance_dims(w, out, cov, 1, 3, 3),
             (1, 4, 4) => self.coefficient_covariance_dims(w, out, cov, 1, 4, 4),
+            (1, 5, 5) => self.coefficient_covariance_dims(w, out, cov, 1, 5, 5),
             (1, 6, 6) => self.coefficient_covariance_dims(w, out, cov, 1, 6, 6),
             (p, d, k) => self.coefficient_covariance_dims(w, out, cov, p, d, k),
         }

@@ -95,6 +95,21 @@ impl SlidingRegression {
     /// column) the sums are left as they are (the estimate is then warming up).
     #[inline(always)]
     fn enter_centred(&mut self) {
+        if self.cfg.outputs == 1 && self.cfg.inputs == 1 && self.cfg.estimator == Estimator::Ordinary
+        {
+            // p = m = 1, ordinary: the same arithmetic as the general loops below, in
+            // registers (the paper's case, every sample).
+            let inv = if self.tt > 0.0 { 1.0 / self.tt } else { 0.0 };
+            let (z0, z1, y0) = (self.zt[0], self.zt[1], self.dyt[0]);
+            let (a0, a1, ay) = (z0 * inv, z1 * inv, y0 * inv);
+            let (g, c, s) = (&self.g[..4], &self.c[..2], &self.s[..1]);
+            let out = &mut self.centred;
+            out.g[..4].copy_from_slice(&[g[0] - a0 * z0, g[1] - a0 * z1, g[2] - a1 * z0, g[3] - a1 * z1]);
+            out.c[..2].copy_from_slice(&[c[0] - ay * z0, c[1] - ay * z1]);
+            out.s[0] = s[0] - ay * y0;
+            self.swap_centred();
+            return;
+        }
         let (p, d) = (self.cfg.outputs, self.d());
         let tt = self.tt;
         let inv = if tt > 0.0 { 1.0 / tt } else { 0.0 };

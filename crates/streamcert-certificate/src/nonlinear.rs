@@ -97,6 +97,7 @@ mod features;
 
 pub use bounds::{f_quantile, polynomial_bounds, simultaneous_multiplier};
 use cells::Bounds;
+pub(crate) use check::hotelling_wald;
 use check::{LackOfFit, WaldAt, wald};
 pub use config::NonlinearConfig;
 pub use features::{Feature, FeatureSet};
@@ -466,6 +467,6 @@ impl NonlinearState {
 }
 
 /// Whether two window sets have the same lengths (a restored state against a fresh one).
-fn same_windows(a: &InstrumentedWindows, b: &InstrumentedWindows) -> bool {
+pub(crate) fn same_windows(a: &InstrumentedWindows, b: &InstrumentedWindows) -> bool {
     a.count() == b.count() && (0..a.count()).all(|w| a.window(w) == b.window(w))
 }

@@ -42,9 +42,9 @@
 //! `O(k d' + k²)` per column (`d' = d + p`), no allocation; a test per look `O(B p² d'² + p⁶)`.
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, WindowEstimate, linalg};
+use streamcert_regression::{InstrumentedWindows, WindowEstimate};
 
-use crate::nonlinear::{NonlinearityTest, f_quantile};
+use crate::nonlinear::{NonlinearityTest, hotelling_wald, same_windows};
 use crate::{CertifyError, NotCertified};
 
 /// The guard's state: its own windows of the larger fit, the ring of the last `h` columns'
@@ -161,19 +161,8 @@ impl OrderGuard {
             }
             self.rhs[a] = self.est.theta[index(a)];
         }
-        if !linalg::cholesky_in_place(&mut self.sub[..q * q], q) {
-            return;
-        }
-        self.work[..q].copy_from_slice(&self.rhs[..q]);
-        linalg::cholesky_solve_in_place(&self.sub[..q * q], q, &mut self.rhs[..q]);
-        let stat: f64 = self.work[..q].iter().zip(&self.rhs[..q]).map(|(a, b)| a * b).sum();
-        let (qf, d2) = (q as f64, nu - q as f64 + 1.0);
-        if !(d2 > 0.0 && stat.is_finite()) {
-            return;
-        }
-        let threshold = nu * qf / d2 * f_quantile(qf, d2, self.alpha);
         self.latest[w] =
-            threshold.is_finite().then_some(NonlinearityTest { statistic: stat, threshold });
+            hotelling_wald(q, nu, self.alpha, (&mut self.sub, &mut self.rhs, &mut self.work));
     }
 
     /// Whether window `w`'s look may stand: `Ok` when its latest test ran and found nothing
@@ -208,8 +197,7 @@ impl OrderGuard {
         self.windows.check_state().is_ok()
             && (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)
             && self.alpha == fresh.alpha
-            && self.windows.count() == fresh.windows.count()
-            && (0..self.windows.count()).all(|w| self.windows.window(w) == fresh.windows.window(w))
+            && same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && self.latest.len() == fresh.latest.len()
             && [

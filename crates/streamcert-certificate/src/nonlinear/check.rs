@@ -74,6 +74,19 @@ pub(super) fn wald(
         }
         rhs[i] = theta[first + i];
     }
+    hotelling_wald(q, nu, alpha, (sub, rhs, work))
+}
+
+/// The Wald statistic `θ̂_Sᵀ Ω̂_SS⁻¹ θ̂_S` of `q` coefficients whose covariance `Ω̂_SS` is in
+/// `sub` (`q × q`, overwritten by its factor) and values in `rhs` (overwritten), against
+/// Hotelling's quantile `ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)`; `None` when `Ω̂_SS` is not
+/// positive definite, `ν − q + 1 <= 0`, or a value is not finite. `work`: `q` values.
+pub(crate) fn hotelling_wald(
+    q: usize,
+    nu: f64,
+    alpha: f64,
+    (sub, rhs, work): (&mut [f64], &mut [f64], &mut [f64]),
+) -> Option<NonlinearityTest> {
     if !linalg::cholesky_in_place(&mut sub[..q * q], q) {
         return None;
     }
@@ -81,8 +94,11 @@ pub(super) fn wald(
     linalg::cholesky_solve_in_place(&sub[..q * q], q, &mut rhs[..q]);
     let quad: f64 = work[..q].iter().zip(&rhs[..q]).map(|(a, b)| a * b).sum();
     let (qf, d2) = (q as f64, nu - q as f64 + 1.0);
+    if !(quad.is_finite() && d2 > 0.0) {
+        return None;
+    }
     let threshold = nu * qf / d2 * f_quantile(qf, d2, alpha);
-    (quad.is_finite() && d2 > 0.0).then_some(NonlinearityTest { statistic: quad, threshold })
+    threshold.is_finite().then_some(NonlinearityTest { statistic: quad, threshold })
 }
 
 impl LackOfFit {

@@ -95,7 +95,9 @@ impl SlidingRegression {
     /// column) the sums are left as they are (the estimate is then warming up).
     #[inline(always)]
     fn enter_centred(&mut self) {
-        if self.cfg.outputs == 1 && self.cfg.inputs == 1 && self.cfg.estimator == Estimator::Ordinary
+        if self.cfg.outputs == 1
+            && self.cfg.inputs == 1
+            && self.cfg.estimator == Estimator::Ordinary
         {
             // p = m = 1, ordinary: the same arithmetic as the general loops below, in
             // registers (the paper's case, every sample).
@@ -104,7 +106,12 @@ impl SlidingRegression {
             let (a0, a1, ay) = (z0 * inv, z1 * inv, y0 * inv);
             let (g, c, s) = (&self.g[..4], &self.c[..2], &self.s[..1]);
             let out = &mut self.centred;
-            out.g[..4].copy_from_slice(&[g[0] - a0 * z0, g[1] - a0 * z1, g[2] - a1 * z0, g[3] - a1 * z1]);
+            out.g[..4].copy_from_slice(&[
+                g[0] - a0 * z0,
+                g[1] - a0 * z1,
+                g[2] - a1 * z0,
+                g[3] - a1 * z1,
+            ]);
             out.c[..2].copy_from_slice(&[c[0] - ay * z0, c[1] - ay * z1]);
             out.s[0] = s[0] - ay * y0;
             self.swap_centred();

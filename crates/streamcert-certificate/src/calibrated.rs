@@ -582,7 +582,7 @@ impl CalibratedState {
             Some(contradicted.or(order).or(varying).unwrap_or(warming))
         };
         let (nonlinear, nonlinear_blocked) = match &self.nonlinear {
-            Some(n) => n.verdict(margin, warming, self.order.as_ref()),
+            Some(n) => n.verdict(margin, warming),
             None => (None, None),
         };
         CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked }

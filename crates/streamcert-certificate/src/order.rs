@@ -28,7 +28,8 @@
 //! rejects, no calibrated look stands (`NotCertified::HiddenDynamics`: a hidden state seen on
 //! one window is a hidden state of the plant, and the longest windows have the power); where a
 //! window's test could not run (the larger fit not ready), that window's look does not stand
-//! (`NotCertified::OrderUntested`): the certificate's model is then unchecked.
+//! (`NotCertified::OrderUntested`): the certificate's model is then unchecked. The nonlinear
+//! certificate is not gated by this test of the linear model's order.
 //!
 //! **What it sees**: dynamics whose effect on the next `h` samples is carried by the past
 //! increment: second-order and lightly damped outputs, an integrator behind a lag, a

@@ -52,10 +52,14 @@ pub struct Calibration {
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
     /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
     /// at risk `δ / W` per look of each of the `W` windows; where any window's latest test
-    /// rejects no look stands, and a window whose test could not run does not stand
+    /// rejects no linear calibrated look stands, and a window whose test could not run does
+    /// not stand
     /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
     /// certified on the first-order model even when the output carries a hidden state (a
-    /// mass measured by its position), which the certificate's risk does not cover.
+    /// mass measured by its position), which the certificate's risk does not cover. It tests
+    /// the linear model's order and gates the linear calibrated certificate; the nonlinear
+    /// certificate is not gated by it (on a nonlinear loop the linear model's misfit reads as
+    /// a past-increment term) and has no order test of its own.
     #[serde(default = "default_true")]
     pub hidden_dynamics: bool,
 }

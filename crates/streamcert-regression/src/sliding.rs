@@ -3,6 +3,7 @@
 //! `update.rs`, the solve in `solve.rs`, the consistency check of a restored state in
 //! `checkpoint.rs`.
 
+mod affine;
 mod checkpoint;
 mod solve;
 mod update;

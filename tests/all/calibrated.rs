@@ -286,25 +286,40 @@ fn look_risks_sum_to_the_share_of_delta() {
 
 #[test]
 fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
-    // h (p + m + 3) = 25 is the smallest window for p = m = 1, h = 5 under the affine model
-    // (the intercept is one more unknown), h (p + m + 2) = 20 through the origin.
-    let err = Certifier::new(calibrated(1, vec![-0.54], 24, 1)).unwrap_err();
+    // With the guards (the default): the guards' larger fit has u = p + m + 1 + p + 2p
+    // unknowns under the affine model, so h (u + 2) = 40 for p = m = 1, h = 5 (35 through the
+    // origin); without them h (p + m + 3) = 25 (the intercept is one more unknown) and
+    // h (p + m + 2) = 20 through the origin.
+    let err = Certifier::new(calibrated(1, vec![-0.54], 39, 1)).unwrap_err();
     let CertifyError::InvalidConfig { field: "window", reason } = err else { panic!("{err}") };
-    assert!(reason.contains("smallest valid window is 25"), "{reason}");
-    assert!(Certifier::new(calibrated(1, vec![-0.54], 25, 1)).is_ok());
-    let origin = |p: usize, gain: Vec<f64>, window: usize| {
-        let mut cfg = calibrated(p, gain, window, 1);
-        cfg.regression.model = Model::ThroughOrigin;
+    assert!(reason.contains("smallest valid window is 40"), "{reason}");
+    assert!(reason.contains("without the guards it would be 25"), "{reason}");
+    assert!(Certifier::new(calibrated(1, vec![-0.54], 40, 1)).is_ok());
+    let model = |p: usize, window: usize, origin: bool, guards: bool| {
+        let mut cfg = calibrated(p, vec![if p == 1 { -0.54 } else { 0.0 }; p * p], window, 1);
+        if origin {
+            cfg.regression.model = Model::ThroughOrigin;
+        }
+        if !guards {
+            cfg.calibration = cfg.calibration.map(Calibration::unguarded);
+        }
         Certifier::new(cfg)
     };
-    let err = origin(1, vec![-0.54], 19).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 20"), "{err}");
-    assert!(origin(1, vec![-0.54], 20).is_ok());
-    // p = m = 2: 5 · 7 = 35 affine, 5 · 6 = 30 through the origin.
-    let err = Certifier::new(calibrated(2, vec![0.0; 4], 34, 1)).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 35"), "{err}");
-    let err = origin(2, vec![0.0; 4], 29).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 30"), "{err}");
+    // (p, origin, guards, smallest): p = m = 2 has 2 + 2 + 1 (+ 2 + 4) unknowns.
+    for (p, origin, guards, smallest) in [
+        (1, true, true, 35),
+        (1, false, false, 25),
+        (1, true, false, 20),
+        (2, false, true, 65),
+        (2, true, true, 60),
+        (2, false, false, 35),
+        (2, true, false, 30),
+    ] {
+        let err = model(p, smallest - 1, origin, guards).unwrap_err();
+        let text = format!("smallest valid window is {smallest}");
+        assert!(err.to_string().contains(&text), "{p} {origin} {guards}: {err}");
+        assert!(model(p, smallest, origin, guards).is_ok());
+    }
     for margin in [0.0, -0.1] {
         let cfg = CertifierConfig { margin, ..calibrated(1, vec![-0.54], 150, 1) };
         let err = Certifier::new(cfg).unwrap_err();
@@ -347,26 +362,31 @@ fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window()
     // The smallest accepted windows of each model (the affine model's intercept is one more
     // unknown: h (p + m + 3) = 25, and 85 with batches of 4), then batches of 4 blocks at
     // their smallest accepted window, and at 150.
+    // With the guards (the default) the smallest is 40 (35 through the origin), without them
+    // 25 (20).
     use Model::{Affine, ThroughOrigin};
-    for (window, batch_blocks, model) in [
-        (25, 1, Affine),
-        (30, 1, Affine),
-        (150, 1, Affine),
-        (85, 4, Affine),
-        (150, 4, Affine),
-        (20, 1, ThroughOrigin),
-        (65, 4, ThroughOrigin),
+    for (window, batch_blocks, model, guards) in [
+        (40, 1, Affine, true),
+        (25, 1, Affine, false),
+        (30, 1, Affine, false),
+        (150, 1, Affine, true),
+        (85, 4, Affine, true),
+        (150, 4, Affine, true),
+        (35, 1, ThroughOrigin, true),
+        (20, 1, ThroughOrigin, false),
+        (65, 4, ThroughOrigin, false),
     ] {
         let mut cfg = calibrated(1, vec![-0.54], window, 1);
         cfg.regression.model = model;
-        cfg.calibration = Some(Calibration { batch_blocks, ..Calibration::new(0.01) });
+        let cal = Calibration { batch_blocks, ..Calibration::new(0.01) };
+        cfg.calibration = Some(if guards { cal } else { cal.unguarded() });
         let opened =
             (0..runs).filter(|&s| first_opening(&cfg, &short_window_plant(), 7000 + s).is_some());
         let opened = opened.count();
         let (lower, upper) = clopper_pearson(opened, runs as usize);
         assert!(
             lower <= 0.01,
-            "window {window}, b = {batch_blocks}, {model:?}: {opened} of {runs} opened \
+            "window {window}, b = {batch_blocks}, {model:?}, guards {guards}: {opened} of {runs} opened \
              ([{lower:.4}, {upper:.4}])"
         );
     }
@@ -394,16 +414,18 @@ fn contracting_candidates_are_certified_and_a_plant_change_closes_the_gate() {
                 open_at_switch = ev.calibrated.open;
             } else if closed_at.is_none() && !ev.calibrated.open {
                 closed_at = Some(traj.t[i] - 20.0);
-                // A newer window's bound, the certificate below the margin, or the
-                // hidden-dynamics guard (a window that mixes the two plants is not a
-                // first-order one): every closing costs no validity.
+                // The change guard, a newer window's bound, the certificate below the margin,
+                // or the model guard (a window that mixes the two plants is neither first
+                // order nor linear): every closing costs no validity.
                 assert!(
                     matches!(
                         ev.calibrated.reason,
                         Some(
-                            NotCertified::RateDropped { .. }
+                            NotCertified::PlantChanged { .. }
+                                | NotCertified::RateDropped { .. }
                                 | NotCertified::BelowMargin { .. }
                                 | NotCertified::HiddenDynamics { .. }
+                                | NotCertified::VaryingDynamics { .. }
                         )
                     ),
                     "{:?}",
@@ -520,8 +542,8 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
     }
     assert!(all.iter().any(|e| e.calibrated.value.is_some()), "the calibrated looks ran");
     let payload = streamcert::certificate::unseal::<CertifierConfig>(&text, None).expect("sealed");
-    // The calibrated windows' and the hidden-dynamics guard's.
-    assert_eq!(payload.matches("\"batch\":4").count(), 2, "the windows' batch is written");
+    // The calibrated windows' (the model guard's larger fit keeps batches of one block).
+    assert_eq!(payload.matches("\"batch\":4").count(), 1, "the windows' batch is written");
     assert!(payload.contains("\"batch_blocks\":4"));
     let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
     let err = Certifier::restore(&reseal(payload.replace("\"batch\":4", "\"batch\":2")))

@@ -336,6 +336,8 @@ fn the_configuration_says_what_is_valid() {
     assert!(Certifier::new(unchecked.clone()).is_ok());
     let mut short = config(-1.0, 0.05, 30, 3);
     short.nonlinear = unchecked.nonlinear;
+    // (The linear certificate's guards would ask for 40 first.)
+    short.calibration = short.calibration.map(Calibration::unguarded);
     let err = Certifier::new(short).unwrap_err();
     assert!(err.to_string().contains("smallest valid window is 35"), "{err}");
     // Through the origin, one unknown fewer: 40.
@@ -385,8 +387,8 @@ proptest! {
         // The certificate's arithmetic, without the lack-of-fit check (which only closes gates).
         let mut cfg = config(k, 0.05, window, 1);
         cfg.nonlinear = Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(1) });
-        // The hidden-dynamics guard gates the linear certificate only.
-        cfg.calibration = cfg.calibration.map(|c| Calibration { hidden_dynamics: false, ..c });
+        // The guards gate the linear certificate only.
+        cfg.calibration = cfg.calibration.map(Calibration::unguarded);
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut compared = 0;
         for i in 0..traj.t.len() {

@@ -27,16 +27,21 @@ const WINDOW: usize = 50;
 const PAPER_C: f64 = 0.1;
 /// The certificates of the table: the kind, and the degree of the certifier that gives it (the
 /// nonlinear certificate twice: the default cubic library and a quadratic one).
-const ROWS: [(CertificateKind, usize, &str); 5] = [
+const ROWS: [(CertificateKind, usize, &str); 6] = [
     (CertificateKind::Gaussian, 3, "paper (Gaussian, c = 0.1)"),
-    (CertificateKind::Calibrated, 3, "linear calibrated"),
+    (CertificateKind::Calibrated, DEFAULT, "linear calibrated, default configuration"),
+    (CertificateKind::Calibrated, 3, "linear calibrated (with [nonlinear])"),
     (CertificateKind::Nonlinear, 3, "nonlinear, degree 3"),
     (CertificateKind::Nonlinear, 2, "nonlinear, degree 2"),
     (CertificateKind::Nonlinear, 0, "nonlinear, features y, y·tanh y"),
 ];
 
+/// The "degree" of the row whose certifier has the default configuration: no `[nonlinear]`
+/// section, so its linear calibrated gate is closed by the nonlinearity guard alone.
+const DEFAULT: usize = 9;
+
 /// The study's certifier: `degree` 2 or 3 for the polynomial library, 0 for the named
-/// library `y, y·tanh y`.
+/// library `y, y·tanh y`, [`DEFAULT`] for none.
 fn config(k: f64, degree: usize, window: usize, windows: Option<usize>) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
@@ -44,12 +49,14 @@ fn config(k: f64, degree: usize, window: usize, windows: Option<usize>) -> Certi
     };
     CertifierConfig {
         calibration: Some(Calibration { windows, ..Calibration::new(DELTA) }),
-        nonlinear: Some(if degree == 0 {
-            NonlinearConfig::with_features(
-                FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
-            )
-        } else {
-            NonlinearConfig::with_degree(degree)
+        nonlinear: (degree != DEFAULT).then(|| {
+            if degree == 0 {
+                NonlinearConfig::with_features(
+                    FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
+                )
+            } else {
+                NonlinearConfig::with_degree(degree)
+            }
         }),
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
@@ -127,22 +134,24 @@ struct Outcome {
     last: Option<(f64, f64)>,
 }
 
-fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 5]> {
+fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 6]> {
     let (ts, ys, us) = cell.data(seed)?;
     let rate = |x: f64| cell.rate(x);
     let mut certs = [
         Certifier::new(config(cell.k, 3, cell.window, cell.windows))?,
         Certifier::new(config(cell.k, 2, cell.window, cell.windows))?,
         Certifier::new(config(cell.k, 0, cell.window, cell.windows))?,
+        Certifier::new(config(cell.k, DEFAULT, cell.window, cell.windows))?,
     ];
     let slot = |degree: usize| match degree {
         3 => 0,
         2 => 1,
+        DEFAULT => 3,
         _ => 2,
     };
-    let mut out = [Outcome::default(); 5];
+    let mut out = [Outcome::default(); 6];
     for i in 0..ts.len() {
-        let mut evs = Vec::with_capacity(3);
+        let mut evs = Vec::with_capacity(4);
         for c in &mut certs {
             evs.push(c.push(ts[i], &ys[i..=i], &us[i..=i])?);
         }
@@ -201,7 +210,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Five certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Six certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate the nonlinearity guard closes, and from the degree-3 certifier, whose gate the nonlinear certificate's test closes too) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio).\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {

@@ -163,8 +163,8 @@ use streamcert_regression::{
     InstrumentedWindows, Interval, RegressionConfig, SlidingRegression, WindowEstimate, linalg,
 };
 
+use crate::guard::{ChangeGuard, Fresh, Groups, ModelGuard};
 use crate::nonlinear::{LookAt, NonlinearLook, NonlinearState};
-use crate::order::OrderGuard;
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use streamcert_regression::Model;
 
@@ -251,8 +251,13 @@ pub(crate) struct CalibratedState {
     affine: bool,
     zaug: Vec<f64>,
     nl_origin: f64,
-    /// The hidden-dynamics guard on the same columns and looks, when configured.
-    order: Option<OrderGuard>,
+    /// The model guard (hidden dynamics, nonlinearity) on the same columns and looks, when
+    /// either is configured.
+    order: Option<ModelGuard>,
+    /// The change guard, when configured.
+    change: Option<ChangeGuard>,
+    /// The column count (`seen`) at each window's latest look.
+    look_cols: Vec<u64>,
     // Scratch: the newest column's samples (times, outputs) and output ranges.
     ts: Vec<f64>,
     ys: Vec<f64>,
@@ -319,6 +324,7 @@ impl CalibratedState {
             min_pivot: reg.min_excitation_ratio,
             shares: lengths.iter().map(|&w| w as f64 / total).collect(),
             until_look: vec![0; lengths.len()],
+            look_cols: vec![0; lengths.len()],
             looks: vec![0; lengths.len()],
             latest: vec![None; lengths.len()],
             windows,
@@ -334,16 +340,23 @@ impl CalibratedState {
             affine,
             zaug: vec![0.0; d],
             nl_origin: 0.0,
-            order: cal
-                .hidden_dynamics
+            order: (cal.hidden_dynamics || cal.nonlinearity)
                 .then(|| {
-                    let shape = (cal.instrument_lag, cal.instrument_intervals, cal.batch_blocks);
+                    // Batches of one block: see `Calibration::guard_unknowns`.
+                    let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
+                    let groups = Groups { order: cal.hidden_dynamics, curvature: cal.nonlinearity };
                     // Any window's rejection closes every look: δ split over the windows
                     // keeps the false closings of a look at about δ.
                     let alpha = cal.delta / lengths.len() as f64;
-                    OrderGuard::new(p, d, reg.horizon, shape, &lengths, alpha)
+                    ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
                 })
                 .transpose()?,
+            change: cal.plant_change.then(|| {
+                let blocks: Vec<usize> = lengths.iter().map(|&w| w / reg.horizon).collect();
+                let w = lengths.len();
+                let pairs = (w * (w + 1) / 2 + w).max(1);
+                ChangeGuard::new(&blocks, cal.delta / pairs as f64)
+            }),
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],
@@ -368,6 +381,16 @@ impl CalibratedState {
         self.order.as_ref().map_or(&[], |o| o.tests())
     }
 
+    /// The nonlinearity guard's latest test per window (empty without the guard).
+    pub(crate) fn curvature_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.order.as_ref().map_or(&[], |o| o.curvature_tests())
+    }
+
+    /// The change guard's latest fresh estimate (`None` without the guard or before one).
+    pub(crate) fn fresh(&self) -> Option<Fresh> {
+        self.change.as_ref().and_then(ChangeGuard::fresh)
+    }
+
     /// The latest look of each window.
     pub(crate) fn looks(&self) -> &[Option<WindowLook>] {
         &self.latest
@@ -388,6 +411,9 @@ impl CalibratedState {
         }
         if let Some(o) = &mut self.order {
             o.reset();
+        }
+        if let Some(c) = &mut self.change {
+            c.reset();
         }
     }
 
@@ -422,8 +448,15 @@ impl CalibratedState {
                     } else {
                         z
                     };
-                    if let Some(n) = &mut self.nonlinear {
+                    let samples = self.nonlinear.is_some()
+                        || self.order.as_ref().is_some_and(ModelGuard::needs_samples);
+                    if samples {
                         reg.column_samples(&mut self.ts, &mut self.ys);
+                    }
+                    if let Some(o) = &mut self.order {
+                        o.push(z, dy, (&self.ts, &self.ys, reg.origin()));
+                    }
+                    if let Some(n) = &mut self.nonlinear {
                         if self.affine && n.is_polynomial() {
                             // Powers of `y − y_o` (the regression's origin): with the
                             // intercept the polynomial class is the same, and the digits are
@@ -434,9 +467,6 @@ impl CalibratedState {
                             }
                         }
                         n.push(z, dy, &self.ts, &self.ys);
-                    }
-                    if let Some(o) = &mut self.order {
-                        o.push(z, dy);
                     }
                     self.windows.push_column_ranged(z, dy, &self.col_range)
                 }
@@ -454,6 +484,37 @@ impl CalibratedState {
                 }
                 self.until_look[w] -= 1;
             }
+            // The change guard's fresh estimates, every eighth of each window and at every
+            // look (so that no look stands unchecked against the newest data).
+            // Each window's split test follows the shorter window's fresh estimate.
+            let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| Fresh {
+                t,
+                beta_hat,
+                sd: variance.max(0.0).sqrt(),
+                nu,
+            };
+            for v in 0..self.latest.len() {
+                let due = block_done
+                    && self.windows.is_full(v)
+                    && self.change.as_mut().is_some_and(|c| c.due(v) | looked);
+                if due {
+                    let newest = self.rate(v, 0).map(fresh);
+                    let older = if v == 0 {
+                        None
+                    } else {
+                        let skip = self.windows.window(v - 1) / self.horizon;
+                        self.rate(v, skip).map(fresh)
+                    };
+                    if let Some(c) = &mut self.change {
+                        c.set(v, newest);
+                        if v > 0 {
+                            let newer = self.windows.window(v - 1) as u64;
+                            c.set_split(v, older, self.seen.saturating_sub(newer));
+                        }
+                    }
+                    looked = true;
+                }
+            }
         }
         // The verdict changes only with the looks (returned by reference: with a nonlinear
         // look it is a few hundred bytes).
@@ -468,6 +529,7 @@ impl CalibratedState {
     /// nonlinear certificate looks at the same window with the same risk.
     fn look(&mut self, w: usize, t: f64, margin: f64) {
         self.looks[w] += 1;
+        self.look_cols[w] = self.seen;
         let k = self.looks[w];
         if let Some(n) = &mut self.nonlinear {
             let risk = look_risk(self.cal.delta, self.shares[w], k);
@@ -479,9 +541,7 @@ impl CalibratedState {
             o.look(w, &self.tmat, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
-        let d = self.tmat.len() / p;
-        self.windows.estimate(w, self.ridge, &self.tmat, self.min_pivot, &mut self.est);
-        if !self.est.ready {
+        let Some((beta_hat, variance, nu)) = self.rate(w, 0) else {
             self.latest[w] = None;
             if let Some(c) = &mut self.coupling {
                 let window = self.windows.window(w);
@@ -489,26 +549,7 @@ impl CalibratedState {
                 c.look(&look, &self.windows, &mut self.est, p);
             }
             return;
-        }
-        // sym(Θ̂ T).
-        let (th, tm) = (&self.est.theta, &self.tmat);
-        for i in 0..p {
-            for j in 0..p {
-                let (mut a, mut b) = (0.0, 0.0);
-                for l in 0..d {
-                    a += th[i * d + l] * tm[l * p + j];
-                    b += th[j * d + l] * tm[l * p + i];
-                }
-                self.sym[i * p + j] = 0.5 * (a + b);
-            }
-        }
-        let beta_hat = -linalg::sym_eig_extremes(&self.sym, p, &mut self.eig_work).1;
-        let mut variance =
-            linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
-        if p == 2 {
-            variance = variance.min(rank_one_variance_bound(&self.est.score_cov));
-        }
-        let nu = self.est.effective_blocks.min(self.est.batches as f64) - d as f64;
+        };
         let risk = look_risk(self.cal.delta, self.shares[w], k);
         let pp = self.col_range.len();
         self.windows.window_range(w, &mut self.regions[w * pp..(w + 1) * pp]);
@@ -532,18 +573,62 @@ impl CalibratedState {
         });
     }
 
+    /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest
+    /// `skip`: `(β̂_w, σ²_max, ν)` of the module docs, `None` when the fit is not ready.
+    fn rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
+        let p = self.sym.len().isqrt();
+        let d = self.tmat.len() / p;
+        let (ridge, pivot) = (self.ridge, self.min_pivot);
+        self.windows.estimate_older(w, skip, ridge, &self.tmat, pivot, &mut self.est);
+        if !self.est.ready {
+            return None;
+        }
+        // sym(Θ̂ T).
+        let (th, tm) = (&self.est.theta, &self.tmat);
+        for i in 0..p {
+            for j in 0..p {
+                let (mut a, mut b) = (0.0, 0.0);
+                for l in 0..d {
+                    a += th[i * d + l] * tm[l * p + j];
+                    b += th[j * d + l] * tm[l * p + i];
+                }
+                self.sym[i * p + j] = 0.5 * (a + b);
+            }
+        }
+        let beta_hat = -linalg::sym_eig_extremes(&self.sym, p, &mut self.eig_work).1;
+        let mut variance =
+            linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
+        if p == 2 {
+            variance = variance.min(rank_one_variance_bound(&self.est.score_cov));
+        }
+        let nu = self.est.effective_blocks.min(self.est.batches as f64) - d as f64;
+        Some((beta_hat, variance, nu))
+    }
+
     /// The largest standing certificate, and why the gate must stay closed if none stands.
     fn verdict(&self, margin: f64) -> CalibratedVerdict {
         let mut varying = None;
         let nonlinear = self.nonlinear_looks();
         let mut order = None;
+        let mut changed = None;
         let (best, contradicted) = standing(&self.latest, margin, |w, look| {
+            // The change guard: the look must agree with the newest data.
+            if let Some(guard) = &self.change {
+                let first = self.look_cols[w].saturating_sub(look.window as u64);
+                if let Err(reason) = guard.admits(w, look, first) {
+                    changed.get_or_insert(reason);
+                    return false;
+                }
+            }
             // The hidden-dynamics guard: the window's larger fit must have run and found no
             // past-increment term.
             if let Some(guard) = &self.order {
                 if let Err(reason) = guard.admits(w, look.window) {
                     // A significant test is the stronger reason.
-                    let stronger = matches!(reason, NotCertified::HiddenDynamics { .. });
+                    let stronger = matches!(
+                        reason,
+                        NotCertified::HiddenDynamics { .. } | NotCertified::VaryingDynamics { .. }
+                    );
                     if stronger || order.is_none() {
                         order = Some(reason);
                     }
@@ -579,7 +664,7 @@ impl CalibratedState {
         let blocked = if best.is_some() {
             None
         } else {
-            Some(contradicted.or(order).or(varying).unwrap_or(warming))
+            Some(contradicted.or(changed).or(order).or(varying).unwrap_or(warming))
         };
         let (nonlinear, nonlinear_blocked) = match &self.nonlinear {
             Some(n) => n.verdict(margin, warming),

@@ -157,6 +157,22 @@ impl Certifier {
         self.calibrated.as_ref().map_or(&[], |c| c.order_tests())
     }
 
+    /// The nonlinearity guard's latest test of each calibrated window (the joint Wald
+    /// statistic of the outputs' squares and cubes and its threshold); empty without the guard
+    /// ([`Calibration::nonlinearity`](crate::Calibration::nonlinearity)).
+    #[must_use]
+    pub fn nonlinearity_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.curvature_tests())
+    }
+
+    /// The change guard's latest fresh estimate of the shortest window, `(t, β̂_f, s_f)`
+    /// ([`Calibration::plant_change`](crate::Calibration::plant_change)); `None` without the
+    /// guard or before the shortest window's first fit.
+    #[must_use]
+    pub fn newest_estimate(&self) -> Option<(f64, f64, f64)> {
+        self.calibrated.as_ref().and_then(|c| c.fresh()).map(|f| (f.t, f.beta_hat, f.sd))
+    }
+
     /// The region of the paper's certificates: the range of each output, then each input,
     /// over the samples of the regression window (`M + h` samples; see
     /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the

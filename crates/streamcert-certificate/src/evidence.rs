@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::Interval;
 
-use crate::fixed::Fixed;
+use crate::fixed::{Fixed, Sig};
 
 /// Why a sample is not certified.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -58,9 +58,11 @@ pub enum NotCertified {
         /// Its upper bound `β̂_w + ρ_w`.
         upper: f64,
     },
-    /// Calibrated certificate: the window's nonlinearity test says the dynamics vary over the
-    /// region it explored, so the linear model (one Jacobian) does not describe it (see the
-    /// [`nonlinear`](crate::nonlinear) module).
+    /// Calibrated certificate: a window's nonlinearity test (the nonlinearity guard,
+    /// [`Calibration::nonlinearity`](crate::Calibration::nonlinearity), or the nonlinear
+    /// certificate's test, see the [`nonlinear`](crate::nonlinear) module) says the dynamics
+    /// vary over the region it explored, so the linear model (one Jacobian) does not
+    /// describe it.
     VaryingDynamics {
         /// The window length.
         window: usize,
@@ -88,12 +90,25 @@ pub enum NotCertified {
         /// The window length.
         window: usize,
     },
-    /// Calibrated certificate with a nonlinear model: the window's nonlinearity test has no
-    /// estimate yet (too few columns for the feature fit, or a singular one), so the linear
-    /// model is not checked and the window's linear certificate does not stand.
+    /// Calibrated certificate: the window's nonlinearity test (the guard's larger fit, or the
+    /// nonlinear certificate's feature fit) has no estimate yet (too few columns, or a
+    /// singular fit), so the linear model is not checked and the window's linear certificate
+    /// does not stand.
     LinearityUntested {
         /// The window length.
         window: usize,
+    },
+    /// Calibrated certificate: the change guard
+    /// ([`Calibration::plant_change`](crate::Calibration::plant_change)) found the newest
+    /// data's rate significantly below the window's latest look (the plant changed since),
+    /// so that look does not stand.
+    PlantChanged {
+        /// The window length of the look.
+        window: usize,
+        /// The look's `β̂_w`.
+        beta_hat: f64,
+        /// The newest data's one-sided upper bound `β̂_f + t √(s_f² + s_w²)`, below it.
+        newest_upper: f64,
     },
     /// No nonlinear model is configured, so there is no nonlinear certificate.
     NoNonlinearModel,
@@ -117,6 +132,63 @@ pub enum NotCertified {
         /// The window length.
         window: usize,
     },
+}
+
+impl NotCertified {
+    /// Every reason's name (the `reason` tag of its serde form) in the order of
+    /// [`code`](Self::code), from code 1.
+    pub const KINDS: [&'static str; 18] = [
+        "warming_up",
+        "insufficient_excitation",
+        "weak_instruments",
+        "below_margin",
+        "accumulating",
+        "skipped_sample",
+        "no_ambiguity_model",
+        "no_calibration",
+        "gap",
+        "rate_dropped",
+        "varying_dynamics",
+        "hidden_dynamics",
+        "order_untested",
+        "linearity_untested",
+        "plant_changed",
+        "no_nonlinear_model",
+        "library_misfit",
+        "library_untested",
+    ];
+
+    /// A small stable integer per kind of reason, from 1 (0 is left for "certified" in
+    /// tables of codes): the position in [`KINDS`](Self::KINDS) plus one.
+    #[must_use]
+    pub fn code(&self) -> u8 {
+        match self {
+            Self::WarmingUp { .. } => 1,
+            Self::InsufficientExcitation => 2,
+            Self::WeakInstruments => 3,
+            Self::BelowMargin { .. } => 4,
+            Self::Accumulating { .. } => 5,
+            Self::SkippedSample => 6,
+            Self::NoAmbiguityModel => 7,
+            Self::NoCalibration => 8,
+            Self::Gap { .. } => 9,
+            Self::RateDropped { .. } => 10,
+            Self::VaryingDynamics { .. } => 11,
+            Self::HiddenDynamics { .. } => 12,
+            Self::OrderUntested { .. } => 13,
+            Self::LinearityUntested { .. } => 14,
+            Self::PlantChanged { .. } => 15,
+            Self::NoNonlinearModel => 16,
+            Self::LibraryMisfit { .. } => 17,
+            Self::LibraryUntested { .. } => 18,
+        }
+    }
+
+    /// The reason's name, as in its serde form (`"plant_changed"`, …).
+    #[must_use]
+    pub fn kind(&self) -> &'static str {
+        Self::KINDS[usize::from(self.code()) - 1]
+    }
 }
 
 impl std::fmt::Display for NotCertified {
@@ -163,6 +235,13 @@ impl std::fmt::Display for NotCertified {
             Self::LinearityUntested { window } => {
                 write!(f, "window {window}: linearity not yet tested (no feature fit)")
             }
+            Self::PlantChanged { window, beta_hat, newest_upper } => write!(
+                f,
+                "the plant changed (window {window}'s rate {} is above what the newest data \
+                 allow, at most {})",
+                Sig(*beta_hat),
+                Sig(*newest_upper)
+            ),
             Self::NoNonlinearModel => f.write_str("no nonlinear model configured"),
             Self::LibraryMisfit { window, statistic, threshold } => write!(
                 f,

@@ -3,11 +3,50 @@
 //! The reasons a closed gate gives carry the certificate to four decimals at every sample;
 //! core's fixed-precision formatting often falls back to its big-number (Dragon) algorithm
 //! there (on data whose gates stay closed, 23 % of the command line's `perf record` samples
-//! were in `dragon::format_exact`; BENCHMARKS.md, session 8). Here `|x| · 10^P` is rounded exactly in 128-bit
+//! were in `dragon::format_exact`; measured with `perf record`). Here `|x| · 10^P` is rounded exactly in 128-bit
 //! integers (`x = m · 2^e` with `m < 2^53`, so `m · 10^P < 2^67`), half to even as core does;
 //! numbers too large for that (`|x| >= 2^60`), NaN and infinities go to core's formatter.
 
 use std::fmt;
+
+/// `x` as a person writes it: six significant digits, trailing zeros dropped (`3.26`, not
+/// `3.2600000000000002`; `0.000123457`; `1.5e-7` and `2.5e+9` outside `[10⁻⁴, 10⁹)`);
+/// NaN and infinities as Rust writes them. For messages and summaries; the evidence files
+/// keep every digit.
+#[derive(Debug, Clone, Copy)]
+pub struct Sig(pub f64);
+
+impl fmt::Display for Sig {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let x = self.0;
+        if !x.is_finite() || x == 0.0 {
+            return if x == 0.0 { f.write_str("0") } else { write!(f, "{x}") };
+        }
+        let a = x.abs();
+        if (1e-4..1e9).contains(&a) {
+            // Decimals for six significant digits; the rounding may carry into a new digit
+            // (999999.5 → 1000000), which only drops a decimal.
+            let digits = a.log10().floor() as i32 + 1;
+            let decimals = (6 - digits).max(0) as usize;
+            let text = format!("{x:.decimals$}");
+            let text = if text.contains('.') {
+                text.trim_end_matches('0').trim_end_matches('.')
+            } else {
+                &text
+            };
+            return f.write_str(text);
+        }
+        let text = format!("{x:.5e}");
+        let (mantissa, exp) = text.split_once('e').unwrap_or((&text, "0"));
+        let mantissa = if mantissa.contains('.') {
+            mantissa.trim_end_matches('0').trim_end_matches('.')
+        } else {
+            mantissa
+        };
+        let sign = if exp.starts_with('-') { "" } else { "+" };
+        write!(f, "{mantissa}e{sign}{exp}")
+    }
+}
 
 /// `x` with `P` decimals (`P <= 9`), exactly as `format!("{:.P}", x)` writes it (tested
 /// against it on random and tie values).
@@ -124,6 +163,33 @@ mod tests {
     fn signed_zeros_and_edges() {
         for x in [0.0, -0.0, -1e-10, 5e-5, 1e-320, 0.03125, 0.09375, 2.5, (1u64 << 60) as f64] {
             same(x).expect("equal to core");
+        }
+    }
+
+    #[test]
+    fn sig_writes_what_a_person_writes() {
+        for (x, text) in [
+            (3.2600000000000002, "3.26"),
+            (-0.1 - 0.2, "-0.3"),
+            (0.0, "0"),
+            (-0.0, "0"),
+            (1234567.0, "1234567"),
+            (999_999.5, "1000000"),
+            (0.000_123_456_7, "0.000123457"),
+            (1.5e-7, "1.5e-7"),
+            (2.5e9, "2.5e+9"),
+            (f64::INFINITY, "inf"),
+        ] {
+            assert_eq!(Sig(x).to_string(), text, "{x:?}");
+        }
+    }
+
+    proptest! {
+        /// Six significant digits: the text reads back within half a unit of the sixth digit.
+        #[test]
+        fn sig_is_within_six_significant_digits(x in any::<f64>().prop_filter("finite", |x| x.is_finite())) {
+            let back: f64 = Sig(x).to_string().parse().expect("a number");
+            prop_assert!((back - x).abs() <= 5e-6 * x.abs() * (1.0 + 1e-12), "{} -> {}", x, back);
         }
     }
 }

@@ -63,8 +63,8 @@ mod evidence;
 mod fixed;
 mod gap;
 mod gate;
+mod guard;
 pub mod nonlinear;
-mod order;
 mod radius;
 mod row;
 
@@ -79,6 +79,7 @@ pub use certifier::checkpoint::{
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
+pub use fixed::Sig;
 pub use gate::{Gate, GateState};
 pub use nonlinear::{Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest};
 pub use radius::{certificate_surface, certificate_value};

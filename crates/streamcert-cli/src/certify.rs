@@ -10,6 +10,9 @@ use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::Format;
+pub use summary::Summary;
+
+mod summary;
 use crate::output::{EvidenceWriter, region_columns};
 
 /// What to do with a malformed row.
@@ -39,92 +42,6 @@ pub struct Options {
     /// Flush every row as soon as it is written (for a live input: a pipe or a terminal).
     /// Otherwise the output is buffered and flushed at the end and at each checkpoint.
     pub flush_each_row: bool,
-}
-
-/// Counts over a run (continued across checkpoint and resume).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct Summary {
-    /// Rows certified or not (accepted rows).
-    pub rows: u64,
-    /// Malformed rows skipped (each closes every gate, as the library's
-    /// `Certifier::skip`).
-    pub skipped: u64,
-    /// Gaps in the time column (a step above `gap_factor` times the reference step): the
-    /// window restarts there and the row's reason says so.
-    #[serde(default)]
-    pub gaps: u64,
-    /// Rows passed over at the start of a resumed input because the checkpoint already holds
-    /// them (times up to its last time).
-    #[serde(default)]
-    pub replayed: u64,
-    /// Rows with the Gaussian gate open.
-    pub gauss_open: u64,
-    /// Rows with the Wasserstein gate open.
-    pub wass_open: u64,
-    /// First time the Gaussian gate opened (deployment decision).
-    pub first_deploy_gauss: Option<f64>,
-    /// First time the Wasserstein gate opened.
-    pub first_deploy_wass: Option<f64>,
-    /// Rows with the calibrated gate open (0 unless `[calibration]` is enabled).
-    #[serde(default)]
-    pub calibrated_open: u64,
-    /// First time the calibrated gate opened.
-    #[serde(default)]
-    pub first_deploy_calibrated: Option<f64>,
-    /// Rows with the nonlinear gate open (0 unless `[nonlinear]` is enabled).
-    #[serde(default)]
-    pub nonlinear_open: u64,
-    /// First time the nonlinear gate opened.
-    #[serde(default)]
-    pub first_deploy_nonlinear: Option<f64>,
-    /// Time of the last accepted row.
-    pub last_time: Option<f64>,
-    /// The range `(lo, hi)` of each output over the accepted rows (for the units warning).
-    #[serde(default)]
-    pub output_ranges: Vec<(f64, f64)>,
-}
-
-impl Summary {
-    /// Share of accepted rows with the Gaussian gate open.
-    #[must_use]
-    pub fn share_gauss(&self) -> f64 {
-        if self.rows == 0 { 0.0 } else { self.gauss_open as f64 / self.rows as f64 }
-    }
-    /// Share of accepted rows with the Wasserstein gate open.
-    #[must_use]
-    pub fn share_wass(&self) -> f64 {
-        if self.rows == 0 { 0.0 } else { self.wass_open as f64 / self.rows as f64 }
-    }
-    /// Share of accepted rows with the calibrated gate open.
-    #[must_use]
-    pub fn share_calibrated(&self) -> f64 {
-        if self.rows == 0 { 0.0 } else { self.calibrated_open as f64 / self.rows as f64 }
-    }
-
-    /// With two or more outputs, the ratio of the widest output range to the narrowest over
-    /// the run (`None` with one output, or while an output has not varied). A contraction
-    /// rate in the identity metric depends on the units of each output: past `100` the
-    /// outputs' units, not the plant, decide the metric, and the summary says to state one
-    /// (`[certificate] metric`).
-    #[must_use]
-    pub fn output_scale_ratio(&self) -> Option<f64> {
-        if self.output_ranges.len() < 2 {
-            return None;
-        }
-        let spans = self.output_ranges.iter().map(|(lo, hi)| hi - lo);
-        let (mut small, mut large) = (f64::INFINITY, 0.0f64);
-        for v in spans {
-            small = small.min(v);
-            large = large.max(v);
-        }
-        (small > 0.0).then(|| large / small)
-    }
-
-    /// Share of rows with the nonlinear gate open.
-    #[must_use]
-    pub fn share_nonlinear(&self) -> f64 {
-        if self.rows == 0 { 0.0 } else { self.nonlinear_open as f64 / self.rows as f64 }
-    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -336,6 +253,8 @@ pub fn run<R: Read + Send, W: Write>(
         })?;
     }
     writer.flush().map_err(io)?;
+    summary.calibrated_region =
+        cert.calibrated_region().map(|r| (r.lo, r.hi)).filter(|(lo, hi)| lo <= hi).collect();
     if let Some(path) = &opts.checkpoint {
         save(path, &cert, &summary)?;
     }
@@ -449,6 +368,7 @@ impl Step<'_> {
         summary.nonlinear_open += u64::from(ev.nonlinear.open);
         summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
         summary.last_time = Some(s.t);
+        summary.count_calibrated(s.t, &ev);
         region.extend(self.cert.region());
         if self.cert.config().calibration.is_some() {
             let p = self.cert.config().regression.outputs;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
+use streamcert_certificate::Sig;
 use streamcert_cli::{CliError, certify, compose, config, network, simulate};
 use streamcert_dynamics::Coupling;
 use streamcert_experiments::Experiment;
@@ -13,7 +14,8 @@ use streamcert_experiments::Experiment;
 /// whether a coupled network of certified subsystems stays contracting.
 ///
 /// Exit codes: 0 success, 2 invalid command line or configuration, 3 malformed input data,
-/// 4 I/O failure, 5 checkpoint failure.
+/// 4 I/O failure, 5 checkpoint failure, 6 not certified at the end of the input (only with
+/// --require-certified).
 #[derive(Parser)]
 #[command(name = "streamcert", version, about, long_about = None)]
 struct Cli {
@@ -42,6 +44,8 @@ enum Command {
         /// Write the summary as JSON to FILE instead of text on stderr.
         #[arg(long)]
         summary: Option<PathBuf>,
+        #[command(flatten)]
+        require: Require,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
     Compose {
@@ -73,6 +77,8 @@ enum Command {
         persist: Persist,
         #[command(flatten)]
         cluster: ClusterArgs,
+        #[command(flatten)]
+        require: Require,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
@@ -100,6 +106,20 @@ struct ClusterArgs {
     #[arg(long)]
     hostfile: Option<PathBuf>,
 }
+
+/// For scripts: the exit status says whether the verdict at the end is "certified".
+#[derive(clap::Args)]
+struct Require {
+    /// Exit with code 6 (after writing every output) when the gate is not open at the end of
+    /// the input: the calibrated gate for `certify` (the Gaussian gate in the paper-only
+    /// mode), the network gate for `network`. A commissioning script can stop on it.
+    #[arg(long)]
+    require_certified: bool,
+}
+
+/// The exit code of a run whose verdict at the end is not "certified" under
+/// `--require-certified`.
+const NOT_CERTIFIED_EXIT: u8 = 6;
 
 /// Checkpoint and resume of the streaming commands.
 #[derive(clap::Args)]
@@ -221,13 +241,21 @@ fn read(path: &PathBuf) -> Result<String, CliError> {
         .map_err(|e| CliError::io(format!("reading {}", path.display()), e))
 }
 
-fn run(cli: Cli) -> Result<(), CliError> {
+/// What a successful run says about the verdict at the end.
+enum Outcome {
+    /// Done (no verdict asked for, or certified).
+    Done,
+    /// `--require-certified` and the gate is not open at the end.
+    NotCertified,
+}
+
+fn run(cli: Cli) -> Result<Outcome, CliError> {
     match cli.command {
-        Command::Certify { io, on_bad_row, persist, summary } => {
+        Command::Certify { io, on_bad_row, persist, summary, require } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", config::DEFAULT_CONFIG);
-                return Ok(());
+                return Ok(Outcome::Done);
             }
             let (path, text) = io.config_text()?;
             let cfg = config::parse(&text, &path)?;
@@ -245,6 +273,12 @@ fn run(cli: Cli) -> Result<(), CliError> {
             match summary {
                 Some(file) => {
                     let v = serde_json::json!({
+                        "verdict": s.verdict_line(&cfg.certifier, &cfg.columns.outputs),
+                        "certified_at_end": s.certified_at_end(&cfg.certifier),
+                        "paper_only": cfg.certifier.calibration.is_none(),
+                        "calibrated_since": s.calibrated_since,
+                        "calibrated_reasons": s.calibrated_reasons,
+                        "calibrated_region": s.calibrated_region,
                         "rows": s.rows, "skipped": s.skipped, "gaps": s.gaps,
                         "share_gauss_gate_open": s.share_gauss(), "share_wass_gate_open": s.share_wass(),
                         "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
@@ -260,43 +294,19 @@ fn run(cli: Cli) -> Result<(), CliError> {
                         .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
                 }
                 None => {
-                    eprintln!(
-                        "summary: {} rows, {} skipped, {} gaps; Gaussian gate open {:.1} % (first at {}), Wasserstein gate open {:.1} % (first at {})",
-                        s.rows,
-                        s.skipped,
-                        s.gaps,
-                        100.0 * s.share_gauss(),
-                        s.first_deploy_gauss.map_or("never".into(), |t| format!("t = {t}")),
-                        100.0 * s.share_wass(),
-                        s.first_deploy_wass.map_or("never".into(), |t| format!("t = {t}")),
-                    );
-                    if cfg.certifier.calibration.is_some() {
-                        eprintln!(
-                            "calibrated gate (risk delta over the run) open {:.1} % (first at {})",
-                            100.0 * s.share_calibrated(),
-                            s.first_deploy_calibrated
-                                .map_or("never".into(), |t| format!("t = {t}")),
-                        );
-                    }
-                    if cfg.certifier.nonlinear.is_some() {
-                        eprintln!(
-                            "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % (first at {})",
-                            100.0 * s.share_nonlinear(),
-                            s.first_deploy_nonlinear.map_or("never".into(), |t| format!("t = {t}")),
-                        );
-                    }
+                    eprintln!("{}", s.text(&cfg.certifier, &cfg.columns.outputs));
                     if let Some(w) = units_warning(&cfg.certifier, &s) {
                         eprintln!("warning: {w}");
                     }
                 }
             }
-            Ok(())
+            Ok(verdict(require.require_certified, s.certified_at_end(&cfg.certifier)))
         }
-        Command::Network { io, persist, cluster } => {
+        Command::Network { io, persist, cluster, require } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
-                return Ok(());
+                return Ok(Outcome::Done);
             }
             let (path, text) = io.config_text()?;
             let cfg = network::parse(&text, &path)?;
@@ -320,7 +330,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 let empty: Box<dyn std::io::Read + Send> = Box::new(std::io::empty());
                 network::run_timely(&cfg, empty, "-", std::io::sink(), &opts, &cluster)?;
                 eprintln!("process {}: done", cluster.index());
-                return Ok(());
+                return Ok(Outcome::Done);
             };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(
@@ -330,9 +340,9 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 s.epochs,
                 s.certified,
                 s.open,
-                s.first_open.map_or("never".into(), |t| format!("t = {t}")),
+                s.first_open.map_or("never".into(), |t| format!("t = {}", Sig(t))),
             );
-            Ok(())
+            Ok(verdict(require.require_certified, s.open_at_end))
         }
         Command::Compose { rates, gains, gains_format, method, json } => {
             let text = compose::run(
@@ -345,7 +355,7 @@ fn run(cli: Cli) -> Result<(), CliError> {
                 json,
             )?;
             print!("{text}");
-            Ok(())
+            Ok(Outcome::Done)
         }
         Command::Simulate {
             system: SimSystem::G5 { experiment, seed, coupling, steps, gamma },
@@ -357,15 +367,24 @@ fn run(cli: Cli) -> Result<(), CliError> {
             };
             let stdout = std::io::stdout();
             let mut out = BufWriter::new(stdout.lock());
-            simulate::run(experiment, coupling, seed, steps, gamma, &mut out)
+            simulate::run(experiment, coupling, seed, steps, gamma, &mut out)?;
+            Ok(Outcome::Done)
         }
     }
+}
+
+fn verdict(required: bool, certified: bool) -> Outcome {
+    if required && !certified { Outcome::NotCertified } else { Outcome::Done }
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(Outcome::Done) => ExitCode::SUCCESS,
+        Ok(Outcome::NotCertified) => {
+            eprintln!("streamcert: not certified at the end of the input (--require-certified)");
+            ExitCode::from(NOT_CERTIFIED_EXIT)
+        }
         // A closed pipe downstream (`streamcert simulate g5 | head`) is not an error.
         Err(CliError::Io { source, .. }) if source.kind() == std::io::ErrorKind::BrokenPipe => {
             ExitCode::SUCCESS

@@ -56,12 +56,8 @@ fn simulate_pipes_into_certify() {
 }
 
 #[test]
-fn calibration_section_adds_the_calibrated_certificate() {
+fn the_calibrated_certificate_is_the_default_verdict() {
     let cfg = config("calibrated");
-    let on = std::fs::read_to_string(&cfg)
-        .expect("config")
-        .replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.01");
-    std::fs::write(&cfg, on).expect("write config");
     let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &simulate("6"));
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
@@ -77,12 +73,65 @@ fn calibration_section_adds_the_calibrated_certificate() {
     assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200].contains(&window));
     // The gate is open exactly when no reason is given.
     assert_eq!(last[15] == "1", last[16].is_empty(), "{last:?}");
-    assert!(text(&out.stderr).contains("calibrated gate (risk delta over the run)"));
-    // Off by default: the columns are empty.
-    let plain =
-        run(&["certify", "--config", config("plain").to_str().expect("utf8")], &simulate("6"));
+    // The summary's first line is the calibrated verdict, with its risk.
+    let stderr = text(&out.stderr);
+    let first = stderr.lines().next().expect("a summary");
+    assert!(first.starts_with("verdict: ") && first.contains("delta = 0.01"), "{stderr}");
+    assert!(stderr.contains("calibrated gate (risk delta over the run)"));
+    assert!(stderr.contains("paper's gates (no stated risk)"));
+    // The paper-only mode is a named choice, and says it has no stated risk.
+    let paper = tmp("config-paper-only.toml");
+    let text_cfg = std::fs::read_to_string(&cfg)
+        .expect("config")
+        .replace("enabled = true\ndelta = 0.01", "enabled = false\ndelta = 0.01");
+    std::fs::write(&paper, text_cfg).expect("write config");
+    let plain = run(&["certify", "--config", paper.to_str().expect("utf8")], &simulate("6"));
     let row = text(&plain.stdout).lines().last().expect("rows").to_string();
     assert!(row.contains(",,,,0,no calibration configured,"), "{row}");
+    let stderr = text(&plain.stderr);
+    assert!(stderr.lines().next().expect("summary").contains("NO STATED RISK"), "{stderr}");
+}
+
+/// `--require-certified`: exit 6 exactly when the verdict at the end is not "certified", after
+/// every output is written; without the flag the same run exits 0.
+#[test]
+fn require_certified_sets_the_exit_status_from_the_verdict() {
+    let cfg = config("require");
+    let path = cfg.to_str().expect("utf8");
+    let mut seen = [false, false];
+    for (seed, summary) in [("6", "require-6.json"), ("1", "require-1.json")] {
+        let data = simulate(seed);
+        let json = tmp(summary);
+        let args = ["certify", "--config", path, "--require-certified", "--summary"];
+        let mut args: Vec<&str> = args.to_vec();
+        args.push(json.to_str().expect("utf8"));
+        let out = run(&args, &data);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).expect("summary")).expect("json");
+        let certified = v["certified_at_end"].as_bool().expect("bool");
+        let verdict = v["verdict"].as_str().expect("verdict");
+        assert_eq!(verdict.starts_with("verdict: CERTIFIED"), certified, "{verdict}");
+        assert_eq!(out.status.code(), Some(if certified { 0 } else { 6 }), "{verdict}");
+        assert_eq!(text(&out.stdout).lines().count(), 1 + 1501, "every row is written first");
+        seen[usize::from(certified)] = true;
+        let free = run(&["certify", "--config", path], &data);
+        assert_eq!(free.status.code(), Some(0));
+    }
+    // The paper-only mode's verdict is its Gaussian gate.
+    let paper = tmp("config-require-paper.toml");
+    let text_cfg = std::fs::read_to_string(&cfg)
+        .expect("config")
+        .replace("enabled = true\ndelta = 0.01", "enabled = false\ndelta = 0.01");
+    std::fs::write(&paper, text_cfg).expect("write config");
+    let out = run(
+        &["certify", "--config", paper.to_str().expect("utf8"), "--require-certified"],
+        &simulate("6"),
+    );
+    let open_at_end =
+        text(&out.stdout).lines().last().expect("rows").split(',').nth(8) == Some("1");
+    assert_eq!(out.status.code(), Some(if open_at_end { 0 } else { 6 }));
+    seen[usize::from(open_at_end)] = true;
+    assert!(seen[0] && seen[1], "both outcomes exercised: {seen:?}");
 }
 
 #[test]
@@ -90,7 +139,6 @@ fn nonlinear_section_adds_the_nonlinear_certificate_and_its_region() {
     let cfg = config("nonlinear");
     let on = std::fs::read_to_string(&cfg)
         .expect("config")
-        .replace("enabled = false\ndelta = 0.01", "enabled = true\ndelta = 0.01")
         .replace("enabled = false\nfeatures", "enabled = true\nfeatures");
     std::fs::write(&cfg, on).expect("write config");
     let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], &simulate("6"));

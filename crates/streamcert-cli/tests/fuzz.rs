@@ -115,9 +115,9 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
     let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
     let calibrated = cfg_text
         .replace("enabled = false\ndelta", "enabled = true\ndelta")
-        .replace("window = 150 ", "window = 25 ")
-        .replace("# max_window = 1200 ", "max_window = 100 ")
-        .replace("tail_window = 150", "tail_window = 25");
+        .replace("window = 150 ", "window = 40 ")
+        .replace("# max_window = 1200 ", "max_window = 160 ")
+        .replace("tail_window = 150", "tail_window = 40");
     let cfg = parse(&calibrated, "c").expect("corpus config");
     let damaged = if reseal {
         // Past the checksum: mutate the payload and seal it again.
@@ -148,14 +148,15 @@ fn the_corpus_checkpoint_resumes() {
 #[test]
 fn fuzz_findings_stay_fixed() {
     // A re-sealed checkpoint whose sliding-moments ring index is out of range: restore used to
-    // panic while recounting spikes (index 37 of 20). Written as that edit of the seed file
-    // (the byte offsets of the original finding moved when the checkpoint format grew).
+    // panic while recounting spikes (index 37 of 20). Written as that edit of the seed file,
+    // with an index past the seed's ring of 40 (the byte offsets of the original finding
+    // moved when the checkpoint format grew).
     let seed = String::from_utf8(corpus("checkpoint")[0].clone()).expect("UTF-8");
     let (_, payload) = seed.split_once('\n').expect("header");
     let at = payload.find("\"moments\":").expect("moments");
     let head = at + payload[at..].find("\"head\":").expect("head") + "\"head\":".len();
     let end = head + payload[head..].find(',').expect("comma");
-    let edited = format!("{}37{}", &payload[..head], &payload[end..]);
+    let edited = format!("{}97{}", &payload[..head], &payload[end..]);
     assert_ne!(edited, payload);
     let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
     let cfg = parse(&cfg_text, "c").expect("corpus config");

@@ -22,14 +22,15 @@ fn network_equals_two_certify_runs_and_compose() {
     std::fs::write(&net_cfg, &example.stdout).expect("write");
     let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);
     assert!(net.status.success(), "{}", text(&net.stderr));
-    // The same certifier settings as the example's shared sections, one subsystem each.
+    // The same certifier settings as the example's shared sections, one subsystem each: the
+    // example composes the calibrated certificates at run-level risk 0.01, δ/2 each.
     let certify_cfg = |tag: &str, y: &str, u: &str, k: f64| {
         let path = tmp(&format!("network-{tag}.toml"));
         let body = format!(
             "[columns]\ntime = \"t\"\noutputs = [\"{y}\"]\ninputs = [\"{u}\"]\n[controller]\ngain = [[{k}]]\n\
              [certificate]\nconservatism = 0.3\nmargin = 0.1\nconsecutive = 10\n\
              [regression]\nwindow = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\
-             [ambiguity]\nenabled = false\n"
+             [calibration]\ndelta = 0.005\n[ambiguity]\nenabled = false\n"
         );
         std::fs::write(&path, body).expect("write");
         path
@@ -41,7 +42,7 @@ fn network_equals_two_certify_runs_and_compose() {
         let h = r.headers().expect("header").clone();
         let (t, c) = (
             h.iter().position(|x| x == "t").expect("t"),
-            h.iter().position(|x| x == "cert_gauss").expect("cert"),
+            h.iter().position(|x| x == "cert_calibrated").expect("cert"),
         );
         r.records()
             .map(|x| x.expect("row"))
@@ -195,11 +196,8 @@ fn g5_bidirectional(seed: u32, steps: u32) -> std::process::Output {
 fn network_estimates_the_couplings_of_bidirectional_g5() {
     let data = g5_bidirectional(2, 3000);
     let example = text(&run(&["network", "--print-config"], b"").stdout);
-    let body = example
-        .replace("gamma = 0.4", "estimate = true")
-        .replace("certificate = \"gaussian\"", "certificate = \"calibrated\"")
-        .replace("# risk = 0.01", "risk = 0.04")
-        .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+    let body =
+        example.replace("gamma = 0.4", "estimate = true").replace("risk = 0.01 ", "risk = 0.04 ");
     let net_cfg = tmp("network-estimated.toml");
     std::fs::write(&net_cfg, body).expect("write");
     let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);

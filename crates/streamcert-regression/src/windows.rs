@@ -265,8 +265,13 @@ impl InstrumentedWindows {
     /// The sums of window `w`, `(N, Cw, H)` row-major (full matrices), into `out` (`3` slices
     /// of `d k`, `p k` and `k²` values, concatenated). `O(B_w (d k + k²))`.
     pub fn window_sums(&self, w: usize, out: &mut [f64]) {
+        self.span_sums(self.span(w, 0), out);
+    }
+
+    /// The sums of the blocks `span` selects (see [`Self::span`]) into `out`.
+    pub(crate) fn span_sums(&self, span: (usize, usize), out: &mut [f64]) {
         let stride = self.layout().stride();
-        let (older, newer) = self.window_blocks(w);
+        let (older, newer) = self.span_blocks(span);
         if stride == 10 {
             // p = m = 1, J = 1: a fixed-size accumulator the compiler keeps in registers.
             sum_runs::<10>(older, newer, &mut out[..10]);
@@ -284,9 +289,23 @@ impl InstrumentedWindows {
     /// The blocks of window `w` as two contiguous runs of the block ring, oldest first (the
     /// first run is empty unless the window wraps around the ring).
     fn window_blocks(&self, w: usize) -> (&[f64], &[f64]) {
+        self.span_blocks(self.span(w, 0))
+    }
+
+    /// Window `w`'s blocks less its newest `skip`: `(count, skip)`, `count` the blocks held
+    /// of window `w` (at most its length).
+    pub(crate) fn span(&self, w: usize, skip: usize) -> (usize, usize) {
+        (self.windows[w].min(self.block_len), skip)
+    }
+
+    /// The blocks of `span = (count, skip)`: the newest `count` blocks less the newest `skip`,
+    /// as two contiguous runs of the block ring, oldest first.
+    pub(crate) fn span_blocks(&self, (count, skip): (usize, usize)) -> (&[f64], &[f64]) {
         let (stride, cap) = (self.layout().stride(), self.block_cap());
-        let count = self.windows[w].min(self.block_len);
-        let head = self.block_head;
+        let skip = skip.min(count);
+        let count = count - skip;
+        // The span ends `skip` blocks before the head (modulo the ring).
+        let head = (self.block_head + cap - skip) % cap;
         if count <= head {
             (&[], &self.blocks[(head - count) * stride..head * stride])
         } else {

@@ -24,6 +24,7 @@ enum ReasonDef {
     LinearityUntested { window: usize },
     HiddenDynamics { window: usize, statistic: f64, threshold: f64 },
     OrderUntested { window: usize },
+    PlantChanged { window: usize, beta_hat: f64, newest_upper: f64 },
     NoNonlinearModel,
     LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
     LibraryUntested { window: usize },

@@ -36,8 +36,14 @@ impl CalibratedState {
             (None, None) => true,
             _ => false,
         };
+        let change_ok = match (&self.change, &fresh.change) {
+            (Some(a), Some(b)) => a.matches(b),
+            (None, None) => true,
+            _ => false,
+        };
         let ok = coupling_ok
             && order_ok
+            && change_ok
             && self.affine == fresh.affine
             && self.zaug.len() == fresh.zaug.len()
             && self.nl_origin.is_finite()
@@ -50,6 +56,8 @@ impl CalibratedState {
             && self.tmat == fresh.tmat
             && self.shares == fresh.shares
             && self.until_look.len() == fresh.until_look.len()
+            && self.look_cols.len() == fresh.look_cols.len()
+            && self.look_cols.iter().all(|&c| c <= self.seen)
             && self.looks.len() == fresh.looks.len()
             && self.latest.len() == fresh.latest.len()
             && self.est.matches(&fresh.est)

@@ -59,9 +59,29 @@ pub struct Calibration {
     /// mass measured by its position), which the certificate's risk does not cover. It tests
     /// the linear model's order and gates the linear calibrated certificate; the nonlinear
     /// certificate is not gated by it (on a nonlinear loop the linear model's misfit reads as
-    /// a past-increment term) and has no order test of its own.
+    /// a past-increment term) and has no order test of its own. See the guard's module
+    /// (`guard::model`) for what it sees and what it cannot.
     #[serde(default = "default_true")]
     pub hidden_dynamics: bool,
+    /// The nonlinearity guard (default on, every output): at every look, the same larger fit
+    /// with the square and the cube of each output's excursion integrated over the column as
+    /// `2p` more regressors, and the joint Wald test of their `2p²` coefficients at risk
+    /// `δ / W`; where any window's latest test rejects no linear calibrated look stands
+    /// (`NotCertified::VaryingDynamics`), and a window whose test could not run does not stand
+    /// (`NotCertified::LinearityUntested`). Off, a loop whose slope varies over the explored
+    /// region is certified on its average slope, above the smallest local rate it visits,
+    /// which the certificate's risk does not cover. It needs no nonlinear certificate; for a
+    /// nonlinear loop, the nonlinear certificate (`[nonlinear]`) is the one that can open.
+    #[serde(default = "default_true")]
+    pub nonlinearity: bool,
+    /// The change guard (default on): a window's look stands only while a fresh estimate of
+    /// the shortest window on the newest columns, taken every eighth of that window's blocks,
+    /// is not significantly below it (one-sided, risk `δ / W` per comparison;
+    /// `NotCertified::PlantChanged`). Off, after a plant change the longer windows keep
+    /// certifying the plant that was until a newer look bounds the rate below the margin (a
+    /// median of several shortest-window spans). See the guard's module (`guard::change`).
+    #[serde(default = "default_true")]
+    pub plant_change: bool,
 }
 
 fn default_true() -> bool {
@@ -99,11 +119,33 @@ impl Calibration {
             instrument_intervals: default_intervals(),
             batch_blocks: default_batch(),
             hidden_dynamics: true,
+            nonlinearity: true,
+            plant_change: true,
         }
     }
 
+    /// The settings with every guard off: the calibrated certificate alone, whose risk then
+    /// covers only plants that are linear, first order in the measured outputs and unchanged
+    /// over the windows (an explicit choice; see the guards' fields for what each one gives).
+    #[must_use]
+    pub fn unguarded(self) -> Self {
+        Self { hidden_dynamics: false, nonlinearity: false, plant_change: false, ..self }
+    }
+
+    /// The extra regressors per output of the model guard's larger fit for `p` outputs: `p`
+    /// for the hidden-dynamics guard, `2p` for the nonlinearity guard. The larger fit's
+    /// variance uses batches of one block whatever [`batch_blocks`](Self::batch_blocks) is
+    /// (under sensor noise that variance is conservative, so the guards lose power, not
+    /// validity), so its smallest window is [`min_window`](Self::min_window) for `u` plus
+    /// these.
+    #[must_use]
+    pub fn guard_unknowns(&self, outputs: usize) -> usize {
+        outputs * (usize::from(self.hidden_dynamics) + 2 * usize::from(self.nonlinearity))
+    }
+
     /// The smallest base window with a calibrated bound: `h (u + 2)` columns for `u`
-    /// unknowns per output (`p + m`, one more for the affine model's intercept), so that the
+    /// unknowns per output (`p + m`, one more for the affine model's intercept, and the model
+    /// guard's [`guard_unknowns`](Self::guard_unknowns)), so that the
     /// window holds at least two non-overlapping intervals per unknown plus two
     /// (`ν = ⌊M/h⌋ − u >= 2`).
     #[must_use]
@@ -184,18 +226,37 @@ impl Calibration {
                 ),
             );
         }
-        // The affine model's intercept is one more unknown.
+        // The affine model's intercept is one more unknown; the model guard's larger fit has
+        // its extra regressors (in batches of one block: see `guard_unknowns`).
         let d = reg.outputs
             + reg.inputs
             + usize::from(reg.model == streamcert_regression::Model::Affine);
+        let g = self.guard_unknowns(reg.outputs);
         let min = self.smallest_window(reg.horizon, d);
+        let guarded = Self::min_window(reg.horizon, d + g);
+        let counted = "p + m, + 1 for the affine model's intercept";
+        if reg.window < guarded && guarded >= min {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for a calibrated bound with its guards with h = {}: \
+                     the guards' larger fit has {} unknowns per output ({counted}, + p for the \
+                     hidden-dynamics guard and + 2p for the nonlinearity guard), so the \
+                     smallest valid window is {guarded} columns (h · (unknowns + 2)); without \
+                     the guards it would be {min}",
+                    reg.window,
+                    reg.horizon,
+                    d + g
+                ),
+            );
+        }
         if reg.window < min && self.batch_blocks == 1 {
             return bad(
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with h = {} and {d} unknowns \
-                     per output (p + m, + 1 for the affine model's intercept): the smallest \
-                     valid window is {min} columns (h · (unknowns + 2))",
+                     per output ({counted}): the smallest valid window is {min} columns \
+                     (h · (unknowns + 2))",
                     reg.window, reg.horizon
                 ),
             );
@@ -205,9 +266,9 @@ impl Calibration {
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with h = {}, {d} unknowns per \
-                     output (p + m, + 1 for the affine model's intercept) and batches of \
-                     b = {} blocks: the smallest valid window is {min} columns \
-                     (h · (b (unknowns + 1) + 1)), or use fewer blocks per batch",
+                     output ({counted}) and batches of b = {} blocks: the smallest valid window \
+                     is {min} columns (h · (b (unknowns + 1) + 1)), or use fewer blocks per \
+                     batch",
                     reg.window, reg.horizon, self.batch_blocks
                 ),
             );

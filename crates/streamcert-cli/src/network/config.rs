@@ -18,10 +18,13 @@ pub const EXAMPLE_CONFIG: &str = r#"# streamcert network configuration (TOML). U
 [network]
 epoch = 0.5             # seconds between compositions (t = k * epoch)
 stale_after = 2.5       # a subsystem without a sample for this long is not certified
-certificate = "gaussian"  # which local certificate composes: gaussian | wasserstein | calibrated
-margin = 0.0            # the network is certified when its rate is >= margin
+# Which local certificate composes: "calibrated" (the default: a stated risk over the run);
+# "gaussian" or "wasserstein" is the paper-only mode, whose network verdict carries no
+# stated risk.
+certificate = "calibrated"
+margin = 0.0            # the network is certified when its rate is >= margin (contraction)
 consecutive = 1         # certified epochs in a row before the network gate opens
-# risk = 0.01           # calibrated: run-level risk, split delta/N over the subsystems
+risk = 0.01             # run-level risk of the calibrated certificates, split delta/N
 # dense_limit = 64      # up to this many subsystems the exact dense composition
 # input = "wide"        # or "long": rows `t,subsystem,outputs...,inputs...`, one subsystem each
 # max_epoch_jump = 100000  # a row more epochs ahead than this is refused (corrupted time)
@@ -46,8 +49,8 @@ gain = [[-3.0]]
 # `gains = "gains.txt"` and `gains_format = "dense"` (N rows of N, entry (i, j) = how j drives
 # i) or "triplets" (lines `i,j,gamma`) in [network], indices in [[subsystem]] order.
 # Or measure a coupling: `estimate = true` instead of `gamma` puts `from`'s outputs among
-# `to`'s regressors and composes with a calibrated upper bound on the gain (needs
-# [network] risk and [calibration] enabled = true; output column gamma_<from>_<to>).
+# `to`'s regressors and composes with a calibrated upper bound on the gain (spends part of
+# [network] risk; output column gamma_<from>_<to>).
 [[coupling]]
 from = "B"
 to = "A"
@@ -112,8 +115,11 @@ pub enum InputLayout {
 }
 
 fn default_certificate() -> CertificateKind {
-    CertificateKind::Gaussian
+    CertificateKind::Calibrated
 }
+
+/// The run-level risk of the calibrated certificates when `[network] risk` is omitted.
+const DEFAULT_RISK: f64 = 0.01;
 
 fn one() -> usize {
     1
@@ -201,10 +207,11 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
             (Some(_), false) => {}
         }
     }
-    if !estimated.is_empty() && section.risk.is_none() {
+    let calibrated = section.certificate == CertificateKind::Calibrated;
+    if !estimated.is_empty() && section.risk.is_none() && !calibrated {
         return Err(bad(
-            "estimated couplings spend part of the run-level risk: set [network] risk = δ (and \
-             [calibration] enabled = true)"
+            "estimated couplings spend part of the run-level risk: set [network] risk = δ (or \
+             certificate = \"calibrated\", whose default risk is 0.01)"
                 .into(),
         ));
     }
@@ -310,7 +317,15 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     if let Some(m) = section.max_epoch_jump {
         network.max_epoch_jump = m;
     }
-    if let Some(delta) = section.risk {
+    if calibrated && network.subsystems.iter().any(|s| s.certifier.calibration.is_none()) {
+        return Err(bad(
+            "[network] certificate = \"calibrated\" composes the calibrated certificates, but \
+             [calibration] enabled = false leaves no calibration: enable it, or choose the \
+             paper-only certificate = \"gaussian\" (no stated risk)"
+                .into(),
+        ));
+    }
+    if let Some(delta) = section.risk.or(calibrated.then_some(DEFAULT_RISK)) {
         if !(delta > 0.0 && delta < 1.0) {
             return Err(bad(format!("[network] risk must be in (0, 1), got {delta}")));
         }
@@ -343,11 +358,21 @@ mod tests {
         assert_eq!(cfg.columns.outputs, ["y_a", "y_b"]);
         assert_eq!(cfg.network.couplings, vec![(0, 1, 0.4), (1, 0, 0.4)]);
         refused(&EXAMPLE_CONFIG.replace("from = \"B\"", "from = \"C\""), "`C`");
-        refused(&EXAMPLE_CONFIG.replace("# risk = 0.01", "risk = 1.5"), "risk");
+        refused(&EXAMPLE_CONFIG.replace("risk = 0.01 ", "risk = 1.5 "), "risk");
         refused(
-            &EXAMPLE_CONFIG.replace("certificate = \"gaussian\"", "certificate = \"calibrated\""),
+            &EXAMPLE_CONFIG.replace("[ambiguity]", "[calibration]\nenabled = false\n\n[ambiguity]"),
             "no calibration",
         );
+        // The default is the calibrated certificate at risk 0.01, δ/N per subsystem.
+        assert_eq!(cfg.network.certificate, CertificateKind::Calibrated);
+        for s in &cfg.network.subsystems {
+            assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.005));
+        }
+        let paper = EXAMPLE_CONFIG
+            .replace("certificate = \"calibrated\"", "certificate = \"gaussian\"")
+            .replace("risk = 0.01 ", "# risk = 0.01 ");
+        let cfg = parse(&paper, "paper").expect("the paper-only mode is valid");
+        assert_eq!(cfg.network.certificate, CertificateKind::Gaussian);
         refused(
             &EXAMPLE_CONFIG.replace("gamma = 0.4", "gamma = -0.4"),
             "γ must be finite and >= 0",
@@ -358,13 +383,12 @@ mod tests {
         );
         refused(&EXAMPLE_CONFIG.replace("epoch = 0.5", "epoch = 0.0"), "epoch");
         // Estimated couplings: one of gamma and estimate, and a run-level risk.
-        refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", "estimate = true"), "[network] risk");
+        refused(&paper.replace("gamma = 0.4", "estimate = true"), "[network] risk");
         refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", "gamma = 0.4\nestimate = true"), "not both");
         refused(&EXAMPLE_CONFIG.replace("gamma = 0.4", ""), "needs `gamma`");
         let text = EXAMPLE_CONFIG
             .replacen("gamma = 0.4", "estimate = true", 1)
-            .replace("# risk = 0.01", "risk = 0.03")
-            .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+            .replace("risk = 0.01 ", "risk = 0.03 ");
         let cfg = parse(&text, "estimated").expect("valid");
         // B -> A estimated: A's inputs gain B's output, a zero gain row and one block.
         assert_eq!(cfg.dims, vec![(1, 2), (1, 1)]);
@@ -375,14 +399,12 @@ mod tests {
         assert_eq!(blocks, Some((vec![CouplingBlock { first: 1, len: 1 }], 0.01)));
         assert_eq!(cfg.network.estimated, vec![EstimatedCoupling { to: 0, from: 1, block: 0 }]);
         assert_eq!(cfg.network.couplings, vec![(1, 0, 0.4)]);
-        // With a run-level risk the calibrated certificate composes, delta/N per subsystem.
-        let text = EXAMPLE_CONFIG
-            .replace("# risk = 0.01", "risk = 0.01")
-            .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
+        // A run-level risk with the paper's certificate named composes the calibrated one.
+        let text = paper.replace("# risk = 0.01 ", "risk = 0.02 ");
         let cfg = parse(&text, "risk").expect("valid");
         assert_eq!(cfg.network.certificate, CertificateKind::Calibrated);
         for s in &cfg.network.subsystems {
-            assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.005));
+            assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.01));
         }
     }
 

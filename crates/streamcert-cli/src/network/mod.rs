@@ -44,6 +44,9 @@ pub struct NetSummary {
     pub open: u64,
     /// First time the network gate opened.
     pub first_open: Option<f64>,
+    /// Whether the network gate was open at the last epoch (for `--require-certified`).
+    #[serde(default)]
+    pub open_at_end: bool,
 }
 
 /// Options of a `network` run.

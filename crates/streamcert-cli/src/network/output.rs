@@ -79,6 +79,7 @@ impl<W: Write> EpochWriter<W> {
         summary.epochs += 1;
         summary.certified += u64::from(r.certified);
         summary.open += u64::from(r.open);
+        summary.open_at_end = r.open;
         if r.open && summary.first_open.is_none() {
             summary.first_open = Some(r.t);
         }

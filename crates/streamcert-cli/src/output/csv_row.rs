@@ -73,6 +73,9 @@ fn number_bits(r: &NotCertified) -> [u64; 3] {
         N::BelowMargin { certificate, margin } => [certificate.to_bits(), margin.to_bits(), 0],
         N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
         N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
+        N::PlantChanged { beta_hat, newest_upper, .. } => {
+            [beta_hat.to_bits(), newest_upper.to_bits(), 0]
+        }
         N::VaryingDynamics { statistic, threshold, .. }
         | N::HiddenDynamics { statistic, threshold, .. }
         | N::LibraryMisfit { statistic, threshold, .. } => {
@@ -285,6 +288,9 @@ mod tests {
             )),
             (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
                 NotCertified::HiddenDynamics { window, statistic, threshold }
+            )),
+            (1usize..9, n(), n()).prop_map(|(window, beta_hat, newest_upper)| Some(
+                NotCertified::PlantChanged { window, beta_hat, newest_upper }
             )),
         ]
         .prop_map(|r| r.map(ReasonText))

@@ -164,9 +164,35 @@ impl InstrumentedWindows {
         min_pivot_ratio: f64,
         out: &mut WindowEstimate,
     ) {
+        self.estimate_span(self.span(w, 0), ridge, t, min_pivot_ratio, out);
+    }
+
+    /// As [`estimate`](Self::estimate), on window `w`'s blocks older than its newest `skip`
+    /// blocks (the older part of the window, disjoint from a window of `skip` blocks that ends
+    /// now): for a two-sample comparison of the older and the newer data.
+    pub fn estimate_older(
+        &self,
+        w: usize,
+        skip: usize,
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+    ) {
+        self.estimate_span(self.span(w, skip), ridge, t, min_pivot_ratio, out);
+    }
+
+    fn estimate_span(
+        &self,
+        span: (usize, usize),
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+    ) {
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
-        let blocks = self.windows[w].min(self.block_len);
+        let blocks = span.0.saturating_sub(span.1);
         out.ready = false;
         out.columns = blocks * self.horizon;
         let batches = blocks.div_ceil(self.batch);
@@ -174,7 +200,7 @@ impl InstrumentedWindows {
         if batches <= d {
             return;
         }
-        self.window_sums(w, &mut out.sums);
+        self.span_sums(span, &mut out.sums);
         let (nm, rest) = out.sums.split_at(lay.cw());
         let (cw, hm) = rest.split_at(p * k);
         // Q = (H + λI)⁻¹ Nᵀ: row i of Q stored as column i of Nᵀ solved against H.
@@ -229,12 +255,12 @@ impl InstrumentedWindows {
             q_ainv(&out.lu, &out.piv, &out.q, d, k, row, |b, v| out.x[j * k + b] = v);
         }
         let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(w, out, 1, 2, 2),
-            (1, 3, 3) => self.block_scores(w, out, 1, 3, 3),
-            (1, 4, 4) => self.block_scores(w, out, 1, 4, 4),
-            (1, 5, 5) => self.block_scores(w, out, 1, 5, 5),
-            (1, 6, 6) => self.block_scores(w, out, 1, 6, 6),
-            _ => self.block_scores(w, out, p, d, k),
+            (1, 2, 2) => self.block_scores(span, out, 1, 2, 2),
+            (1, 3, 3) => self.block_scores(span, out, 1, 3, 3),
+            (1, 4, 4) => self.block_scores(span, out, 1, 4, 4),
+            (1, 5, 5) => self.block_scores(span, out, 1, 5, 5),
+            (1, 6, 6) => self.block_scores(span, out, 1, 6, 6),
+            _ => self.block_scores(span, out, p, d, k),
         };
         out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
         let overlap = overlap_factor(self.batch, self.horizon);
@@ -252,7 +278,7 @@ impl InstrumentedWindows {
     #[inline(always)]
     fn block_scores(
         &self,
-        w: usize,
+        span: (usize, usize),
         out: &mut WindowEstimate,
         p: usize,
         d: usize,
@@ -265,7 +291,7 @@ impl InstrumentedWindows {
         let (theta, x) = (&out.theta[..p * d], &out.x[..p * k]);
         let (row, block) = (&mut out.row[..k], &mut out.block[..pp]);
         let (mut sum_w, mut sum_w2, mut cov) = (0.0, 0.0, 0.0);
-        let (older, newer) = self.window_blocks(w);
+        let (older, newer) = self.span_blocks(span);
         let stride = lay.stride();
         // Batches of `b > 1` blocks: the batch's score sum in `g` (p d >= p² values, free
         // here), its weight in `batch_w`.

@@ -1,0 +1,208 @@
+//! The change guard ([`Calibration::plant_change`]): a window's certificate stands only while
+//! its data agree with the newest data.
+//!
+//! A window's look is held until its next look, up to half its span later, and the longest
+//! windows hold up to `200 h` columns of the past: after a plant change they keep certifying
+//! the plant that was, or an average of the two. Every `⌈B_v / 8⌉` blocks of `h` columns
+//! (`B_v` window `v`'s blocks), and at every look, the guard takes a *fresh* estimate of each
+//! window `v` on its newest columns (`β̂_v` and its standard deviation `s_v`, the calibrated
+//! look's formulas; no risk of `δ` is spent, it certifies nothing), and two tests decide:
+//!
+//! ```text
+//! split test of window v >= 1:  β̂_{v−1} + t_{ν_{v−1}}(1 − α) · √(s_{v−1}² + s_o²)  >=  β̂_o
+//! held look of window w:        β̂_v + t_{ν_v}(1 − α) · √(s_v² + s_w²)  >=  β̂_w   (v <= w)
+//! ```
+//!
+//! The split test compares window `v`'s blocks older than window `v − 1` (`β̂_o`, `s_o`)
+//! with window `v − 1`'s fresh estimate, which ends now: two disjoint parts, so a change near
+//! the middle of a window is seen at full strength. Where it rejects, the start of that newer
+//! part becomes the *change point*, and from then on no look whose data start before the
+//! latest change point stands (any window's: the change lies somewhere in window `v`, and a
+//! look that holds data from before its newer part may hold the old plant; once the change
+//! has moved deep into the longer windows their halves no longer differ enough to see it,
+//! which is why the point is kept). A false rejection thus closes the looks of the longer
+//! windows until they have filled past it, at most the longest window's span; the shorter
+//! windows' looks after it still stand. The second compares each window's
+//! latest look with the fresh estimates of itself and of every shorter window: it catches a
+//! look taken before the change. `α = δ / (W (W + 1) / 2 + W)` per comparison (`W` windows).
+//! Where the plant is unchanged, each difference has mean zero and variance at most the sum
+//! of the two variances (disjoint parts: about equal; overlapping estimates have a positive
+//! covariance), so a comparison closes falsely with probability at most about `α`. One-sided,
+//! because a rate that rose leaves the older certificate on the safe side. Where a test
+//! rejects, the look does not stand (`NotCertified::PlantChanged`, with both numbers); the
+//! next looks, on post-change data, decide again.
+//!
+//! **Closing delay.** A drop of the rate by `Δ` is seen once a newer part, a mixture of the
+//! old and the new plant weighted by its share `f` of post-change columns, falls
+//! `t √(s² + s_o²)` below the older part: `f ≈ t s √2 / Δ` of the shorter window's span,
+//! plus at most an eighth of it to the next comparison. A slow drift is a sequence of small
+//! changes: the guard closes once the rate has drifted by about `t √(s² + s_o²)` between a
+//! window's two parts, so a slow enough drift keeps the gate open on looks at most that far
+//! above the newest rate (VALIDITY.md measures the jumps; a drift is not measured yet).
+//!
+//! Closing never costs validity; its price is power (a false comparison closes a standing
+//! look until the next comparison, and a change to a still contracting plant closes the
+//! longer windows' looks until the shorter windows certify the new plant). A fresh estimate
+//! of window `v` costs `O(B_v (k d + p²) + k³)`, twice (newest and older part), every
+//! `⌈B_v / 8⌉` blocks and at the looks: `O(W h⁻¹ (k d + p²))` per sample amortised, no
+//! allocation.
+//!
+//! [`Calibration::plant_change`]: crate::Calibration::plant_change
+
+use serde::{Deserialize, Serialize};
+
+use crate::NotCertified;
+use crate::calibrated::{WindowLook, t_quantile};
+
+/// The fresh estimate of the shortest window.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub(crate) struct Fresh {
+    /// Time of the estimate.
+    pub t: f64,
+    /// `β̂_f`.
+    pub beta_hat: f64,
+    /// `s_f`.
+    pub sd: f64,
+    /// Degrees of freedom `ν_f`.
+    pub nu: f64,
+}
+
+/// The guard's state.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(crate) struct ChangeGuard {
+    /// Risk `α` per comparison.
+    alpha: f64,
+    /// Blocks between fresh estimates of each window, `⌈B_v / 8⌉`.
+    spacing: Vec<usize>,
+    /// Blocks until each window's next fresh estimate (0: at the next block boundary).
+    until: Vec<usize>,
+    /// Each window's latest fresh estimate (`None`: none yet, or its fit not ready).
+    fresh: Vec<Option<Fresh>>,
+    /// Each window's latest split test (`v >= 1`): its older part's `β̂`, the newer part's
+    /// (window `v − 1`'s fresh estimate) one-sided upper bound, and the newer part's first
+    /// column (in the calibrated state's column count); `None` when not run.
+    split: Vec<Option<(f64, f64, u64)>>,
+    /// The latest change point: the newer part's first column of the latest split test that
+    /// rejected, with its older `β̂` and newer upper bound (sticky until a reset: a look whose
+    /// data start before it may hold the old plant).
+    changed: Option<(f64, f64, u64)>,
+}
+
+impl ChangeGuard {
+    /// The guard for windows of `blocks` blocks each (shortest first), at risk `alpha` per
+    /// comparison.
+    pub(crate) fn new(blocks: &[usize], alpha: f64) -> Self {
+        Self {
+            alpha,
+            spacing: blocks.iter().map(|b| b.div_ceil(8).max(1)).collect(),
+            until: vec![0; blocks.len()],
+            fresh: vec![None; blocks.len()],
+            split: vec![None; blocks.len()],
+            changed: None,
+        }
+    }
+
+    /// Forget the fresh estimates.
+    pub(crate) fn reset(&mut self) {
+        self.until.fill(0);
+        self.fresh.fill(None);
+        self.split.fill(None);
+        self.changed = None;
+    }
+
+    /// At a block boundary of a full window `v`: whether its fresh estimate is due (counts
+    /// the blocks down).
+    pub(crate) fn due(&mut self, v: usize) -> bool {
+        if self.until[v] == 0 {
+            self.until[v] = self.spacing[v] - 1;
+            true
+        } else {
+            self.until[v] -= 1;
+            false
+        }
+    }
+
+    /// Replace window `v`'s fresh estimate (kept only when every number is finite).
+    pub(crate) fn set(&mut self, v: usize, fresh: Option<Fresh>) {
+        self.fresh[v] = fresh.filter(|f| {
+            f.t.is_finite() && f.beta_hat.is_finite() && f.sd.is_finite() && f.nu.is_finite()
+        });
+    }
+
+    /// Replace window `v`'s split test (`v >= 1`) with the estimate `older` of its blocks
+    /// older than window `v − 1` against window `v − 1`'s fresh estimate (set first), whose
+    /// first column is `boundary`.
+    pub(crate) fn set_split(&mut self, v: usize, older: Option<Fresh>, boundary: u64) {
+        let newer = v.checked_sub(1).and_then(|u| self.fresh[u]);
+        self.split[v] = older.zip(newer).and_then(|(old, new)| {
+            let spread = (new.sd * new.sd + old.sd * old.sd).sqrt();
+            let upper = new.beta_hat + t_quantile(new.nu, self.alpha) * spread;
+            // A test without a finite bound (too few degrees of freedom) is not run.
+            upper.is_finite().then_some((old.beta_hat, upper, boundary))
+        });
+        if let Some(s) = self.split[v].filter(|s| s.1 < s.0) {
+            if self.changed.is_none_or(|c| c.2 < s.2) {
+                self.changed = Some(s);
+            }
+        }
+    }
+
+    /// The shortest window's latest fresh estimate.
+    pub(crate) fn fresh(&self) -> Option<Fresh> {
+        self.fresh.first().copied().flatten()
+    }
+
+    /// Whether window `w`'s `look`, whose data start at column `first`, agrees with the newest
+    /// data: `Err(PlantChanged)` when a window's split test rejects and the look holds data
+    /// from before that split's newer part, or when the fresh estimate of any window `v <= w`
+    /// (taken at every look, so at least as recent as any) lies significantly below it.
+    pub(crate) fn admits(
+        &self,
+        w: usize,
+        look: &WindowLook,
+        first: u64,
+    ) -> Result<(), NotCertified> {
+        // A drop inside a window: its newer part significantly below its older one, now or
+        // at the latest change point.
+        for &(older, upper, boundary) in self.split.iter().flatten().chain(&self.changed) {
+            if upper < older && first < boundary {
+                return Err(NotCertified::PlantChanged {
+                    window: look.window,
+                    beta_hat: older,
+                    newest_upper: upper,
+                });
+            }
+        }
+        for f in self.fresh.iter().take(w + 1).flatten() {
+            let spread = (f.sd * f.sd + look.sd * look.sd).sqrt();
+            let upper = f.beta_hat + t_quantile(f.nu, self.alpha) * spread;
+            if upper < look.beta_hat {
+                return Err(NotCertified::PlantChanged {
+                    window: look.window,
+                    beta_hat: look.beta_hat,
+                    newest_upper: upper,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Whether a deserialised guard matches a fresh one of the same configuration.
+    pub(crate) fn matches(&self, fresh: &Self) -> bool {
+        self.alpha == fresh.alpha
+            && self.spacing == fresh.spacing
+            && self.until.len() == fresh.until.len()
+            && self.until.iter().zip(&self.spacing).all(|(u, s)| u < s)
+            && self.fresh.len() == fresh.fresh.len()
+            && self.split.len() == fresh.split.len()
+            && self
+                .split
+                .iter()
+                .flatten()
+                .chain(&self.changed)
+                .all(|s| s.0.is_finite() && s.1.is_finite())
+            && self.fresh.iter().flatten().all(|f| {
+                f.t.is_finite() && f.beta_hat.is_finite() && f.sd >= 0.0 && f.nu.is_finite()
+            })
+    }
+}

@@ -1,0 +1,320 @@
+//! The model guard: does the window's data need more than the linear first-order model
+//! `ΔY_q ≈ Θ Z_q (+ c τ_q)` holds? One larger fit on the same columns, windows and looks as
+//! the calibrated certificate, with up to two groups of extra regressors, each tested by its
+//! own Wald statistic:
+//!
+//! ```text
+//! ΔY_q ≈ Θ Z_q (+ c τ_q) + Φ ΔY_{q−h} + Σ_i (a_i ∫(y_i − o_i)² + b_i ∫(y_i − o_i)³)
+//! ```
+//!
+//! * **Hidden dynamics (model order, [`Calibration::hidden_dynamics`]).** A sensor sees one
+//!   coordinate of a plant with many states (the paper's `p ≪ n`). When the output carries a
+//!   hidden state (a mass measured by its position, a tank behind a tank), its increment over
+//!   a column depends on that state at the column's start, which the model has no term for.
+//!   The extra regressor is the output's increment over the `h` samples before the column (a
+//!   proxy for the hidden state's effect at the column's start). Under a first-order plant
+//!   with white noise `Φ = 0`: `ΔY_{q−h}` ends where column `q`'s noise begins. Tested:
+//!   the `q = p²` entries of `Φ̂`.
+//! * **Nonlinearity ([`Calibration::nonlinearity`]).** The calibrated certificate assumes
+//!   one Jacobian over its window; a drift whose slope varies over the explored region is
+//!   certified on its average. The extra regressors are the integrals over the column of the
+//!   square and the cube of each output's excursion from the regression's working origin
+//!   `o` (the first sample); under linear dynamics their coefficients are zero. Tested: the
+//!   `q = 2p²` coefficients `a_i, b_i` of every output's equation, jointly (per output
+//!   squares and cubes: a state dependence through cross products `y_i y_j` only is not
+//!   seen). With the affine model the test does not depend on `o` (the square and cube of
+//!   `y − o` span the same functions as those of `y` with the intercept and `y`).
+//!
+//! Every regressor is instrumented as the windows' are (by the regressors of the intervals
+//! before the column). Each Wald statistic,
+//!
+//! ```text
+//! W = vec(Φ̂_S)ᵀ Ω̂_SS⁻¹ vec(Φ̂_S)   against   ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)
+//! ```
+//!
+//! (Hotelling's quantile, `Ω̂` the batch-means coefficient covariance of the larger fit, `ν`
+//! its effective number of batches less its unknowns per output, `α = δ/W` the guard's risk
+//! per look of each of the `W` windows), rejects at risk about `α` when the linear
+//! first-order model holds. Where any window's latest test rejects, no calibrated look stands
+//! (`NotCertified::HiddenDynamics`, `NotCertified::VaryingDynamics`: a hidden state or a
+//! varying slope seen on one window is the plant's, and the longest windows have the power);
+//! where a window's tests could not run (the larger fit not ready), that window's look does
+//! not stand (`NotCertified::OrderUntested`, `NotCertified::LinearityUntested`): the
+//! certificate's model is then unchecked. The larger fit has `p` (order) and `2p`
+//! (nonlinearity) more unknowns per output, so the smallest window the calibrated
+//! certificate accepts grows with them
+//! ([`Calibration::smallest_window`](crate::Calibration::smallest_window)). The nonlinear
+//! certificate is not gated by this guard (it has its own nonlinearity and lack-of-fit
+//! tests).
+//!
+//! **What it sees**: dynamics whose effect on the next `h` samples is carried by the past
+//! increment (second-order and lightly damped outputs, an integrator behind a lag, a measured
+//! output of a chain), and a drift whose slope varies with the output over the window
+//! (quadratic and cubic components of it). **What it cannot see**: hidden states that the
+//! increment over `h` samples does not reflect (much faster than `h` samples: then the
+//! first-order model is a fair reduction; much slower than the window: their effect looks like
+//! an operating point, which the intercept absorbs), dynamics the dither does not excite,
+//! state dependence orthogonal to squares and cubes of each output (cross products only), and
+//! an effect smaller than the test's resolution at the window's length. Closing never costs
+//! validity; a false closing costs power (measured in the tests and VALIDITY.md).
+//!
+//! `O(k d' + k²)` per column (`d'` the larger fit's regressors, `k` its instruments), no
+//! allocation; a test per look `O(B p² d'² + q³)`.
+//!
+//! [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
+//! [`Calibration::nonlinearity`]: crate::Calibration::nonlinearity
+
+use serde::{Deserialize, Serialize};
+use streamcert_regression::{InstrumentedWindows, WindowEstimate};
+
+use crate::nonlinear::{NonlinearityTest, hotelling_wald, same_windows};
+use crate::{CertifyError, NotCertified};
+
+/// Which groups of extra regressors the guard fits and tests.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub(crate) struct Groups {
+    /// The past increment `ΔY_{q−h}` (`p` regressors): hidden dynamics.
+    pub order: bool,
+    /// `∫(y_i − o_i)²`, `∫(y_i − o_i)³` per output (`2p` regressors): nonlinearity.
+    pub curvature: bool,
+}
+
+impl Groups {
+    /// Extra regressors for `p` outputs.
+    #[must_use]
+    pub(crate) fn extra(self, p: usize) -> usize {
+        p * (usize::from(self.order) + 2 * usize::from(self.curvature))
+    }
+}
+
+/// The guard's state: its own windows of the larger fit, the ring of the last `h` columns'
+/// increments, the latest tests per window, and scratch.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub(crate) struct ModelGuard {
+    /// Outputs `p` and the linear windows' regressors `d` (the extras follow them: the past
+    /// increments, then the squares and cubes output by output).
+    p: usize,
+    d: usize,
+    horizon: usize,
+    groups: Groups,
+    /// The risk `α` of each test.
+    alpha: f64,
+    windows: InstrumentedWindows,
+    est: WindowEstimate,
+    /// The increments `ΔY` of the last `h` columns (ring, `h p` values), `pushed` columns so
+    /// far since the last reset.
+    lags: Vec<f64>,
+    pushed: u64,
+    /// The latest order test of each window (`None`: not run, or its fit not ready).
+    latest: Vec<Option<NonlinearityTest>>,
+    /// The latest nonlinearity test of each window.
+    curvature: Vec<Option<NonlinearityTest>>,
+    // Scratch (meaningless between calls).
+    z: Vec<f64>,
+    dir: Vec<f64>,
+    cov: Vec<f64>,
+    sub: Vec<f64>,
+    rhs: Vec<f64>,
+    work: Vec<f64>,
+}
+
+impl ModelGuard {
+    /// The guard for `p` outputs on windows of `d` regressors, `lengths`, with the extra
+    /// regressors of `groups`, at risk `alpha` per test; `batch` blocks per batch as the
+    /// linear windows.
+    pub(crate) fn new(
+        (p, d, horizon): (usize, usize, usize),
+        groups: Groups,
+        (lag, intervals, batch): (usize, usize, usize),
+        lengths: &[usize],
+        alpha: f64,
+    ) -> Result<Self, CertifyError> {
+        let dd = d + groups.extra(p);
+        let windows =
+            InstrumentedWindows::with_regressors(p, dd, horizon, lag, intervals, lengths)?
+                .with_batch(batch)?;
+        let q = 2 * p * p;
+        Ok(Self {
+            p,
+            d,
+            horizon,
+            groups,
+            alpha,
+            windows,
+            est: WindowEstimate::with_regressors(p, dd, intervals),
+            lags: vec![0.0; if groups.order { horizon * p } else { 0 }],
+            pushed: 0,
+            latest: vec![None; lengths.len()],
+            curvature: vec![None; lengths.len()],
+            z: vec![0.0; dd],
+            dir: vec![0.0; dd * p],
+            cov: vec![0.0; (p * dd) * (p * dd)],
+            sub: vec![0.0; q * q],
+            rhs: vec![0.0; q],
+            work: vec![0.0; q],
+        })
+    }
+
+    /// Whether the guard fits the curvature terms (and so needs the column's samples).
+    pub(crate) fn needs_samples(&self) -> bool {
+        self.groups.curvature
+    }
+
+    /// Forget every column and test.
+    pub(crate) fn reset(&mut self) {
+        self.windows.reset();
+        self.lags.fill(0.0);
+        self.pushed = 0;
+        self.latest.fill(None);
+        self.curvature.fill(None);
+    }
+
+    /// The latest order test of each window (empty without the order group).
+    pub(crate) fn tests(&self) -> &[Option<NonlinearityTest>] {
+        if self.groups.order { &self.latest } else { &[] }
+    }
+
+    /// The latest nonlinearity test of each window (empty without the curvature group).
+    pub(crate) fn curvature_tests(&self) -> &[Option<NonlinearityTest>] {
+        if self.groups.curvature { &self.curvature } else { &[] }
+    }
+
+    /// Absorb a column: the linear windows' regressors `z` (`d`) and its `dy` (`p`); with the
+    /// curvature group, its `h + 1` sample times `ts` and outputs `ys` (row-major, `p` per
+    /// sample) and the working origin `origin` (`p`), integrated by the trapezoidal rule as
+    /// the outputs are. The order group's regressor is the increment of the column `h`
+    /// columns earlier (zero for the first `h` columns after a reset, so the guard's blocks
+    /// stay aligned with the linear ones).
+    pub(crate) fn push(&mut self, z: &[f64], dy: &[f64], samples: (&[f64], &[f64], &[f64])) {
+        let (p, d, h) = (self.p, self.d, self.horizon);
+        self.z[..d].copy_from_slice(&z[..d]);
+        let mut at = d;
+        if self.groups.order {
+            let slot = (self.pushed % h as u64) as usize;
+            self.z[at..at + p].copy_from_slice(&self.lags[slot * p..(slot + 1) * p]);
+            self.lags[slot * p..(slot + 1) * p].copy_from_slice(&dy[..p]);
+            at += p;
+        }
+        if self.groups.curvature {
+            let (ts, ys, origin) = samples;
+            for i in 0..p {
+                let (mut sq, mut cu) = (0.0, 0.0);
+                let e0 = ys[i] - origin[i];
+                let (mut a2, mut a3) = (e0 * e0, e0 * e0 * e0);
+                for s in 1..ts.len() {
+                    let e = ys[s * p + i] - origin[i];
+                    let (b2, b3) = (e * e, e * e * e);
+                    let half = 0.5 * (ts[s] - ts[s - 1]);
+                    sq += half * (a2 + b2);
+                    cu += half * (a3 + b3);
+                    (a2, a3) = (b2, b3);
+                }
+                self.z[at + 2 * i] = sq;
+                self.z[at + 2 * i + 1] = cu;
+            }
+        }
+        self.pushed += 1;
+        self.windows.push_column(&self.z, dy);
+    }
+
+    /// Window `w`'s tests at a look, for the certificate's directions `tmat` (`d × p`, the
+    /// extra rows zero): replace the window's latest tests.
+    pub(crate) fn look(&mut self, w: usize, tmat: &[f64], ridge: f64, min_pivot: f64) {
+        let (p, d) = (self.p, self.d);
+        let dd = self.z.len();
+        self.latest[w] = None;
+        self.curvature[w] = None;
+        if !self.windows.is_full(w) {
+            return;
+        }
+        self.dir[..d * p].copy_from_slice(&tmat[..d * p]);
+        self.dir[d * p..].fill(0.0);
+        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
+        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
+        {
+            return;
+        }
+        let nu = self.est.effective_blocks.min(self.est.batches as f64) - dd as f64;
+        let mut first = d;
+        if self.groups.order {
+            self.latest[w] = self.wald(first, p, nu);
+            first += p;
+        }
+        if self.groups.curvature {
+            self.curvature[w] = self.wald(first, 2 * p, nu);
+        }
+    }
+
+    /// The Wald test of the coefficients of regressors `first .. first + e` in every output's
+    /// equation (`q = p e` entries of `vec(Θ̂)`).
+    fn wald(&mut self, first: usize, e: usize, nu: f64) -> Option<NonlinearityTest> {
+        let (p, dd) = (self.p, self.z.len());
+        let q = p * e;
+        // Entry a: output a / e, regressor first + a % e, at index (a / e)·d' + first + a % e.
+        let index = |a: usize| (a / e) * dd + first + a % e;
+        for a in 0..q {
+            for b in 0..q {
+                self.sub[a * q + b] = self.cov[index(a) * (p * dd) + index(b)];
+            }
+            self.rhs[a] = self.est.theta[index(a)];
+        }
+        hotelling_wald(q, nu, self.alpha, (&mut self.sub, &mut self.rhs, &mut self.work))
+    }
+
+    /// Whether window `w`'s look may stand: `Ok` when its latest tests ran and found nothing
+    /// and no window's latest test rejects (the longer windows' tests have the power: a hidden
+    /// state or a varying slope seen on any window is the plant's), else the reason.
+    pub(crate) fn admits(&self, w: usize, window: usize) -> Result<(), NotCertified> {
+        let rejected = |tests: &[Option<NonlinearityTest>]| {
+            tests
+                .iter()
+                .enumerate()
+                .find_map(|(v, t)| t.filter(NonlinearityTest::significant).map(|t| (v, t)))
+        };
+        if let Some((v, t)) = rejected(self.tests()) {
+            return Err(NotCertified::HiddenDynamics {
+                window: self.windows.window(v),
+                statistic: t.statistic,
+                threshold: t.threshold,
+            });
+        }
+        if let Some((v, t)) = rejected(self.curvature_tests()) {
+            return Err(NotCertified::VaryingDynamics {
+                window: self.windows.window(v),
+                statistic: t.statistic,
+                threshold: t.threshold,
+            });
+        }
+        if self.groups.order && self.latest.get(w).copied().flatten().is_none() {
+            return Err(NotCertified::OrderUntested { window });
+        }
+        if self.groups.curvature && self.curvature.get(w).copied().flatten().is_none() {
+            return Err(NotCertified::LinearityUntested { window });
+        }
+        Ok(())
+    }
+
+    /// Whether a deserialised guard matches a fresh one of the same configuration.
+    pub(crate) fn matches(&self, fresh: &Self) -> bool {
+        self.windows.check_state().is_ok()
+            && (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)
+            && self.groups == fresh.groups
+            && self.alpha == fresh.alpha
+            && same_windows(&self.windows, &fresh.windows)
+            && self.est.matches(&fresh.est)
+            && self.latest.len() == fresh.latest.len()
+            && self.curvature.len() == fresh.curvature.len()
+            && [
+                (self.lags.len(), fresh.lags.len()),
+                (self.z.len(), fresh.z.len()),
+                (self.dir.len(), fresh.dir.len()),
+                (self.cov.len(), fresh.cov.len()),
+                (self.sub.len(), fresh.sub.len()),
+                (self.rhs.len(), fresh.rhs.len()),
+                (self.work.len(), fresh.work.len()),
+            ]
+            .iter()
+            .all(|(a, b)| a == b)
+            && self.lags.iter().all(|v| v.is_finite())
+    }
+}

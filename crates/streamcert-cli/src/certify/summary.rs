@@ -1,0 +1,248 @@
+//! [`Summary`]: the counts over a `certify` run, and the text and JSON a person reads, whose
+//! first line is the calibrated verdict.
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig};
+
+/// Counts over a run (continued across checkpoint and resume).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Rows certified or not (accepted rows).
+    pub rows: u64,
+    /// Malformed rows skipped (each closes every gate, as the library's
+    /// `Certifier::skip`).
+    pub skipped: u64,
+    /// Gaps in the time column (a step above `gap_factor` times the reference step): the
+    /// window restarts there and the row's reason says so.
+    #[serde(default)]
+    pub gaps: u64,
+    /// Rows passed over at the start of a resumed input because the checkpoint already holds
+    /// them (times up to its last time).
+    #[serde(default)]
+    pub replayed: u64,
+    /// Rows with the Gaussian gate open.
+    pub gauss_open: u64,
+    /// Rows with the Wasserstein gate open.
+    pub wass_open: u64,
+    /// First time the Gaussian gate opened (deployment decision).
+    pub first_deploy_gauss: Option<f64>,
+    /// First time the Wasserstein gate opened.
+    pub first_deploy_wass: Option<f64>,
+    /// Rows with the calibrated gate open (0 unless `[calibration]` is enabled).
+    #[serde(default)]
+    pub calibrated_open: u64,
+    /// First time the calibrated gate opened.
+    #[serde(default)]
+    pub first_deploy_calibrated: Option<f64>,
+    /// Rows with the nonlinear gate open (0 unless `[nonlinear]` is enabled).
+    #[serde(default)]
+    pub nonlinear_open: u64,
+    /// First time the nonlinear gate opened.
+    #[serde(default)]
+    pub first_deploy_nonlinear: Option<f64>,
+    /// Time of the last accepted row.
+    pub last_time: Option<f64>,
+    /// The range `(lo, hi)` of each output over the accepted rows (for the units warning).
+    #[serde(default)]
+    pub output_ranges: Vec<(f64, f64)>,
+    /// While the calibrated gate is open, the time it last opened (`None` while closed).
+    #[serde(default)]
+    pub calibrated_since: Option<f64>,
+    /// Rows with the calibrated gate closed, by kind of reason ([`NotCertified::kind`]), in
+    /// the order first seen.
+    #[serde(default)]
+    pub calibrated_reasons: Vec<(String, u64)>,
+    /// The calibrated gate's reason at the last row, when closed.
+    #[serde(default)]
+    pub calibrated_last_reason: Option<NotCertified>,
+    /// While the Gaussian gate is open, the time it last opened.
+    #[serde(default)]
+    pub gauss_since: Option<f64>,
+    /// The region (output ranges) of the calibrated certificate standing at the last row.
+    #[serde(default)]
+    pub calibrated_region: Vec<(f64, f64)>,
+}
+
+impl Summary {
+    /// Share of accepted rows with the Gaussian gate open.
+    #[must_use]
+    pub fn share_gauss(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.gauss_open as f64 / self.rows as f64 }
+    }
+    /// Share of accepted rows with the Wasserstein gate open.
+    #[must_use]
+    pub fn share_wass(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.wass_open as f64 / self.rows as f64 }
+    }
+    /// Share of accepted rows with the calibrated gate open.
+    #[must_use]
+    pub fn share_calibrated(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.calibrated_open as f64 / self.rows as f64 }
+    }
+
+    /// With two or more outputs, the ratio of the widest output range to the narrowest over
+    /// the run (`None` with one output, or while an output has not varied). A contraction
+    /// rate in the identity metric depends on the units of each output: past `100` the
+    /// outputs' units, not the plant, decide the metric, and the summary says to state one
+    /// (`[certificate] metric`).
+    #[must_use]
+    pub fn output_scale_ratio(&self) -> Option<f64> {
+        if self.output_ranges.len() < 2 {
+            return None;
+        }
+        let spans = self.output_ranges.iter().map(|(lo, hi)| hi - lo);
+        let (mut small, mut large) = (f64::INFINITY, 0.0f64);
+        for v in spans {
+            small = small.min(v);
+            large = large.max(v);
+        }
+        (small > 0.0).then(|| large / small)
+    }
+
+    /// Share of rows with the nonlinear gate open.
+    #[must_use]
+    pub fn share_nonlinear(&self) -> f64 {
+        if self.rows == 0 { 0.0 } else { self.nonlinear_open as f64 / self.rows as f64 }
+    }
+}
+
+/// `t = …` or `never`.
+fn when(t: Option<f64>) -> String {
+    t.map_or_else(|| "never".into(), |t| format!("t = {}", Sig(t)))
+}
+
+impl Summary {
+    /// Count the calibrated verdict of one accepted row at time `t`.
+    pub(crate) fn count_calibrated(&mut self, t: f64, ev: &Evidence) {
+        self.gauss_since = if ev.gaussian.open { self.gauss_since.or(Some(t)) } else { None };
+        let v = &ev.calibrated;
+        if v.open {
+            self.calibrated_since.get_or_insert(t);
+            self.calibrated_last_reason = None;
+            return;
+        }
+        self.calibrated_since = None;
+        if let Some(r) = &v.reason {
+            let kind = r.kind();
+            match self.calibrated_reasons.iter_mut().find(|(k, _)| k == kind) {
+                Some((_, n)) => *n += 1,
+                None => self.calibrated_reasons.push((kind.to_string(), 1)),
+            }
+            self.calibrated_last_reason = Some(*r);
+        }
+    }
+
+    /// The kind of reason that held the calibrated gate closed for the most rows.
+    #[must_use]
+    pub fn longest_reason(&self) -> Option<&str> {
+        self.calibrated_reasons.iter().max_by_key(|(_, n)| *n).map(|(k, _)| k.as_str())
+    }
+
+    /// The verdict line: the calibrated verdict at the end of the input (certified since
+    /// when, at which risk, over which region; or not, with the reason that held longest), or,
+    /// without a calibration, that the paper's gates carry no stated risk.
+    #[must_use]
+    pub fn verdict_line(&self, cfg: &CertifierConfig, outputs: &[String]) -> String {
+        let Some(cal) = &cfg.calibration else {
+            return format!(
+                "verdict (paper-only mode, NO STATED RISK): the Gaussian gate is {} at the end; \
+                 the paper's gates carry no bound on the chance of a false deployment (enable \
+                 [calibration] for one)",
+                self.gauss_since
+                    .map_or_else(|| "closed".into(), |t| format!("open since {}", when(Some(t))))
+            );
+        };
+        match self.calibrated_since {
+            Some(since) => {
+                let region: Vec<String> = outputs
+                    .iter()
+                    .zip(&self.calibrated_region)
+                    .map(|(name, (lo, hi))| format!("{name} in [{}, {}]", Sig(*lo), Sig(*hi)))
+                    .collect();
+                format!(
+                    "verdict: CERTIFIED from {} to the end (calibrated certificate, risk \
+                     delta = {} over the run), over the region {}",
+                    when(Some(since)),
+                    Sig(cal.delta),
+                    if region.is_empty() { "(none recorded)".into() } else { region.join(", ") }
+                )
+            }
+            None => format!(
+                "verdict: NOT CERTIFIED at the end (calibrated certificate, risk delta = {}); \
+                 the reason that held longest: {}{}",
+                Sig(cal.delta),
+                self.longest_reason().map_or_else(|| "none (no rows)".into(), reason_words),
+                self.calibrated_last_reason
+                    .map_or_else(String::new, |r| format!("; at the end: {r}"))
+            ),
+        }
+    }
+
+    /// The text summary (stderr): the verdict line first, then the gates' shares.
+    #[must_use]
+    pub fn text(&self, cfg: &CertifierConfig, outputs: &[String]) -> String {
+        let mut lines = vec![self.verdict_line(cfg, outputs)];
+        lines.push(format!(
+            "summary: {} rows, {} skipped, {} gaps",
+            self.rows, self.skipped, self.gaps
+        ));
+        if cfg.calibration.is_some() {
+            lines.push(format!(
+                "calibrated gate (risk delta over the run) open {:.1} % of rows (first at {})",
+                100.0 * self.share_calibrated(),
+                when(self.first_deploy_calibrated),
+            ));
+        }
+        if cfg.nonlinear.is_some() {
+            lines.push(format!(
+                "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % \
+                 (first at {})",
+                100.0 * self.share_nonlinear(),
+                when(self.first_deploy_nonlinear),
+            ));
+        }
+        lines.push(format!(
+            "paper's gates (no stated risk): Gaussian open {:.1} % (first at {}), Wasserstein \
+             open {:.1} % (first at {})",
+            100.0 * self.share_gauss(),
+            when(self.first_deploy_gauss),
+            100.0 * self.share_wass(),
+            when(self.first_deploy_wass),
+        ));
+        lines.join("\n")
+    }
+
+    /// Whether the verdict at the end is "certified": the calibrated gate open at the last
+    /// row, or, in the paper-only mode, the Gaussian gate (for `--require-certified`).
+    #[must_use]
+    pub fn certified_at_end(&self, cfg: &CertifierConfig) -> bool {
+        if cfg.calibration.is_some() {
+            self.calibrated_since.is_some()
+        } else {
+            self.gauss_since.is_some()
+        }
+    }
+}
+
+/// A reason's kind in words.
+fn reason_words(kind: &str) -> String {
+    let words = match kind {
+        "warming_up" => "warming up (too few columns yet)",
+        "insufficient_excitation" | "weak_instruments" => {
+            "too little excitation (weak instruments)"
+        }
+        "below_margin" => "the certificate is below the margin",
+        "accumulating" => "above the margin, not yet for n_s samples",
+        "gap" => "a gap in the time column reset the window",
+        "rate_dropped" => "a newer window bounds the rate below the margin",
+        "varying_dynamics" => "the dynamics vary over the explored region (nonlinearity guard)",
+        "hidden_dynamics" => {
+            "the output has dynamics the model does not hold (hidden-dynamics guard)"
+        }
+        "order_untested" | "linearity_untested" => "the guards have not tested the window yet",
+        "plant_changed" => "the plant changed (change guard)",
+        "skipped_sample" => "a bad sample was skipped",
+        other => other,
+    };
+    format!("{words} [{kind}]")
+}

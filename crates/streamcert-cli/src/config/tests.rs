@@ -1,0 +1,140 @@
+//! The configuration file: defaults, refusals, and what each section selects.
+
+use super::*;
+
+#[test]
+fn default_config_parses() {
+    let c = parse(DEFAULT_CONFIG, "default").unwrap();
+    assert_eq!(c.certifier.gain, vec![-4.0]);
+    assert!(c.certifier.ambiguity.is_some());
+}
+
+#[test]
+fn bad_configs_are_refused() {
+    let unknown = DEFAULT_CONFIG.replace("margin = 0.05", "margin = 0.05\nmargn = 1");
+    assert!(parse(&unknown, "x").unwrap_err().to_string().contains("margn"));
+    let shape = DEFAULT_CONFIG.replace("gain = [[-4.0]]", "gain = [[-4.0, 1.0]]");
+    assert!(parse(&shape, "x").unwrap_err().to_string().contains("m × p"));
+    let invalid = DEFAULT_CONFIG.replace("conservatism = 0.1", "conservatism = -1.0");
+    assert!(parse(&invalid, "x").unwrap_err().to_string().contains("conservatism"));
+    let risk = DEFAULT_CONFIG.replace("delta = 0.01 ", "delta = 1.5 ");
+    assert!(parse(&risk, "x").unwrap_err().to_string().contains("delta"));
+}
+
+#[test]
+fn keys_with_documented_defaults_may_be_omitted() {
+    let full = parse(DEFAULT_CONFIG, "default").unwrap();
+    let start = DEFAULT_CONFIG.find("[ambiguity]").unwrap();
+    let end = DEFAULT_CONFIG.find("[calibration]").unwrap();
+    let short = format!(
+        "{}[ambiguity]\nenabled = true\n\n{}",
+        &DEFAULT_CONFIG[..start],
+        &DEFAULT_CONFIG[end..]
+    );
+    let short = short.replace("window = 150 ", "# window = 150 ");
+    let parsed = parse(&short, "short").unwrap();
+    assert_eq!(parsed.certifier, full.certifier);
+}
+
+#[test]
+fn calibration_section_selects_the_calibrated_certificate() {
+    // The default is the calibrated certificate with every guard.
+    assert_eq!(
+        parse(DEFAULT_CONFIG, "default").unwrap().certifier.calibration,
+        Some(Calibration::new(0.01))
+    );
+    let on = DEFAULT_CONFIG.replace("delta = 0.01 ", "delta = 0.05 ");
+    let c = parse(&on, "x").unwrap();
+    assert_eq!(c.certifier.calibration, Some(Calibration::new(0.05)));
+    let tuned = on.replace("# windows = 4 ", "windows = 2 ");
+    let c = parse(&tuned, "x").unwrap();
+    assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(Some(2)));
+    let batched = on.replace("# batch_blocks = 1 ", "batch_blocks = 4 ");
+    let c = parse(&batched, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.batch_blocks, 4);
+    // A window below h (u + 2) has no calibrated bound: refused, naming the smallest. With
+    // the guards u = p + m + 1 + p + 2p = 6 (40 columns); through the origin 35; without the
+    // guards 25 and 20.
+    let short = on.replace("window = 150 ", "window = 10 ");
+    let err = parse(&short, "x").unwrap_err().to_string();
+    assert!(err.contains("smallest valid window is 40"), "{err}");
+    let origin = short.replace("model = \"affine\"", "model = \"through_origin\"");
+    let err = parse(&origin, "x").unwrap_err().to_string();
+    assert!(err.contains("smallest valid window is 35"), "{err}");
+    let bare = short
+        .replace("# hidden_dynamics = true ", "hidden_dynamics = false ")
+        .replace("# nonlinearity = true ", "nonlinearity = false ");
+    let err = parse(&bare, "x").unwrap_err().to_string();
+    assert!(err.contains("smallest valid window is 25"), "{err}");
+    let origin = bare.replace("model = \"affine\"", "model = \"through_origin\"");
+    let err = parse(&origin, "x").unwrap_err().to_string();
+    assert!(err.contains("smallest valid window is 20"), "{err}");
+    let zero_margin = on.replace("margin = 0.05", "margin = 0.0");
+    assert!(parse(&zero_margin, "x").unwrap_err().to_string().contains("margin"));
+}
+
+#[test]
+fn nonlinear_section_selects_the_nonlinear_certificate() {
+    let nl = "enabled = false\nfeatures";
+    let both = DEFAULT_CONFIG.replace(nl, "enabled = true\nfeatures");
+    // Without a calibration (the paper-only mode) the nonlinear certificate is refused,
+    // saying what to set.
+    let paper = both.replace("enabled = true\ndelta = 0.01", "enabled = false\ndelta = 0.01");
+    let err = parse(&paper, "x").unwrap_err().to_string();
+    assert!(err.contains("needs a calibration"), "{err}");
+    let c = parse(&both, "x").unwrap();
+    assert_eq!(c.certifier.nonlinear, Some(NonlinearConfig::default()));
+    let deg = both.replace("degree = 3", "degree = 2").replace("# cells = 32 ", "cells = 8 ");
+    let c = parse(&deg, "x").unwrap().certifier.nonlinear.unwrap();
+    assert_eq!((c.degree, c.cells, c.check_terms), (2, 8, 2));
+    let off = both.replace("# check_terms = 2 ", "check_terms = 0 ");
+    assert_eq!(parse(&off, "x").unwrap().certifier.nonlinear.unwrap().check_terms, 0);
+    let many = both.replace("# check_terms = 2 ", "check_terms = 9 ");
+    assert!(parse(&many, "x").unwrap_err().to_string().contains("check_terms"));
+    let unknown = both.replace("features = \"polynomial\"", "features = \"splines\"");
+    assert!(parse(&unknown, "x").unwrap_err().to_string().contains("splines"));
+    let named = both.replace("features = \"polynomial\"", "features = [\"y\", \"y*tanh(y)\"]");
+    let c = parse(&named, "x").unwrap().certifier.nonlinear.unwrap();
+    assert_eq!(c.library(), FeatureSet::from_names(&["y", "y*tanh(y)"]).unwrap());
+    let first = both.replace("features = \"polynomial\"", "features = [\"tanh(y)\"]");
+    assert!(parse(&first, "x").unwrap_err().to_string().contains("start with `y`"));
+}
+
+#[test]
+fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold() {
+    use streamcert_regression::InputIntegral;
+    let full = parse(DEFAULT_CONFIG, "default").unwrap().certifier;
+    let cal = full.calibration.expect("the calibrated certificate by default");
+    assert!(cal.hidden_dynamics && cal.nonlinearity && cal.plant_change);
+    assert_eq!(full.regression.input_integral, InputIntegral::ZeroOrderHold);
+    // Omitted sections and keys give the same.
+    let minimal = "[columns]\ntime = \"t\"\noutputs = [\"y\"]\ninputs = [\"u\"]\n\
+                   [controller]\ngain = [[-4.0]]\n\
+                   [certificate]\nconservatism = 0.1\nmargin = 0.05\nconsecutive = 10\n";
+    let short = parse(minimal, "minimal").unwrap().certifier;
+    assert_eq!(short.calibration, Some(cal));
+    assert_eq!(short.regression.input_integral, InputIntegral::ZeroOrderHold);
+    // Each guard and the calibration can be turned off by name only.
+    let off = DEFAULT_CONFIG
+        .replace("# plant_change = true ", "plant_change = false ")
+        .replace("# nonlinearity = true ", "nonlinearity = false ");
+    let c = parse(&off, "x").unwrap().certifier.calibration.unwrap();
+    assert!(!c.plant_change && !c.nonlinearity && c.hidden_dynamics);
+    let paper = DEFAULT_CONFIG.replace("enabled = true\ndelta", "enabled = false\ndelta");
+    assert_eq!(parse(&paper, "x").unwrap().certifier.calibration, None);
+}
+
+#[test]
+fn every_default_in_print_config_carries_its_reason() {
+    // Every active `key = value` line of the printed configuration has a comment on it or on
+    // the line before.
+    let lines: Vec<&str> = DEFAULT_CONFIG.lines().collect();
+    for (i, line) in lines.iter().enumerate() {
+        let l = line.trim();
+        if l.is_empty() || l.starts_with('#') || l.starts_with('[') || !l.contains('=') {
+            continue;
+        }
+        let commented = l.contains('#') || lines[i.saturating_sub(1)].trim().starts_with('#');
+        assert!(commented, "line {} has no reason: {l}", i + 1);
+    }
+}

@@ -286,15 +286,15 @@ fn look_risks_sum_to_the_share_of_delta() {
 
 #[test]
 fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
-    // With the guards (the default): the guards' larger fit has u = p + m + 1 + p + 2p
-    // unknowns under the affine model, so h (u + 2) = 40 for p = m = 1, h = 5 (35 through the
-    // origin); without them h (p + m + 3) = 25 (the intercept is one more unknown) and
-    // h (p + m + 2) = 20 through the origin.
-    let err = Certifier::new(calibrated(1, vec![-0.54], 39, 1)).unwrap_err();
+    // With the guards (the default): the nonlinearity guard's larger fit has
+    // u = p + m + 1 + 2p unknowns under the affine model, so h (u + 2) = 35 for p = m = 1,
+    // h = 5 (30 through the origin); without them h (p + m + 3) = 25 (the intercept is one
+    // more unknown) and h (p + m + 2) = 20 through the origin.
+    let err = Certifier::new(calibrated(1, vec![-0.54], 34, 1)).unwrap_err();
     let CertifyError::InvalidConfig { field: "window", reason } = err else { panic!("{err}") };
-    assert!(reason.contains("smallest valid window is 40"), "{reason}");
+    assert!(reason.contains("smallest valid window is 35"), "{reason}");
     assert!(reason.contains("without the guards it would be 25"), "{reason}");
-    assert!(Certifier::new(calibrated(1, vec![-0.54], 40, 1)).is_ok());
+    assert!(Certifier::new(calibrated(1, vec![-0.54], 35, 1)).is_ok());
     let model = |p: usize, window: usize, origin: bool, guards: bool| {
         let mut cfg = calibrated(p, vec![if p == 1 { -0.54 } else { 0.0 }; p * p], window, 1);
         if origin {
@@ -305,13 +305,13 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         }
         Certifier::new(cfg)
     };
-    // (p, origin, guards, smallest): p = m = 2 has 2 + 2 + 1 (+ 2 + 4) unknowns.
+    // (p, origin, guards, smallest): p = m = 2 has 2 + 2 + 1 (+ 4) unknowns.
     for (p, origin, guards, smallest) in [
-        (1, true, true, 35),
+        (1, true, true, 30),
         (1, false, false, 25),
         (1, true, false, 20),
-        (2, false, true, 65),
-        (2, true, true, 60),
+        (2, false, true, 55),
+        (2, true, true, 50),
         (2, false, false, 35),
         (2, true, false, 30),
     ] {
@@ -362,17 +362,17 @@ fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window()
     // The smallest accepted windows of each model (the affine model's intercept is one more
     // unknown: h (p + m + 3) = 25, and 85 with batches of 4), then batches of 4 blocks at
     // their smallest accepted window, and at 150.
-    // With the guards (the default) the smallest is 40 (35 through the origin), without them
+    // With the guards (the default) the smallest is 35 (30 through the origin), without them
     // 25 (20).
     use Model::{Affine, ThroughOrigin};
     for (window, batch_blocks, model, guards) in [
-        (40, 1, Affine, true),
+        (35, 1, Affine, true),
         (25, 1, Affine, false),
         (30, 1, Affine, false),
         (150, 1, Affine, true),
         (85, 4, Affine, true),
         (150, 4, Affine, true),
-        (35, 1, ThroughOrigin, true),
+        (30, 1, ThroughOrigin, true),
         (20, 1, ThroughOrigin, false),
         (65, 4, ThroughOrigin, false),
     ] {

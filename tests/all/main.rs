@@ -4,6 +4,7 @@ mod affine;
 mod ambiguity;
 mod calibrated;
 mod certificate;
+mod change;
 mod compose;
 mod dynamics;
 mod network;

@@ -251,9 +251,10 @@ pub(crate) struct CalibratedState {
     affine: bool,
     zaug: Vec<f64>,
     nl_origin: f64,
-    /// The model guard (hidden dynamics, nonlinearity) on the same columns and looks, when
-    /// either is configured.
-    order: Option<ModelGuard>,
+    /// The model guards on the same columns and looks: hidden dynamics and nonlinearity, each
+    /// its own larger fit when configured (in one fit the past increment, which carries the
+    /// drift, soaks up the curvature terms' signal, and the reverse).
+    model: Vec<ModelGuard>,
     /// The change guard, when configured.
     change: Option<ChangeGuard>,
     /// The column count (`seen`) at each window's latest look.
@@ -340,17 +341,21 @@ impl CalibratedState {
             affine,
             zaug: vec![0.0; d],
             nl_origin: 0.0,
-            order: (cal.hidden_dynamics || cal.nonlinearity)
-                .then(|| {
-                    // Batches of one block: see `Calibration::guard_unknowns`.
-                    let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
-                    let groups = Groups { order: cal.hidden_dynamics, curvature: cal.nonlinearity };
-                    // Any window's rejection closes every look: δ split over the windows
-                    // keeps the false closings of a look at about δ.
-                    let alpha = cal.delta / lengths.len() as f64;
-                    ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
-                })
-                .transpose()?,
+            model: [
+                Groups { order: cal.hidden_dynamics, curvature: false },
+                Groups { order: false, curvature: cal.nonlinearity },
+            ]
+            .into_iter()
+            .filter(|g| g.order || g.curvature)
+            .map(|groups| {
+                // Batches of one block: see `Calibration::guard_unknowns`.
+                let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
+                // Any window's rejection closes every look: δ split over the windows keeps
+                // the false closings of a look at about δ.
+                let alpha = cal.delta / lengths.len() as f64;
+                ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
+            })
+            .collect::<Result<_, _>>()?,
             change: cal.plant_change.then(|| {
                 let blocks: Vec<usize> = lengths.iter().map(|&w| w / reg.horizon).collect();
                 let w = lengths.len();
@@ -378,12 +383,12 @@ impl CalibratedState {
 
     /// The hidden-dynamics guard's latest test per window (empty without the guard).
     pub(crate) fn order_tests(&self) -> &[Option<crate::NonlinearityTest>] {
-        self.order.as_ref().map_or(&[], |o| o.tests())
+        self.model.iter().map(ModelGuard::tests).find(|t| !t.is_empty()).unwrap_or(&[])
     }
 
     /// The nonlinearity guard's latest test per window (empty without the guard).
     pub(crate) fn curvature_tests(&self) -> &[Option<crate::NonlinearityTest>] {
-        self.order.as_ref().map_or(&[], |o| o.curvature_tests())
+        self.model.iter().map(ModelGuard::curvature_tests).find(|t| !t.is_empty()).unwrap_or(&[])
     }
 
     /// The change guard's latest fresh estimate (`None` without the guard or before one).
@@ -409,7 +414,7 @@ impl CalibratedState {
         if let Some(c) = &mut self.coupling {
             c.reset();
         }
-        if let Some(o) = &mut self.order {
+        for o in &mut self.model {
             o.reset();
         }
         if let Some(c) = &mut self.change {
@@ -449,11 +454,11 @@ impl CalibratedState {
                         z
                     };
                     let samples = self.nonlinear.is_some()
-                        || self.order.as_ref().is_some_and(ModelGuard::needs_samples);
+                        || self.model.iter().any(ModelGuard::needs_samples);
                     if samples {
                         reg.column_samples(&mut self.ts, &mut self.ys);
                     }
-                    if let Some(o) = &mut self.order {
+                    for o in &mut self.model {
                         o.push(z, dy, (&self.ts, &self.ys, reg.origin()));
                     }
                     if let Some(n) = &mut self.nonlinear {
@@ -537,7 +542,7 @@ impl CalibratedState {
             let origin = self.nl_origin;
             n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });
         }
-        if let Some(o) = &mut self.order {
+        for o in &mut self.model {
             o.look(w, &self.tmat, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
@@ -620,9 +625,9 @@ impl CalibratedState {
                     return false;
                 }
             }
-            // The hidden-dynamics guard: the window's larger fit must have run and found no
-            // past-increment term.
-            if let Some(guard) = &self.order {
+            // The model guards: each window's larger fits must have run and found no
+            // past-increment or curvature term.
+            for guard in &self.model {
                 if let Err(reason) = guard.admits(w, look.window) {
                     // A significant test is the stronger reason.
                     let stronger = matches!(

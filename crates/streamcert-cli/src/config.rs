@@ -77,8 +77,8 @@ residuals = "one_step"  # keeps the tail shape eps detects (the paper is silent)
 # from its own uncertainty (no c); its gate opens for a controller whose true rate is below
 # the margin with probability at most delta over the whole run (see the README for the
 # assumptions), and its guards close it where the data contradict its model. Needs margin > 0
-# and window >= h (u + 2), u = p + m + 1 (intercept) + p (hidden-dynamics guard) + 2p
-# (nonlinearity guard): 40 for p = m = 1, h = 5. `enabled = false` is the paper-only mode: the
+# and window >= h (u + 2), u = p + m + 1 (intercept) + 2p (the nonlinearity guard's fit):
+# 35 for p = m = 1, h = 5. `enabled = false` is the paper-only mode: the
 # paper's two certificates alone, which carry no stated risk (the summary says so).
 enabled = true
 delta = 0.01            # the risk of a false deployment over the whole run

@@ -31,11 +31,8 @@ impl CalibratedState {
             }
         }
         self.windows.check_state()?;
-        let order_ok = match (&self.order, &fresh.order) {
-            (Some(a), Some(b)) => a.matches(b),
-            (None, None) => true,
-            _ => false,
-        };
+        let order_ok = self.model.len() == fresh.model.len()
+            && self.model.iter().zip(&fresh.model).all(|(a, b)| a.matches(b));
         let change_ok = match (&self.change, &fresh.change) {
             (Some(a), Some(b)) => a.matches(b),
             (None, None) => true,

@@ -132,15 +132,17 @@ impl Calibration {
         Self { hidden_dynamics: false, nonlinearity: false, plant_change: false, ..self }
     }
 
-    /// The extra regressors per output of the model guard's larger fit for `p` outputs: `p`
-    /// for the hidden-dynamics guard, `2p` for the nonlinearity guard. The larger fit's
-    /// variance uses batches of one block whatever [`batch_blocks`](Self::batch_blocks) is
+    /// The extra regressors per output of the model guards' larger fits for `p` outputs: `p`
+    /// for the hidden-dynamics guard, `2p` for the nonlinearity guard, each in its own fit (the
+    /// larger of the two counts). The larger fits' variance uses batches of one block whatever [`batch_blocks`](Self::batch_blocks) is
     /// (under sensor noise that variance is conservative, so the guards lose power, not
-    /// validity), so its smallest window is [`min_window`](Self::min_window) for `u` plus
+    /// validity), so their smallest window is [`min_window`](Self::min_window) for `u` plus
     /// these.
     #[must_use]
     pub fn guard_unknowns(&self, outputs: usize) -> usize {
-        outputs * (usize::from(self.hidden_dynamics) + 2 * usize::from(self.nonlinearity))
+        let order = if self.hidden_dynamics { outputs } else { 0 };
+        let curvature = if self.nonlinearity { 2 * outputs } else { 0 };
+        order.max(curvature)
     }
 
     /// The smallest base window with a calibrated bound: `h (u + 2)` columns for `u`
@@ -240,8 +242,8 @@ impl Calibration {
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with its guards with h = {}: \
-                     the guards' larger fit has {} unknowns per output ({counted}, + p for the \
-                     hidden-dynamics guard and + 2p for the nonlinearity guard), so the \
+                     the guards' larger fits have up to {} unknowns per output ({counted}, + p \
+                     for the hidden-dynamics guard or + 2p for the nonlinearity guard), so the \
                      smallest valid window is {guarded} columns (h · (unknowns + 2)); without \
                      the guards it would be {min}",
                     reg.window,

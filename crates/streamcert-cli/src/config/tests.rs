@@ -53,14 +53,14 @@ fn calibration_section_selects_the_calibrated_certificate() {
     let c = parse(&batched, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.batch_blocks, 4);
     // A window below h (u + 2) has no calibrated bound: refused, naming the smallest. With
-    // the guards u = p + m + 1 + p + 2p = 6 (40 columns); through the origin 35; without the
-    // guards 25 and 20.
+    // the guards u = p + m + 1 + 2p = 5 (the nonlinearity guard's fit: 35 columns); through
+    // the origin 30; without the guards 25 and 20.
     let short = on.replace("window = 150 ", "window = 10 ");
     let err = parse(&short, "x").unwrap_err().to_string();
-    assert!(err.contains("smallest valid window is 40"), "{err}");
+    assert!(err.contains("smallest valid window is 35"), "{err}");
     let origin = short.replace("model = \"affine\"", "model = \"through_origin\"");
     let err = parse(&origin, "x").unwrap_err().to_string();
-    assert!(err.contains("smallest valid window is 35"), "{err}");
+    assert!(err.contains("smallest valid window is 30"), "{err}");
     let bare = short
         .replace("# hidden_dynamics = true ", "hidden_dynamics = false ")
         .replace("# nonlinearity = true ", "nonlinearity = false ");

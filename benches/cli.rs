@@ -56,6 +56,7 @@ fn options() -> Options {
         checkpoint_every: None,
         resume: None,
         flush_each_row: false,
+        plot: None,
     }
 }
 

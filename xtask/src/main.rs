@@ -24,7 +24,7 @@ mod exp1;
 mod exp2;
 mod network;
 mod nonlinear;
-mod plot;
+use streamcert_plot as plot;
 mod real;
 mod reliability;
 mod report;

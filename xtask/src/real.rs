@@ -96,6 +96,7 @@ fn certify_text(config: &str, csv: &str, name: &str) -> Result<Certified> {
         checkpoint_every: None,
         resume: None,
         flush_each_row: false,
+        plot: None,
     };
     let mut out = Vec::new();
     let summary = certify(&cfg, Cursor::new(csv.as_bytes().to_vec()), name, &mut out, &opts)?;

@@ -42,6 +42,8 @@ pub struct Options {
     /// Flush every row as soon as it is written (for a live input: a pipe or a terminal).
     /// Otherwise the output is buffered and flushed at the end and at each checkpoint.
     pub flush_each_row: bool,
+    /// Draw a picture of the run into this `.png` or `.svg` file at the end.
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -172,6 +174,9 @@ pub fn run<R: Read + Send, W: Write>(
             Summary::default(),
         ),
     };
+    if opts.plot.is_some() {
+        summary.trace = Some(crate::picture::Trace::new());
+    }
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
     let io = |e| CliError::io("writing output", e);
     // The region columns: every output and input over the paper's window, then every output
@@ -257,6 +262,10 @@ pub fn run<R: Read + Send, W: Write>(
         cert.calibrated_region().map(|r| (r.lo, r.hi)).filter(|(lo, hi)| lo <= hi).collect();
     if let Some(path) = &opts.checkpoint {
         save(path, &cert, &summary)?;
+    }
+    if let (Some(path), Some(trace)) = (&opts.plot, &summary.trace) {
+        let name = cfg.columns.outputs.join(", ");
+        trace.draw_certify(path, cfg.certifier.margin, &name)?;
     }
     Ok(summary)
 }

@@ -66,12 +66,27 @@ impl<R: Read> SampleReader<R> {
                 .map_err(|_| input(format!("line {line}: the header is not valid UTF-8")))?;
             header.push(name.trim_start_matches('\u{feff}').trim().to_string());
         }
+        // A header read as one field that holds another delimiter: say which setting to
+        // change.
+        let hint = match header.as_slice() {
+            [one] => [(';', ";"), ('\t', "tab"), (',', ",")]
+                .into_iter()
+                .find(|(c, _)| one.contains(*c) && columns.delimiter_byte() != Ok(*c as u8))
+                .map(|(_, name)| {
+                    format!(
+                        ": the header is one field that holds {name:?}; set `delimiter = \
+                         \"{name}\"` in [columns]"
+                    )
+                }),
+            _ => None,
+        }
+        .unwrap_or_default();
         let find = |name: &str| {
             header.iter().position(|h| h == name).ok_or_else(|| CliError::Input {
                 file: file.into(),
                 message: format!(
                     "line {line}: the header has no column `{name}` (configured in [columns]); \
-                     found {header:?} (delimiter {:?})",
+                     found {header:?} (delimiter {:?}){hint}",
                     columns.delimiter
                 ),
             })

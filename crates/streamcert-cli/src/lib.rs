@@ -13,6 +13,7 @@ pub mod config;
 pub mod input;
 pub mod network;
 pub mod output;
+pub mod picture;
 pub mod simulate;
 
 use std::fmt;

@@ -46,6 +46,11 @@ enum Command {
         summary: Option<PathBuf>,
         #[command(flatten)]
         require: Require,
+        /// Draw a picture of the run into FILE (.png or .svg): the rate with the calibrated
+        /// band and the margin, the certificates, the gates, eps, and why the calibrated gate
+        /// was closed.
+        #[arg(long, value_name = "FILE")]
+        plot: Option<PathBuf>,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
     Compose {
@@ -79,6 +84,10 @@ enum Command {
         cluster: ClusterArgs,
         #[command(flatten)]
         require: Require,
+        /// Draw a picture of the run into FILE (.png or .svg; one-process runs): the network
+        /// rate, the local certificates, the network gate and the subsystems not certified.
+        #[arg(long, value_name = "FILE")]
+        plot: Option<PathBuf>,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
@@ -251,7 +260,7 @@ enum Outcome {
 
 fn run(cli: Cli) -> Result<Outcome, CliError> {
     match cli.command {
-        Command::Certify { io, on_bad_row, persist, summary, require } => {
+        Command::Certify { io, on_bad_row, persist, summary, require, plot } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", config::DEFAULT_CONFIG);
@@ -259,6 +268,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             }
             let (path, text) = io.config_text()?;
             let cfg = config::parse(&text, &path)?;
+            check_plot(plot.as_ref())?;
             let opts = certify::Options {
                 format: io.format,
                 bad_rows: on_bad_row,
@@ -266,6 +276,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 checkpoint_every,
                 resume,
                 flush_each_row: io.flush(),
+                plot,
             };
             let mut out = open_output(&io.output)?;
             let s = certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
@@ -302,7 +313,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             }
             Ok(verdict(require.require_certified, s.certified_at_end(&cfg.certifier)))
         }
-        Command::Network { io, persist, cluster, require } => {
+        Command::Network { io, persist, cluster, require, plot } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
@@ -310,6 +321,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             }
             let (path, text) = io.config_text()?;
             let cfg = network::parse(&text, &path)?;
+            check_plot(plot.as_ref())?;
             let mut out = open_output(&io.output)?;
             let opts = network::NetOptions {
                 format: io.format,
@@ -317,9 +329,18 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 checkpoint,
                 checkpoint_every,
                 resume,
+                plot,
             };
             let ClusterArgs { workers, processes, process, hostfile } = cluster;
             let cluster = network::Cluster { workers, processes, process, hostfile };
+            if cluster.is_set() && opts.plot.is_some() {
+                return Err(CliError::Config {
+                    path: path.clone(),
+                    message: "--plot draws a one-process run (drop --plot, or run without \
+                              --processes/--workers)"
+                        .into(),
+                });
+            }
             let s = if !cluster.is_set() {
                 network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?
             } else if cluster.index() == 0 {
@@ -370,6 +391,20 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             simulate::run(experiment, coupling, seed, steps, gamma, &mut out)?;
             Ok(Outcome::Done)
         }
+    }
+}
+
+/// A picture is a `.png` or an `.svg`: refused before any data is read otherwise.
+fn check_plot(plot: Option<&PathBuf>) -> Result<(), CliError> {
+    let Some(path) = plot else { return Ok(()) };
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+    if matches!(ext.as_deref(), Some("png" | "svg")) {
+        Ok(())
+    } else {
+        Err(CliError::Config {
+            path: path.display().to_string(),
+            message: "--plot writes a .png or an .svg picture: name the file so".into(),
+        })
     }
 }
 

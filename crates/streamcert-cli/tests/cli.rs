@@ -463,3 +463,74 @@ fn simulate_seed_is_the_reproduction_run() {
         }
     }
 }
+
+/// `--plot` writes a picture of a `certify` run and of a `network` run, as PNG and as SVG;
+/// another extension is refused before any data is read (exit 2).
+#[test]
+fn plot_draws_a_picture_of_certify_and_network_runs() {
+    let cfg = config("plot");
+    let data = simulate("2");
+    for ext in ["png", "svg"] {
+        let picture = tmp(&format!("run.{ext}"));
+        let _ = std::fs::remove_file(&picture);
+        let out = run(
+            &[
+                "certify",
+                "--config",
+                cfg.to_str().expect("utf8"),
+                "--plot",
+                picture.to_str().expect("utf8"),
+            ],
+            &data,
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let bytes = std::fs::read(&picture).expect("the picture is written");
+        match ext {
+            "png" => assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n"),
+            _ => {
+                let svg = String::from_utf8(bytes).expect("utf8");
+                assert!(svg.starts_with("<svg") && svg.contains("calibrated certificate"));
+            }
+        }
+    }
+    let net_data =
+        run(&["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional"], b"");
+    let example = run(&["network", "--print-config"], b"");
+    let net_cfg = tmp("network-plot.toml");
+    std::fs::write(&net_cfg, &example.stdout).expect("write");
+    for ext in ["png", "svg"] {
+        let picture = tmp(&format!("network.{ext}"));
+        let _ = std::fs::remove_file(&picture);
+        let out = run(
+            &[
+                "network",
+                "--config",
+                net_cfg.to_str().expect("utf8"),
+                "--plot",
+                picture.to_str().expect("utf8"),
+            ],
+            &net_data.stdout,
+        );
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let bytes = std::fs::read(&picture).expect("the picture is written");
+        assert!(bytes.len() > 1000);
+        if ext == "svg" {
+            assert!(String::from_utf8(bytes).expect("utf8").contains("network rate"));
+        }
+    }
+    let bad =
+        run(&["certify", "--config", cfg.to_str().expect("utf8"), "--plot", "run.pdf"], &data);
+    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad.stderr));
+    assert!(text(&bad.stderr).contains(".png or an .svg"));
+}
+
+/// A file whose header is one field because it uses another delimiter: the message names the
+/// setting to change.
+#[test]
+fn a_foreign_delimiter_names_the_setting_to_change() {
+    let cfg = config("semicolon");
+    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], b"t;y_b;u_b\n0;0;0\n");
+    assert_eq!(out.status.code(), Some(3));
+    let err = text(&out.stderr);
+    assert!(err.contains("set `delimiter = \";\"` in [columns]"), "{err}");
+}

@@ -94,6 +94,7 @@ fn options(resume: Option<PathBuf>) -> Options {
         checkpoint_every: None,
         resume,
         flush_each_row: false,
+        plot: None,
     }
 }
 
@@ -228,6 +229,7 @@ proptest! {
             checkpoint: None,
             checkpoint_every: None,
             resume: None,
+            plot: None,
         };
         let _ = streamcert_cli::network::run(&cfg, Cursor::new(input), "fuzz", std::io::sink(), &opts);
     }

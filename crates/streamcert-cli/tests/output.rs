@@ -31,6 +31,7 @@ fn options(format: Format) -> Options {
         checkpoint_every: None,
         resume: None,
         flush_each_row: false,
+        plot: None,
     }
 }
 

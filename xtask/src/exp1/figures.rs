@@ -96,4 +96,4 @@ pub(super) fn figures(
     Ok(())
 }
 
-const RGB_BLACK: plotters::style::RGBColor = plotters::style::RGBColor(0, 0, 0);
+const RGB_BLACK: plot::RGBColor = plot::RGBColor(0, 0, 0);

@@ -61,6 +61,10 @@ pub struct Summary {
     /// The region (output ranges) of the calibrated certificate standing at the last row.
     #[serde(default)]
     pub calibrated_region: Vec<(f64, f64)>,
+    /// The rows of the picture (`--plot`), not checkpointed: a resumed run's picture starts at
+    /// the resume.
+    #[serde(skip)]
+    pub trace: Option<crate::picture::Trace>,
 }
 
 impl Summary {
@@ -115,6 +119,9 @@ impl Summary {
     /// Count the calibrated verdict of one accepted row at time `t`.
     pub(crate) fn count_calibrated(&mut self, t: f64, ev: &Evidence) {
         self.gauss_since = if ev.gaussian.open { self.gauss_since.or(Some(t)) } else { None };
+        if let Some(trace) = &mut self.trace {
+            trace.push_evidence(ev);
+        }
         let v = &ev.calibrated;
         if v.open {
             self.calibrated_since.get_or_insert(t);

@@ -47,6 +47,9 @@ pub struct NetSummary {
     /// Whether the network gate was open at the last epoch (for `--require-certified`).
     #[serde(default)]
     pub open_at_end: bool,
+    /// The epochs of the picture (`--plot`), not checkpointed.
+    #[serde(skip)]
+    pub trace: Option<crate::picture::Trace>,
 }
 
 /// Options of a `network` run.
@@ -63,6 +66,9 @@ pub struct NetOptions {
     /// Continue from this checkpoint: rows up to its last time are passed over, no header is
     /// written, so the outputs of a split run concatenate to the output of the whole run.
     pub resume: Option<PathBuf>,
+    /// Draw a picture of the run into this `.png` or `.svg` file at the end (one-process
+    /// runs).
+    pub plot: Option<PathBuf>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -122,6 +128,9 @@ pub fn run<R: Read, W: Write>(
         ),
     };
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
+    if opts.plot.is_some() {
+        summary.trace = Some(crate::picture::Trace::new());
+    }
     let mut rows = Rows::new(cfg, input, input_name)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
     let estimated = estimated_columns(&cfg.network, &names);
@@ -177,6 +186,9 @@ pub fn run<R: Read, W: Write>(
     writer.flush().map_err(io)?;
     if let Some(path) = &opts.checkpoint {
         save(path, &net, &summary)?;
+    }
+    if let (Some(path), Some(trace)) = (&opts.plot, &summary.trace) {
+        trace.draw_network(path, cfg.network.margin, &names)?;
     }
     Ok(summary)
 }

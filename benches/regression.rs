@@ -119,10 +119,11 @@ fn certifier_step(c: &mut Criterion) {
     // whole window at every sample (`O(M d²)`).
     // Variant 4 adds the nonlinear certificate of degree 3 to the calibrated one (variant 2 is
     // its baseline in the same run).
-    // Variants 0 to 4 run the defaults (the affine model; with a calibration, the
-    // hidden-dynamics guard). Variants 5 and 6 are their baselines in the same run: the
-    // paper's model through the origin, and the calibrated certificate without the guard (the
-    // step as it was before the intercept and the guard).
+    // Variants 0 to 4 run the defaults (the affine model; with a calibration, its guards:
+    // hidden dynamics, nonlinearity, plant change). Variants 5 and 6 are their baselines in
+    // the same run: the paper's model through the origin, and the calibrated certificate
+    // without any guard (the calibrated step as it was before the intercept and the guards);
+    // variant 7 is the affine calibrated certificate without its guards.
     let cases = [
         (1usize, 1usize, 0u8),
         (1, 1, 1),
@@ -131,6 +132,7 @@ fn certifier_step(c: &mut Criterion) {
         (1, 1, 4),
         (1, 1, 5),
         (1, 1, 6),
+        (1, 1, 7),
         (10, 10, 0),
         (10, 10, 1),
         (10, 10, 5),
@@ -150,12 +152,14 @@ fn certifier_step(c: &mut Criterion) {
         if variant == 2 || variant == 4 {
             cfg.calibration = Some(Calibration::new(0.01));
         }
+        if variant == 7 {
+            cfg.calibration = Some(Calibration::new(0.01).unguarded());
+        }
         if variant == 5 || variant == 6 {
             cfg.regression.model = Model::ThroughOrigin;
         }
         if variant == 6 {
-            cfg.calibration =
-                Some(Calibration { hidden_dynamics: false, ..Calibration::new(0.01) });
+            cfg.calibration = Some(Calibration::new(0.01).unguarded());
         }
         if variant == 4 {
             cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
@@ -171,6 +175,7 @@ fn certifier_step(c: &mut Criterion) {
             "gaussian_calibrated_and_nonlinear_degree3",
             "through_origin_gaussian_and_wasserstein",
             "through_origin_gaussian_and_calibrated_unguarded",
+            "gaussian_and_calibrated_unguarded",
         ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;

@@ -477,6 +477,8 @@ impl CalibratedState {
                 }
                 _ => false,
             };
+            // The windows that look at this block (at most 16).
+            let mut looking = 0u32;
             for w in 0..self.latest.len() {
                 if !block_done || !self.windows.is_full(w) {
                     continue;
@@ -484,14 +486,15 @@ impl CalibratedState {
                 if self.until_look[w] == 0 {
                     self.look(w, t, margin);
                     looked = true;
+                    looking |= 1 << w;
                     let blocks = (self.windows.window(w) / self.horizon) as f64;
                     self.until_look[w] = ((self.cal.look_spacing * blocks).ceil() as usize).max(1);
                 }
                 self.until_look[w] -= 1;
             }
-            // The change guard's fresh estimates, every eighth of each window and at every
-            // look (so that no look stands unchecked against the newest data).
-            // Each window's split test follows the shorter window's fresh estimate.
+            // The change guard's fresh estimates, every eighth of each window and at each
+            // window's look (so that no look stands unchecked against the newest data). Each
+            // window's split test takes the shorter window's latest fresh estimate.
             let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| Fresh {
                 t,
                 beta_hat,
@@ -501,18 +504,21 @@ impl CalibratedState {
             for v in 0..self.latest.len() {
                 let due = block_done
                     && self.windows.is_full(v)
-                    && self.change.as_mut().is_some_and(|c| c.due(v) | looked);
+                    && self.change.as_mut().is_some_and(|c| c.due(v) | (looking >> v & 1 == 1));
                 if due {
                     let newest = self.rate(v, 0).map(fresh);
-                    let older = if v == 0 {
-                        None
+                    // The split's two parts at the same block: the older part of window v
+                    // and window v − 1's estimate now.
+                    let (older, newer) = if v == 0 {
+                        (None, None)
                     } else {
                         let skip = self.windows.window(v - 1) / self.horizon;
-                        self.rate(v, skip).map(fresh)
+                        (self.rate(v, skip).map(fresh), self.rate(v - 1, 0).map(fresh))
                     };
                     if let Some(c) = &mut self.change {
                         c.set(v, newest);
                         if v > 0 {
+                            c.set(v - 1, newer);
                             let newer = self.windows.window(v - 1) as u64;
                             c.set_split(v, older, self.seen.saturating_sub(newer));
                         }

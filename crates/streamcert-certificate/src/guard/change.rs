@@ -3,9 +3,10 @@
 //!
 //! A window's look is held until its next look, up to half its span later, and the longest
 //! windows hold up to `200 h` columns of the past: after a plant change they keep certifying
-//! the plant that was, or an average of the two. Every `⌈B_v / 8⌉` blocks of `h` columns
-//! (`B_v` window `v`'s blocks), and at every look, the guard takes a *fresh* estimate of each
-//! window `v` on its newest columns (`β̂_v` and its standard deviation `s_v`, the calibrated
+//! the plant that was, or an average of the two. Every `⌈B_1 / 8⌉` blocks of `h` columns
+//! (`B_1` the shortest window's blocks: every window at the shortest window's pace), and at
+//! each window's look, the guard takes a *fresh* estimate of each window `v` on its newest
+//! columns (`β̂_v` and its standard deviation `s_v`, the calibrated
 //! look's formulas; no risk of `δ` is spent, it certifies nothing), and two tests decide:
 //!
 //! ```text
@@ -35,7 +36,7 @@
 //! **Closing delay.** A drop of the rate by `Δ` is seen once a newer part, a mixture of the
 //! old and the new plant weighted by its share `f` of post-change columns, falls
 //! `t √(s² + s_o²)` below the older part: `f ≈ t s √2 / Δ` of the shorter window's span,
-//! plus at most an eighth of it to the next comparison. A slow drift is a sequence of small
+//! plus at most an eighth of the shortest window's span to the next comparison. A slow drift is a sequence of small
 //! changes: the guard closes once the rate has drifted by about `t √(s² + s_o²)` between a
 //! window's two parts, so a slow enough drift keeps the gate open on looks at most that far
 //! above the newest rate (VALIDITY.md measures the jumps; a drift is not measured yet).
@@ -43,9 +44,12 @@
 //! Closing never costs validity; its price is power (a false comparison closes a standing
 //! look until the next comparison, and a change to a still contracting plant closes the
 //! longer windows' looks until the shorter windows certify the new plant). A fresh estimate
-//! of window `v` costs `O(B_v (k d + p²) + k³)`, twice (newest and older part), every
-//! `⌈B_v / 8⌉` blocks and at the looks: `O(W h⁻¹ (k d + p²))` per sample amortised, no
-//! allocation.
+//! of window `v` costs `O(B_v (k d + p²) + k³)`, three times (its newest and older part, and
+//! window `v − 1`'s newest), every `⌈B_1 / 8⌉` blocks: `O(8 (Σ_v B_v / B_1) h⁻¹ (k d + p²))`
+//! per sample amortised (about 8 · 15 block passes per block for the default four windows),
+//! no allocation. This is the largest part of the default step's cost (BENCHMARKS.md); a
+//! split statistic kept up to date per block instead of recomputed is the open way to
+//! cheaper.
 //!
 //! [`Calibration::plant_change`]: crate::Calibration::plant_change
 
@@ -67,12 +71,15 @@ pub(crate) struct Fresh {
     pub nu: f64,
 }
 
+/// Fresh estimates per shortest window: every `⌈B_1 / SPACING⌉` blocks.
+const SPACING: usize = 8;
+
 /// The guard's state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct ChangeGuard {
     /// Risk `α` per comparison.
     alpha: f64,
-    /// Blocks between fresh estimates of each window, `⌈B_v / 8⌉`.
+    /// Blocks between fresh estimates of each window, `⌈B_1 / 8⌉`.
     spacing: Vec<usize>,
     /// Blocks until each window's next fresh estimate (0: at the next block boundary).
     until: Vec<usize>,
@@ -94,7 +101,10 @@ impl ChangeGuard {
     pub(crate) fn new(blocks: &[usize], alpha: f64) -> Self {
         Self {
             alpha,
-            spacing: blocks.iter().map(|b| b.div_ceil(8).max(1)).collect(),
+            // Every window at the shortest window's pace: the split tests of the short
+            // windows see a change first, and a split of window v compares with window
+            // v − 1's estimate at the same block.
+            spacing: vec![blocks.first().map_or(1, |b| b.div_ceil(SPACING).max(1)); blocks.len()],
             until: vec![0; blocks.len()],
             fresh: vec![None; blocks.len()],
             split: vec![None; blocks.len()],

@@ -148,8 +148,10 @@
 mod check;
 mod config;
 mod coupling;
+mod look;
 pub(crate) mod quantile;
 mod standing;
+mod update;
 
 pub use config::Calibration;
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
@@ -160,11 +162,11 @@ pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quan
 
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{
-    InstrumentedWindows, Interval, RegressionConfig, SlidingRegression, WindowEstimate, linalg,
+    InstrumentedWindows, Interval, RegressionConfig, WindowEstimate, linalg,
 };
 
 use crate::guard::{ChangeGuard, Fresh, Groups, ModelGuard};
-use crate::nonlinear::{LookAt, NonlinearLook, NonlinearState};
+use crate::nonlinear::{NonlinearLook, NonlinearState};
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use streamcert_regression::Model;
 
@@ -425,262 +427,5 @@ impl CalibratedState {
     /// The current coupling bound per block (empty without a coupling configuration).
     pub(crate) fn coupling_bounds(&self) -> &[Option<CouplingBound>] {
         self.coupling.as_ref().map_or(&[], |c| c.bounds())
-    }
-
-    /// Absorb the regression's newest column if it is new, look where due (at block
-    /// boundaries), and return the verdict. No allocation.
-    pub(crate) fn update(
-        &mut self,
-        t: f64,
-        reg: &SlidingRegression,
-        margin: f64,
-    ) -> &CalibratedVerdict {
-        let built = reg.columns_built();
-        let mut looked = false;
-        if built < self.seen {
-            self.reset();
-            looked = true;
-        }
-        if built > self.seen {
-            self.seen = built;
-            let block_done = match reg.newest_column() {
-                Some((z, dy)) if reg.newest_column_ranges(&mut self.col_range) => {
-                    let z = if self.affine {
-                        let d = z.len();
-                        self.zaug[..d].copy_from_slice(z);
-                        self.zaug[d] = reg.newest_column_span().unwrap_or(0.0);
-                        &self.zaug[..]
-                    } else {
-                        z
-                    };
-                    let samples = self.nonlinear.is_some()
-                        || self.model.iter().any(ModelGuard::needs_samples);
-                    if samples {
-                        reg.column_samples(&mut self.ts, &mut self.ys);
-                    }
-                    for o in &mut self.model {
-                        o.push(z, dy, (&self.ts, &self.ys, reg.origin()));
-                    }
-                    if let Some(n) = &mut self.nonlinear {
-                        if self.affine && n.is_polynomial() {
-                            // Powers of `y − y_o` (the regression's origin): with the
-                            // intercept the polynomial class is the same, and the digits are
-                            // those of the plant's excursions.
-                            self.nl_origin = reg.origin()[0];
-                            for y in &mut self.ys {
-                                *y -= self.nl_origin;
-                            }
-                        }
-                        n.push(z, dy, &self.ts, &self.ys);
-                    }
-                    self.windows.push_column_ranged(z, dy, &self.col_range)
-                }
-                _ => false,
-            };
-            // The windows that look at this block (at most 16).
-            let mut looking = 0u32;
-            for w in 0..self.latest.len() {
-                if !block_done || !self.windows.is_full(w) {
-                    continue;
-                }
-                if self.until_look[w] == 0 {
-                    self.look(w, t, margin);
-                    looked = true;
-                    looking |= 1 << w;
-                    let blocks = (self.windows.window(w) / self.horizon) as f64;
-                    self.until_look[w] = ((self.cal.look_spacing * blocks).ceil() as usize).max(1);
-                }
-                self.until_look[w] -= 1;
-            }
-            // The change guard's fresh estimates, every eighth of each window and at each
-            // window's look (so that no look stands unchecked against the newest data). Each
-            // window's split test takes the shorter window's latest fresh estimate.
-            let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| Fresh {
-                t,
-                beta_hat,
-                sd: variance.max(0.0).sqrt(),
-                nu,
-            };
-            for v in 0..self.latest.len() {
-                let due = block_done
-                    && self.windows.is_full(v)
-                    && self.change.as_mut().is_some_and(|c| c.due(v) | (looking >> v & 1 == 1));
-                if due {
-                    let newest = self.rate(v, 0).map(fresh);
-                    // The split's two parts at the same block: the older part of window v
-                    // and window v − 1's estimate now.
-                    let (older, newer) = if v == 0 {
-                        (None, None)
-                    } else {
-                        let skip = self.windows.window(v - 1) / self.horizon;
-                        (self.rate(v, skip).map(fresh), self.rate(v - 1, 0).map(fresh))
-                    };
-                    if let Some(c) = &mut self.change {
-                        c.set(v, newest);
-                        if v > 0 {
-                            c.set(v - 1, newer);
-                            let newer = self.windows.window(v - 1) as u64;
-                            c.set_split(v, older, self.seen.saturating_sub(newer));
-                        }
-                    }
-                    looked = true;
-                }
-            }
-        }
-        // The verdict changes only with the looks (returned by reference: with a nonlinear
-        // look it is a few hundred bytes).
-        if looked || self.verdict.is_none() {
-            let verdict = self.verdict(margin);
-            return self.verdict.insert(verdict);
-        }
-        self.verdict.get_or_insert_with(CalibratedVerdict::default)
-    }
-
-    /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies; the
-    /// nonlinear certificate looks at the same window with the same risk.
-    fn look(&mut self, w: usize, t: f64, margin: f64) {
-        self.looks[w] += 1;
-        self.look_cols[w] = self.seen;
-        let k = self.looks[w];
-        if let Some(n) = &mut self.nonlinear {
-            let risk = look_risk(self.cal.delta, self.shares[w], k);
-            let (delta, ridge, min_pivot) = (self.cal.delta, self.ridge, self.min_pivot);
-            let origin = self.nl_origin;
-            n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });
-        }
-        for o in &mut self.model {
-            o.look(w, &self.tmat, self.ridge, self.min_pivot);
-        }
-        let p = self.sym.len().isqrt();
-        let Some((beta_hat, variance, nu)) = self.rate(w, 0) else {
-            self.latest[w] = None;
-            if let Some(c) = &mut self.coupling {
-                let window = self.windows.window(w);
-                let look = CouplingLook { w, k, t, share: self.shares[w], nu: 0.0, window };
-                c.look(&look, &self.windows, &mut self.est, p);
-            }
-            return;
-        };
-        let risk = look_risk(self.cal.delta, self.shares[w], k);
-        let pp = self.col_range.len();
-        self.windows.window_range(w, &mut self.regions[w * pp..(w + 1) * pp]);
-        if let Some(c) = &mut self.coupling {
-            let window = self.windows.window(w);
-            let look = CouplingLook { w, k, t, share: self.shares[w], nu, window };
-            c.look(&look, &self.windows, &mut self.est, p);
-        }
-        let radius = calibrated_radius(variance, nu, risk);
-        let upper =
-            (beta_hat < margin).then(|| beta_hat + calibrated_radius(variance, nu, self.cal.delta));
-        self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
-            window: self.windows.window(w),
-            look: k,
-            t,
-            beta_hat,
-            radius,
-            sd: variance.max(0.0).sqrt(),
-            nu,
-            upper,
-        });
-    }
-
-    /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest
-    /// `skip`: `(β̂_w, σ²_max, ν)` of the module docs, `None` when the fit is not ready.
-    fn rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let p = self.sym.len().isqrt();
-        let d = self.tmat.len() / p;
-        let (ridge, pivot) = (self.ridge, self.min_pivot);
-        self.windows.estimate_older(w, skip, ridge, &self.tmat, pivot, &mut self.est);
-        if !self.est.ready {
-            return None;
-        }
-        // sym(Θ̂ T).
-        let (th, tm) = (&self.est.theta, &self.tmat);
-        for i in 0..p {
-            for j in 0..p {
-                let (mut a, mut b) = (0.0, 0.0);
-                for l in 0..d {
-                    a += th[i * d + l] * tm[l * p + j];
-                    b += th[j * d + l] * tm[l * p + i];
-                }
-                self.sym[i * p + j] = 0.5 * (a + b);
-            }
-        }
-        let beta_hat = -linalg::sym_eig_extremes(&self.sym, p, &mut self.eig_work).1;
-        let mut variance =
-            linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
-        if p == 2 {
-            variance = variance.min(rank_one_variance_bound(&self.est.score_cov));
-        }
-        let nu = self.est.effective_blocks.min(self.est.batches as f64) - d as f64;
-        Some((beta_hat, variance, nu))
-    }
-
-    /// The largest standing certificate, and why the gate must stay closed if none stands.
-    fn verdict(&self, margin: f64) -> CalibratedVerdict {
-        let mut varying = None;
-        let nonlinear = self.nonlinear_looks();
-        let mut order = None;
-        let mut changed = None;
-        let (best, contradicted) = standing(&self.latest, margin, |w, look| {
-            // The change guard: the look must agree with the newest data.
-            if let Some(guard) = &self.change {
-                let first = self.look_cols[w].saturating_sub(look.window as u64);
-                if let Err(reason) = guard.admits(w, look, first) {
-                    changed.get_or_insert(reason);
-                    return false;
-                }
-            }
-            // The model guards: each window's larger fits must have run and found no
-            // past-increment or curvature term.
-            for guard in &self.model {
-                if let Err(reason) = guard.admits(w, look.window) {
-                    // A significant test is the stronger reason.
-                    let stronger = matches!(
-                        reason,
-                        NotCertified::HiddenDynamics { .. } | NotCertified::VaryingDynamics { .. }
-                    );
-                    if stronger || order.is_none() {
-                        order = Some(reason);
-                    }
-                    return false;
-                }
-            }
-            // With a nonlinear model, the same window's nonlinearity test must have run and
-            // found no variation: a significant test says the linear model does not hold over
-            // the region, and a missing one (no feature fit yet) cannot say that it does.
-            let Some(state) = &self.nonlinear else { return true };
-            let look_nl = nonlinear.get(w).copied().flatten();
-            let tested = look_nl.is_some_and(|n| n.test.is_some() || state.features() == 1);
-            if let Some(test) = look_nl.and_then(|n| n.test).filter(|t| t.significant()) {
-                varying.get_or_insert(NotCertified::VaryingDynamics {
-                    window: look.window,
-                    statistic: test.statistic,
-                    threshold: test.threshold,
-                });
-                return false;
-            }
-            if !tested {
-                varying.get_or_insert(NotCertified::LinearityUntested { window: look.window });
-            }
-            tested
-        });
-        let w0 = self.windows.window(0);
-        let columns = self.windows.columns(0);
-        let warming = if columns < w0 {
-            NotCertified::WarmingUp { columns, needed: w0 }
-        } else {
-            NotCertified::WeakInstruments
-        };
-        let blocked = if best.is_some() {
-            None
-        } else {
-            Some(contradicted.or(changed).or(order).or(varying).unwrap_or(warming))
-        };
-        let (nonlinear, nonlinear_blocked) = match &self.nonlinear {
-            Some(n) => n.verdict(margin, warming),
-            None => (None, None),
-        };
-        CalibratedVerdict { best, blocked, nonlinear, nonlinear_blocked }
     }
 }

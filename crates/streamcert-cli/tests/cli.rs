@@ -3,26 +3,9 @@
 
 mod common;
 
-use std::path::PathBuf;
 use std::process::Stdio;
 
-use common::{bin, compose, run, text, tmp};
-
-/// The printed default configuration, written to a file private to the calling test (tests
-/// run in parallel).
-fn config(tag: &str) -> PathBuf {
-    let out = run(&["certify", "--print-config"], b"");
-    assert!(out.status.success());
-    let path = tmp(&format!("config-{tag}.toml"));
-    std::fs::write(&path, &out.stdout).expect("write config");
-    path
-}
-
-fn simulate(seed: &str) -> Vec<u8> {
-    let out = run(&["simulate", "g5", "--experiment", "1", "--seed", seed], b"");
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    out.stdout
-}
+use common::{bin, compose, config, run, simulate, text, tmp};
 
 #[test]
 fn simulate_pipes_into_certify() {
@@ -90,48 +73,6 @@ fn the_calibrated_certificate_is_the_default_verdict() {
     assert!(row.contains(",,,,0,no calibration configured,"), "{row}");
     let stderr = text(&plain.stderr);
     assert!(stderr.lines().next().expect("summary").contains("NO STATED RISK"), "{stderr}");
-}
-
-/// `--require-certified`: exit 6 exactly when the verdict at the end is not "certified", after
-/// every output is written; without the flag the same run exits 0.
-#[test]
-fn require_certified_sets_the_exit_status_from_the_verdict() {
-    let cfg = config("require");
-    let path = cfg.to_str().expect("utf8");
-    let mut seen = [false, false];
-    for (seed, summary) in [("6", "require-6.json"), ("1", "require-1.json")] {
-        let data = simulate(seed);
-        let json = tmp(summary);
-        let args = ["certify", "--config", path, "--require-certified", "--summary"];
-        let mut args: Vec<&str> = args.to_vec();
-        args.push(json.to_str().expect("utf8"));
-        let out = run(&args, &data);
-        let v: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(&json).expect("summary")).expect("json");
-        let certified = v["certified_at_end"].as_bool().expect("bool");
-        let verdict = v["verdict"].as_str().expect("verdict");
-        assert_eq!(verdict.starts_with("verdict: CERTIFIED"), certified, "{verdict}");
-        assert_eq!(out.status.code(), Some(if certified { 0 } else { 6 }), "{verdict}");
-        assert_eq!(text(&out.stdout).lines().count(), 1 + 1501, "every row is written first");
-        seen[usize::from(certified)] = true;
-        let free = run(&["certify", "--config", path], &data);
-        assert_eq!(free.status.code(), Some(0));
-    }
-    // The paper-only mode's verdict is its Gaussian gate.
-    let paper = tmp("config-require-paper.toml");
-    let text_cfg = std::fs::read_to_string(&cfg)
-        .expect("config")
-        .replace("enabled = true\ndelta = 0.01", "enabled = false\ndelta = 0.01");
-    std::fs::write(&paper, text_cfg).expect("write config");
-    let out = run(
-        &["certify", "--config", paper.to_str().expect("utf8"), "--require-certified"],
-        &simulate("6"),
-    );
-    let open_at_end =
-        text(&out.stdout).lines().last().expect("rows").split(',').nth(8) == Some("1");
-    assert_eq!(out.status.code(), Some(if open_at_end { 0 } else { 6 }));
-    seen[usize::from(open_at_end)] = true;
-    assert!(seen[0] && seen[1], "both outcomes exercised: {seen:?}");
 }
 
 #[test]
@@ -462,75 +403,4 @@ fn simulate_seed_is_the_reproduction_run() {
             assert_eq!(fields, vec![traj.t[k], y[0], u[0], y[1], u[1]], "row {k}");
         }
     }
-}
-
-/// `--plot` writes a picture of a `certify` run and of a `network` run, as PNG and as SVG;
-/// another extension is refused before any data is read (exit 2).
-#[test]
-fn plot_draws_a_picture_of_certify_and_network_runs() {
-    let cfg = config("plot");
-    let data = simulate("2");
-    for ext in ["png", "svg"] {
-        let picture = tmp(&format!("run.{ext}"));
-        let _ = std::fs::remove_file(&picture);
-        let out = run(
-            &[
-                "certify",
-                "--config",
-                cfg.to_str().expect("utf8"),
-                "--plot",
-                picture.to_str().expect("utf8"),
-            ],
-            &data,
-        );
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        let bytes = std::fs::read(&picture).expect("the picture is written");
-        match ext {
-            "png" => assert_eq!(&bytes[..8], b"\x89PNG\r\n\x1a\n"),
-            _ => {
-                let svg = String::from_utf8(bytes).expect("utf8");
-                assert!(svg.starts_with("<svg") && svg.contains("calibrated certificate"));
-            }
-        }
-    }
-    let net_data =
-        run(&["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional"], b"");
-    let example = run(&["network", "--print-config"], b"");
-    let net_cfg = tmp("network-plot.toml");
-    std::fs::write(&net_cfg, &example.stdout).expect("write");
-    for ext in ["png", "svg"] {
-        let picture = tmp(&format!("network.{ext}"));
-        let _ = std::fs::remove_file(&picture);
-        let out = run(
-            &[
-                "network",
-                "--config",
-                net_cfg.to_str().expect("utf8"),
-                "--plot",
-                picture.to_str().expect("utf8"),
-            ],
-            &net_data.stdout,
-        );
-        assert!(out.status.success(), "{}", text(&out.stderr));
-        let bytes = std::fs::read(&picture).expect("the picture is written");
-        assert!(bytes.len() > 1000);
-        if ext == "svg" {
-            assert!(String::from_utf8(bytes).expect("utf8").contains("network rate"));
-        }
-    }
-    let bad =
-        run(&["certify", "--config", cfg.to_str().expect("utf8"), "--plot", "run.pdf"], &data);
-    assert_eq!(bad.status.code(), Some(2), "{}", text(&bad.stderr));
-    assert!(text(&bad.stderr).contains(".png or an .svg"));
-}
-
-/// A file whose header is one field because it uses another delimiter: the message names the
-/// setting to change.
-#[test]
-fn a_foreign_delimiter_names_the_setting_to_change() {
-    let cfg = config("semicolon");
-    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], b"t;y_b;u_b\n0;0;0\n");
-    assert_eq!(out.status.code(), Some(3));
-    let err = text(&out.stderr);
-    assert!(err.contains("set `delimiter = \";\"` in [columns]"), "{err}");
 }

@@ -57,3 +57,19 @@ pub(crate) fn compose(rates: &std::path::Path, gains: &std::path::Path, extra: &
     args.extend_from_slice(extra);
     run(&args, b"")
 }
+
+/// The printed default configuration, written to a file private to the calling test (tests
+/// run in parallel).
+pub(crate) fn config(tag: &str) -> PathBuf {
+    let out = run(&["certify", "--print-config"], b"");
+    assert!(out.status.success());
+    let path = tmp(&format!("config-{tag}.toml"));
+    std::fs::write(&path, &out.stdout).expect("write config");
+    path
+}
+
+pub(crate) fn simulate(seed: &str) -> Vec<u8> {
+    let out = run(&["simulate", "g5", "--experiment", "1", "--seed", seed], b"");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    out.stdout
+}

@@ -1,0 +1,119 @@
+//! The per-sample part of the calibrated certificate: absorb the regression's newest column
+//! into every window and guard, look where due, take the change guard's fresh estimates, and
+//! recompute the verdict only when a look or an estimate changed it.
+
+use streamcert_regression::SlidingRegression;
+
+use super::{CalibratedState, CalibratedVerdict};
+use crate::guard::{Fresh, ModelGuard};
+
+impl CalibratedState {
+    /// Absorb the regression's newest column if it is new, look where due (at block
+    /// boundaries), and return the verdict. No allocation.
+    pub(crate) fn update(
+        &mut self,
+        t: f64,
+        reg: &SlidingRegression,
+        margin: f64,
+    ) -> &CalibratedVerdict {
+        let built = reg.columns_built();
+        let mut looked = false;
+        if built < self.seen {
+            self.reset();
+            looked = true;
+        }
+        if built > self.seen {
+            self.seen = built;
+            let block_done = match reg.newest_column() {
+                Some((z, dy)) if reg.newest_column_ranges(&mut self.col_range) => {
+                    let z = if self.affine {
+                        let d = z.len();
+                        self.zaug[..d].copy_from_slice(z);
+                        self.zaug[d] = reg.newest_column_span().unwrap_or(0.0);
+                        &self.zaug[..]
+                    } else {
+                        z
+                    };
+                    let samples = self.nonlinear.is_some()
+                        || self.model.iter().any(ModelGuard::needs_samples);
+                    if samples {
+                        reg.column_samples(&mut self.ts, &mut self.ys);
+                    }
+                    for o in &mut self.model {
+                        o.push(z, dy, (&self.ts, &self.ys, reg.origin()));
+                    }
+                    if let Some(n) = &mut self.nonlinear {
+                        if self.affine && n.is_polynomial() {
+                            // Powers of `y − y_o` (the regression's origin): with the
+                            // intercept the polynomial class is the same, and the digits are
+                            // those of the plant's excursions.
+                            self.nl_origin = reg.origin()[0];
+                            for y in &mut self.ys {
+                                *y -= self.nl_origin;
+                            }
+                        }
+                        n.push(z, dy, &self.ts, &self.ys);
+                    }
+                    self.windows.push_column_ranged(z, dy, &self.col_range)
+                }
+                _ => false,
+            };
+            // The windows that look at this block (at most 16).
+            let mut looking = 0u32;
+            for w in 0..self.latest.len() {
+                if !block_done || !self.windows.is_full(w) {
+                    continue;
+                }
+                if self.until_look[w] == 0 {
+                    self.look(w, t, margin);
+                    looked = true;
+                    looking |= 1 << w;
+                    let blocks = (self.windows.window(w) / self.horizon) as f64;
+                    self.until_look[w] = ((self.cal.look_spacing * blocks).ceil() as usize).max(1);
+                }
+                self.until_look[w] -= 1;
+            }
+            // The change guard's fresh estimates, every eighth of each window and at each
+            // window's look (so that no look stands unchecked against the newest data). Each
+            // window's split test takes the shorter window's latest fresh estimate.
+            let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| Fresh {
+                t,
+                beta_hat,
+                sd: variance.max(0.0).sqrt(),
+                nu,
+            };
+            for v in 0..self.latest.len() {
+                let due = block_done
+                    && self.windows.is_full(v)
+                    && self.change.as_mut().is_some_and(|c| c.due(v) | (looking >> v & 1 == 1));
+                if due {
+                    let newest = self.rate(v, 0).map(fresh);
+                    // The split's two parts at the same block: the older part of window v
+                    // and window v − 1's estimate now.
+                    let (older, newer) = if v == 0 {
+                        (None, None)
+                    } else {
+                        let skip = self.windows.window(v - 1) / self.horizon;
+                        (self.rate(v, skip).map(fresh), self.rate(v - 1, 0).map(fresh))
+                    };
+                    if let Some(c) = &mut self.change {
+                        c.set(v, newest);
+                        if v > 0 {
+                            c.set(v - 1, newer);
+                            let newer = self.windows.window(v - 1) as u64;
+                            c.set_split(v, older, self.seen.saturating_sub(newer));
+                        }
+                    }
+                    looked = true;
+                }
+            }
+        }
+        // The verdict changes only with the looks (returned by reference: with a nonlinear
+        // look it is a few hundred bytes).
+        if looked || self.verdict.is_none() {
+            let verdict = self.verdict(margin);
+            return self.verdict.insert(verdict);
+        }
+        self.verdict.get_or_insert_with(CalibratedVerdict::default)
+    }
+}

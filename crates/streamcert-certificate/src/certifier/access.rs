@@ -1,0 +1,92 @@
+//! What a certifier shows besides its evidence: the calibrated and nonlinear looks, the
+//! guards' latest tests, the regions its certificates speak for, the coupling bounds and the
+//! regression.
+
+use streamcert_regression::{Interval, SlidingRegression};
+
+use super::Certifier;
+use crate::{CouplingBound, NonlinearLook, WindowLook};
+
+impl Certifier {
+    /// The latest look of each calibrated window, shortest window first (empty without a
+    /// calibration; `None` for a window that has not looked yet or whose last look had no
+    /// estimate).
+    #[must_use]
+    pub fn calibrated_looks(&self) -> &[Option<WindowLook>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.looks())
+    }
+
+    /// The latest nonlinear look of each window, shortest window first (empty without a
+    /// nonlinear configuration).
+    #[must_use]
+    pub fn nonlinear_looks(&self) -> &[Option<NonlinearLook>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.nonlinear_looks())
+    }
+
+    /// The hidden-dynamics guard's latest test of each calibrated window (the Wald statistic
+    /// of the past increment's coefficients and its threshold; `None` where it has not run
+    /// or its fit was not ready); empty without the guard
+    /// ([`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics)).
+    #[must_use]
+    pub fn hidden_dynamics_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.order_tests())
+    }
+
+    /// The nonlinearity guard's latest test of each calibrated window (the joint Wald
+    /// statistic of the outputs' squares and cubes and its threshold); empty without the guard
+    /// ([`Calibration::nonlinearity`](crate::Calibration::nonlinearity)).
+    #[must_use]
+    pub fn nonlinearity_tests(&self) -> &[Option<crate::NonlinearityTest>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.curvature_tests())
+    }
+
+    /// The change guard's latest fresh estimate of the shortest window, `(t, β̂_f, s_f)`
+    /// ([`Calibration::plant_change`](crate::Calibration::plant_change)); `None` without the
+    /// guard or before the shortest window's first fit.
+    #[must_use]
+    pub fn newest_estimate(&self) -> Option<(f64, f64, f64)> {
+        self.calibrated.as_ref().and_then(|c| c.fresh()).map(|f| (f.t, f.beta_hat, f.sd))
+    }
+
+    /// The region of the paper's certificates: the range of each output, then each input,
+    /// over the samples of the regression window (`M + h` samples; see
+    /// [`SlidingRegression::ranges`]). The Gaussian and Wasserstein certificates speak for the
+    /// averaged linearisation over this region, nothing more. Formed on each call (`O(p + m)`).
+    pub fn region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
+        self.regression.ranges().enumerate().map(|(i, r)| self.logged_units(i, r))
+    }
+
+    /// An output range in the metric's units back in the logged units (`/ w_i`; inputs and
+    /// the identity metric unchanged).
+    fn logged_units(&self, i: usize, r: Interval) -> Interval {
+        match self.cfg.metric.as_ref().and_then(|w| w.get(i)) {
+            Some(&w) => Interval { lo: r.lo / w, hi: r.hi / w },
+            None => r,
+        }
+    }
+
+    /// The current upper bound on each coupling block's gain `‖C_ij‖₂`
+    /// ([`CertifierConfig::couplings`], in its block order; `None` for a block with no bound
+    /// yet; empty without couplings). See [`CouplingConfig`](crate::CouplingConfig).
+    #[must_use]
+    pub fn coupling_bounds(&self) -> &[Option<CouplingBound>] {
+        self.calibrated.as_ref().map_or(&[], |c| c.coupling_bounds())
+    }
+
+    /// The region of the standing calibrated certificate: the range of each output over the
+    /// samples of its window at its look (empty when none stands).
+    #[must_use]
+    pub fn calibrated_region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
+        let region = match (&self.calibrated, self.calibrated_window) {
+            (Some(c), Some(w)) => c.region(w),
+            _ => &[],
+        };
+        region.iter().enumerate().map(|(i, &r)| self.logged_units(i, r))
+    }
+
+    /// The underlying regression.
+    #[must_use]
+    pub fn regression(&self) -> &SlidingRegression {
+        &self.regression
+    }
+}

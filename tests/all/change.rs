@@ -217,3 +217,18 @@ fn the_nonlinearity_guard_closes_a_loop_whose_slope_varies() {
     assert!(named as u64 >= runs / 2, "the reason named in {named} of {runs}");
     assert!(on < off, "false openings {on} with the guard, {off} without");
 }
+
+/// The library's entry point is the guarded calibrated certificate, the one the command line
+/// runs by default; `Calibration::unguarded` is the explicit way to turn every guard off.
+#[test]
+fn the_library_entry_point_is_the_guarded_calibrated_certificate() {
+    let reg = RegressionConfig::new(1, 1, 150, H, 1e-4);
+    let cfg = CertifierConfig::guarded(reg, vec![-1.0], 0.05, 10);
+    let cal = cfg.calibration.expect("the calibrated certificate");
+    assert!(cal.hidden_dynamics && cal.nonlinearity && cal.plant_change);
+    assert_eq!(cal, Calibration::new(0.01));
+    assert!(Certifier::new(cfg.clone()).is_ok());
+    let bare = cal.unguarded();
+    assert!(!bare.hidden_dynamics && !bare.nonlinearity && !bare.plant_change);
+    assert_eq!(CertifierConfig::new(reg, vec![-1.0], 0.1, 0.05, 10).calibration, None);
+}

@@ -45,13 +45,22 @@
 //! keeps the tail shape that `ε` is meant to detect. With `p > 1` outputs each output has its
 //! own estimator and `ε` is the largest of their radii.
 //!
+//! The entry point is [`CertifierConfig::guarded`]: the calibrated certificate with its
+//! guards, the verdict with a stated risk (what `streamcert certify` runs by default);
+//! [`CertifierConfig::new`] is the paper's certificates alone.
+//!
 //! ```
-//! use streamcert_certificate::{Certifier, CertifierConfig};
-//! use streamcert_regression::RegressionConfig;
-//! let cfg = CertifierConfig::new(RegressionConfig::new(1, 1, 100, 5, 1e-4), vec![-1.0], 0.2, 0.05, 10);
-//! let mut cert = Certifier::new(cfg)?;
+//! use streamcert_certificate::{Certifier, CertifierConfig, NotCertified};
+//! use streamcert_regression::{InputIntegral, RegressionConfig};
+//! let reg = RegressionConfig {
+//!     input_integral: InputIntegral::ZeroOrderHold,
+//!     ..RegressionConfig::new(1, 1, 150, 5, 1e-4)
+//! };
+//! let mut cert = Certifier::new(CertifierConfig::guarded(reg, vec![-1.0], 0.05, 10))?;
 //! let ev = cert.push(0.0, &[0.0], &[0.0])?;
-//! assert!(ev.gaussian.value.is_none() && !ev.gaussian.open);
+//! // The verdict to deploy on: closed, with its reason, until the data prove the rate.
+//! assert!(!ev.calibrated.open);
+//! assert!(matches!(ev.calibrated.reason, Some(NotCertified::WarmingUp { .. })));
 //! # Ok::<(), streamcert_certificate::CertifyError>(())
 //! ```
 

@@ -11,6 +11,7 @@ use streamcert::regression::{
     InputIntegral, InstrumentedWindows, RegressionConfig, SlidingRegression, WindowEstimate,
 };
 
+use crate::calibrated::{calibrated, clopper_pearson, first_opening, short_window_plant};
 use crate::support::{run as run_scenario, scalar};
 
 const H: usize = 5;
@@ -231,4 +232,46 @@ fn the_library_entry_point_is_the_guarded_calibrated_certificate() {
     let bare = cal.unguarded();
     assert!(!bare.hidden_dynamics && !bare.nonlinearity && !bare.plant_change);
     assert_eq!(CertifierConfig::new(reg, vec![-1.0], 0.1, 0.05, 10).calibration, None);
+}
+
+/// The issue's case at the smallest accepted window and a one-sample gate: `K = −0.54` has true
+/// rate 0.04, just below the margin 0.05, so every opening is a false deployment. The test
+/// fails when 300 seeded runs give evidence that the false-opening rate exceeds δ = 0.01: the
+/// lower end of the 95 % Clopper–Pearson interval above δ (8 or more openings; at a rate of
+/// exactly δ that happens with probability 1.2 %). `cargo xtask validity` measures the rate
+/// with 1000 runs per cell.
+#[test]
+fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window() {
+    let runs = 300;
+    // The smallest accepted windows of each model (the affine model's intercept is one more
+    // unknown: h (p + m + 3) = 25, and 85 with batches of 4), then batches of 4 blocks at
+    // their smallest accepted window, and at 150.
+    // With the guards (the default) the smallest is 35 (30 through the origin), without them
+    // 25 (20).
+    use streamcert::regression::Model::{Affine, ThroughOrigin};
+    for (window, batch_blocks, model, guards) in [
+        (35, 1, Affine, true),
+        (25, 1, Affine, false),
+        (30, 1, Affine, false),
+        (150, 1, Affine, true),
+        (85, 4, Affine, true),
+        (150, 4, Affine, true),
+        (30, 1, ThroughOrigin, true),
+        (20, 1, ThroughOrigin, false),
+        (65, 4, ThroughOrigin, false),
+    ] {
+        let mut cfg = calibrated(1, vec![-0.54], window, 1);
+        cfg.regression.model = model;
+        let cal = Calibration { batch_blocks, ..Calibration::new(0.01) };
+        cfg.calibration = Some(if guards { cal } else { cal.unguarded() });
+        let opened =
+            (0..runs).filter(|&s| first_opening(&cfg, &short_window_plant(), 7000 + s).is_some());
+        let opened = opened.count();
+        let (lower, upper) = clopper_pearson(opened, runs as usize);
+        assert!(
+            lower <= 0.01,
+            "window {window}, b = {batch_blocks}, {model:?}, guards {guards}: {opened} of {runs} opened \
+             ([{lower:.4}, {upper:.4}])"
+        );
+    }
 }

@@ -149,16 +149,16 @@ mod check;
 mod config;
 mod coupling;
 mod look;
-pub(crate) mod quantile;
-mod standing;
 mod update;
 
+pub(crate) use crate::look::{Look, standing};
 pub use config::Calibration;
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
 use coupling::{CouplingLook, CouplingState};
-pub(crate) use standing::{Look, standing};
 
-pub use quantile::{calibrated_radius, look_risk, rank_one_variance_bound, t_quantile};
+pub use crate::look::quantile::{
+    calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
+};
 
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{
@@ -191,6 +191,21 @@ pub struct WindowLook {
     /// risk, not the run's spending: closing never costs validity). Computed only when `β̂_w`
     /// is below the margin; otherwise it cannot be below the margin and is `None`.
     pub upper: Option<f64>,
+}
+
+impl Look for WindowLook {
+    fn time(&self) -> f64 {
+        self.t
+    }
+    fn window(&self) -> usize {
+        self.window
+    }
+    fn value(&self) -> f64 {
+        self.certificate()
+    }
+    fn upper(&self) -> Option<f64> {
+        self.upper
+    }
 }
 
 impl WindowLook {

@@ -73,6 +73,7 @@ mod fixed;
 mod gap;
 mod gate;
 mod guard;
+mod look;
 pub mod nonlinear;
 mod radius;
 mod row;

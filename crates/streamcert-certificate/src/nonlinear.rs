@@ -105,8 +105,9 @@ pub use features::{Feature, FeatureSet};
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, Interval, RegressionConfig, WindowEstimate};
 
-use crate::calibrated::{Look, standing};
-use crate::{CertifyError, NotCertified, t_quantile};
+use crate::look::quantile::t_quantile;
+use crate::look::{Look, standing};
+use crate::{CertifyError, NotCertified};
 
 /// The Wald test of the terms of degree `>= 2` at one look.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

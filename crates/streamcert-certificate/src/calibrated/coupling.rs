@@ -26,8 +26,8 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, RegressionConfig, WindowEstimate, linalg};
 
-use super::quantile::{look_risk, t_quantile};
 use crate::CertifyError;
+use crate::look::quantile::{look_risk, t_quantile};
 use crate::nonlinear::simultaneous_multiplier;
 
 /// One coupling block: the input channels `first .. first + len` of the subsystem are one

@@ -66,7 +66,7 @@ impl Certifier {
     }
 
     /// The current upper bound on each coupling block's gain `‖C_ij‖₂`
-    /// ([`CertifierConfig::couplings`], in its block order; `None` for a block with no bound
+    /// ([`CertifierConfig::couplings`](crate::CertifierConfig::couplings), in its block order; `None` for a block with no bound
     /// yet; empty without couplings). See [`CouplingConfig`](crate::CouplingConfig).
     #[must_use]
     pub fn coupling_bounds(&self) -> &[Option<CouplingBound>] {

@@ -5,8 +5,8 @@ use statrs::distribution::{ContinuousCDF, Normal};
 use statrs::function::beta::inv_beta_reg;
 use statrs::function::gamma::ln_gamma;
 
-use crate::calibrated::quantile::beta_continued_fraction;
-use crate::t_quantile;
+use crate::look::quantile::beta_continued_fraction;
+use crate::look::quantile::t_quantile;
 
 /// The Taylor coefficients of the polynomial `Σ_i c_i y^i` at `centre`, in place: afterwards
 /// `c_i` is the coefficient of `(y − centre)^i`. Repeated synthetic division, `O(n²)`.

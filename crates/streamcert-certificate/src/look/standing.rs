@@ -1,7 +1,6 @@
 //! The gate rule shared by the calibrated and nonlinear certificates: among the windows'
 //! latest looks, the largest one that still stands.
 
-use super::WindowLook;
 use crate::NotCertified;
 
 /// A window's latest look, as the gate logic sees it.
@@ -14,21 +13,6 @@ pub(crate) trait Look: Copy {
     fn value(&self) -> f64;
     /// The one-look upper bound, when below the margin.
     fn upper(&self) -> Option<f64>;
-}
-
-impl Look for WindowLook {
-    fn time(&self) -> f64 {
-        self.t
-    }
-    fn window(&self) -> usize {
-        self.window
-    }
-    fn value(&self) -> f64 {
-        self.certificate()
-    }
-    fn upper(&self) -> Option<f64> {
-        self.upper
-    }
 }
 
 /// The largest *standing* look among `looks` (one per window) that `admit(window index, look)`

@@ -81,7 +81,7 @@ enum Command {
     /// scalar nonlinear loops, against the smallest true rate over each one's region
     /// (NONLINEAR.md).
     Nonlinear {
-        /// Runs per validity cell (a fifth of them, at least 20, per power cell).
+        /// Runs per validity cell (a fifth of them, at least min(runs, 20), per power cell).
         #[arg(long, default_value_t = 500)]
         runs: usize,
         /// Output folder.

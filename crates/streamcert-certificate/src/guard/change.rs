@@ -104,7 +104,16 @@ impl ChangeGuard {
             // Every window at the shortest window's pace: the split tests of the short
             // windows see a change first, and a split of window v compares with window
             // v − 1's estimate at the same block.
-            spacing: vec![blocks.first().map_or(1, |b| b.div_ceil(SPACING).max(1)); blocks.len()],
+            // A window longer than 64 shortest-window eighths is refreshed every 64th of
+            // itself instead (bounding each window's cost per block; the default four windows
+            // are all at the shortest window's pace).
+            spacing: blocks
+                .iter()
+                .map(|b| {
+                    let pace = blocks.first().map_or(1, |b0| b0.div_ceil(SPACING).max(1));
+                    pace.max(b.div_ceil(64))
+                })
+                .collect(),
             until: vec![0; blocks.len()],
             fresh: vec![None; blocks.len()],
             split: vec![None; blocks.len()],

@@ -3,6 +3,7 @@
 mod affine;
 mod ambiguity;
 mod calibrated;
+mod calibrated_config;
 mod certificate;
 mod change;
 mod compose;

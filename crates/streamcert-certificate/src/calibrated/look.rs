@@ -24,7 +24,7 @@ impl CalibratedState {
             n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });
         }
         for o in &mut self.model {
-            o.look(w, &self.tmat, self.ridge, self.min_pivot);
+            o.look(w, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
         let Some((beta_hat, variance, nu)) = self.rate(w, 0) else {

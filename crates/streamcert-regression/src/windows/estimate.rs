@@ -168,8 +168,7 @@ impl InstrumentedWindows {
     }
 
     /// As [`estimate`](Self::estimate), on window `w`'s blocks older than its newest `skip`
-    /// blocks (the older part of the window, disjoint from a window of `skip` blocks that ends
-    /// now): for a two-sample comparison of the older and the newer data.
+    /// (disjoint from a window of `skip` blocks ending now): a two-sample comparison's part.
     pub fn estimate_older(
         &self,
         w: usize,

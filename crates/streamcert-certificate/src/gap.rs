@@ -29,8 +29,15 @@ pub(crate) struct GapDetector {
     len: usize,
     head: usize,
     since: usize,
+    /// NaN before the first step, which JSON writes as `null`: read back as NaN.
+    #[serde(deserialize_with = "nan_from_null")]
     reference: f64,
     gaps: u64,
+}
+
+/// An `f64` that JSON may hold as `null` (serde_json writes NaN so): `null` reads as NaN.
+fn nan_from_null<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    Ok(<Option<f64> as serde::Deserialize>::deserialize(d)?.unwrap_or(f64::NAN))
 }
 
 /// A detected gap.

@@ -54,10 +54,50 @@ struct Checkpoint {
 
 /// The sealed text of the checkpoint of `cert` and `summary` (to be written to `path`).
 fn checkpoint_text(path: &Path, cert: &Certifier, summary: &Summary) -> Result<String, CliError> {
-    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    seal_checkpoint(&path.display().to_string(), cert, summary)
+}
+
+/// The sealed text of a `certify` checkpoint: the certifier's state and the run's summary,
+/// sealed with the configuration's fingerprint and a checksum
+/// ([`seal`](streamcert_certificate::seal)); `label` names it in errors. The CLI writes this
+/// text to its `--checkpoint` file and the Python package's `Certifier.checkpoint()` returns
+/// it as bytes, so either restores the other's.
+///
+/// # Errors
+/// [`CliError::Checkpoint`] when the state cannot be encoded.
+pub fn seal_checkpoint(
+    label: &str,
+    cert: &Certifier,
+    summary: &Summary,
+) -> Result<String, CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
     let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
     streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))
+}
+
+/// Open a sealed `certify` checkpoint ([`seal_checkpoint`]) for the configuration `cfg`:
+/// refused, with what is wrong, when it is not UTF-8 text, damaged (checksum), written with
+/// another configuration (fingerprint), or holds an inconsistent state.
+///
+/// # Errors
+/// [`CliError::Checkpoint`] naming `label`.
+pub fn open_checkpoint(
+    bytes: &[u8],
+    cfg: &Config,
+    label: &str,
+) -> Result<(Certifier, Summary), CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
+    let text = std::str::from_utf8(bytes)
+        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
+    let json = streamcert_certificate::unseal(text, Some(&cfg.certifier))
+        .map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let cert = cp.certifier.verify().map_err(|e| bad(e.to_string()))?;
+    if cert.config() != &cfg.certifier {
+        return Err(bad("the checkpoint was written with a different configuration".into()));
+    }
+    Ok((cert, cp.summary))
 }
 
 fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
@@ -96,18 +136,10 @@ pub(crate) fn write_atomic(path: &Path, text: &str) -> Result<(), CliError> {
 }
 
 fn load(path: &Path, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
-    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
-    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
-    let text = std::str::from_utf8(&bytes)
-        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
-    let json = streamcert_certificate::unseal(text, Some(&cfg.certifier))
-        .map_err(|e| bad(e.to_string()))?;
-    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
-    let cert = cp.certifier.verify().map_err(|e| bad(e.to_string()))?;
-    if cert.config() != &cfg.certifier {
-        return Err(bad("the checkpoint was written with a different configuration".into()));
-    }
-    Ok((cert, cp.summary))
+    let label = path.display().to_string();
+    let bytes = std::fs::read(path)
+        .map_err(|e| CliError::Checkpoint { path: label.clone(), message: e.to_string() })?;
+    open_checkpoint(&bytes, cfg, &label)
 }
 
 /// Rows a reader thread hands over at a time (when the input is not live).
@@ -258,8 +290,7 @@ pub fn run<R: Read + Send, W: Write>(
         })?;
     }
     writer.flush().map_err(io)?;
-    summary.calibrated_region =
-        cert.calibrated_region().map(|r| (r.lo, r.hi)).filter(|(lo, hi)| lo <= hi).collect();
+    finish(&cert, &mut summary);
     if let Some(path) = &opts.checkpoint {
         save(path, &cert, &summary)?;
     }
@@ -358,32 +389,7 @@ impl Step<'_> {
                 return Err(CliError::Row(err));
             }
         };
-        summary.rows += 1;
-        if summary.output_ranges.len() != s.y.len() {
-            summary.output_ranges = s.y.iter().map(|&v| (v, v)).collect();
-        }
-        for (r, &v) in summary.output_ranges.iter_mut().zip(&s.y) {
-            *r = (r.0.min(v), r.1.max(v));
-        }
-        summary.gaps += u64::from(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
-        let first = |open: bool, first: Option<f64>| first.or(open.then_some(s.t));
-        summary.gauss_open += u64::from(ev.gaussian.open);
-        summary.wass_open += u64::from(ev.wasserstein.open);
-        summary.calibrated_open += u64::from(ev.calibrated.open);
-        summary.first_deploy_gauss = first(ev.gaussian.open, summary.first_deploy_gauss);
-        summary.first_deploy_wass = first(ev.wasserstein.open, summary.first_deploy_wass);
-        summary.first_deploy_calibrated =
-            first(ev.calibrated.open, summary.first_deploy_calibrated);
-        summary.nonlinear_open += u64::from(ev.nonlinear.open);
-        summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
-        summary.last_time = Some(s.t);
-        summary.count_calibrated(s.t, &ev);
-        region.extend(self.cert.region());
-        if self.cert.config().calibration.is_some() {
-            let p = self.cert.config().regression.outputs;
-            let mut cal = self.cert.calibrated_region();
-            region.extend((0..p).map(|_| cal.next().unwrap_or(Interval::EMPTY)));
-        }
+        record(self.cert, summary, s.t, &s.y, &ev, region);
         Ok(Some(ev))
     }
 
@@ -397,4 +403,49 @@ impl Step<'_> {
             _ => Ok(None),
         }
     }
+}
+
+/// Count one certified sample into the run's summary and append its region values to
+/// `region` (the paper's window's region of every output and input, then, with the
+/// calibrated certificate, every output's calibrated region): what `certify` does with every
+/// accepted row, shared with the Python package so that both give the same summary.
+pub fn record(
+    cert: &Certifier,
+    summary: &mut Summary,
+    t: f64,
+    y: &[f64],
+    ev: &Evidence,
+    region: &mut Vec<Interval>,
+) {
+    summary.rows += 1;
+    if summary.output_ranges.len() != y.len() {
+        summary.output_ranges = y.iter().map(|&v| (v, v)).collect();
+    }
+    for (r, &v) in summary.output_ranges.iter_mut().zip(y) {
+        *r = (r.0.min(v), r.1.max(v));
+    }
+    summary.gaps += u64::from(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
+    let first = |open: bool, first: Option<f64>| first.or(open.then_some(t));
+    summary.gauss_open += u64::from(ev.gaussian.open);
+    summary.wass_open += u64::from(ev.wasserstein.open);
+    summary.calibrated_open += u64::from(ev.calibrated.open);
+    summary.first_deploy_gauss = first(ev.gaussian.open, summary.first_deploy_gauss);
+    summary.first_deploy_wass = first(ev.wasserstein.open, summary.first_deploy_wass);
+    summary.first_deploy_calibrated = first(ev.calibrated.open, summary.first_deploy_calibrated);
+    summary.nonlinear_open += u64::from(ev.nonlinear.open);
+    summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
+    summary.last_time = Some(t);
+    summary.count_calibrated(t, ev);
+    region.extend(cert.region());
+    if cert.config().calibration.is_some() {
+        let p = cert.config().regression.outputs;
+        let mut cal = cert.calibrated_region();
+        region.extend((0..p).map(|_| cal.next().unwrap_or(Interval::EMPTY)));
+    }
+}
+
+/// Close a run's summary: the calibrated region that stands at the end.
+pub fn finish(cert: &Certifier, summary: &mut Summary) {
+    summary.calibrated_region =
+        cert.calibrated_region().map(|r| (r.lo, r.hi)).filter(|(lo, hi)| lo <= hi).collect();
 }

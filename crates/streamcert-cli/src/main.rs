@@ -283,30 +283,13 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             match summary {
                 Some(file) => {
-                    let v = serde_json::json!({
-                        "verdict": s.verdict_line(&cfg.certifier, &cfg.columns.outputs),
-                        "certified_at_end": s.certified_at_end(&cfg.certifier),
-                        "paper_only": cfg.certifier.calibration.is_none(),
-                        "calibrated_since": s.calibrated_since,
-                        "calibrated_reasons": s.calibrated_reasons,
-                        "calibrated_region": s.calibrated_region,
-                        "rows": s.rows, "skipped": s.skipped, "gaps": s.gaps,
-                        "share_gauss_gate_open": s.share_gauss(), "share_wass_gate_open": s.share_wass(),
-                        "first_deploy_gauss": s.first_deploy_gauss, "first_deploy_wass": s.first_deploy_wass,
-                        "share_calibrated_gate_open": s.share_calibrated(),
-                        "first_deploy_calibrated": s.first_deploy_calibrated,
-                        "share_nonlinear_gate_open": s.share_nonlinear(),
-                        "first_deploy_nonlinear": s.first_deploy_nonlinear,
-                        "last_time": s.last_time,
-                        "output_scale_ratio": s.output_scale_ratio(),
-                        "warning": units_warning(&cfg.certifier, &s),
-                    });
+                    let v = s.json(&cfg.certifier, &cfg.columns.outputs);
                     std::fs::write(&file, format!("{v}\n"))
                         .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
                 }
                 None => {
                     eprintln!("{}", s.text(&cfg.certifier, &cfg.columns.outputs));
-                    if let Some(w) = units_warning(&cfg.certifier, &s) {
+                    if let Some(w) = s.units_warning(&cfg.certifier) {
                         eprintln!("warning: {w}");
                     }
                 }
@@ -429,21 +412,4 @@ fn main() -> ExitCode {
             ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1))
         }
     }
-}
-
-/// The warning when two or more outputs' ranges differ by more than `100×` and no metric was
-/// stated: the rate is then that of the units as logged.
-fn units_warning(
-    cfg: &streamcert_certificate::CertifierConfig,
-    s: &streamcert_cli::certify::Summary,
-) -> Option<String> {
-    let ratio = s.output_scale_ratio().filter(|r| *r > 100.0)?;
-    cfg.metric.is_none().then(|| {
-        format!(
-            "the outputs' ranges differ by a factor of {ratio:.0}: the contraction rate is in \
-             the identity metric of the units as logged, which then decide the verdict; state \
-             the metric you mean ([certificate] metric = [w1, w2, ...], for example the inverse \
-             of each output's typical range)"
-        )
-    })
 }

@@ -58,6 +58,10 @@ impl CalibratedState {
                 }
                 _ => false,
             };
+            // While the shortest window fills, the verdict's warm-up count changes with every
+            // block: recompute it, so that it is the same whether or not the state was
+            // restored from a checkpoint in between (a restore recomputes it).
+            looked |= block_done && !self.windows.is_full(0);
             // The windows that look at this block (at most 16).
             let mut looking = 0u32;
             for w in 0..self.latest.len() {

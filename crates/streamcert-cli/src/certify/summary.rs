@@ -253,3 +253,46 @@ fn reason_words(kind: &str) -> String {
     };
     format!("{words} [{kind}]")
 }
+
+impl Summary {
+    /// A warning when the outputs' ranges differ by more than 100× and no metric was stated
+    /// (the units as logged then decide the verdict).
+    #[must_use]
+    pub fn units_warning(&self, cfg: &CertifierConfig) -> Option<String> {
+        let ratio = self.output_scale_ratio().filter(|r| *r > 100.0)?;
+        cfg.metric.is_none().then(|| {
+            format!(
+                "the outputs' ranges differ by a factor of {ratio:.0}: the contraction rate is in \
+                 the identity metric of the units as logged, which then decide the verdict; state \
+                 the metric you mean ([certificate] metric = [w1, w2, ...], for example the \
+                 inverse of each output's typical range)"
+            )
+        })
+    }
+
+    /// The summary as the JSON object `certify --summary FILE` writes (and the Python
+    /// package's `CertifyResult.summary` holds): the verdict line first, then the counts,
+    /// shares, first deployment times and the calibrated certificate's reasons and region.
+    #[must_use]
+    pub fn json(&self, cfg: &CertifierConfig, outputs: &[String]) -> serde_json::Value {
+        serde_json::json!({
+            "verdict": self.verdict_line(cfg, outputs),
+            "certified_at_end": self.certified_at_end(cfg),
+            "paper_only": cfg.calibration.is_none(),
+            "calibrated_since": self.calibrated_since,
+            "calibrated_reasons": self.calibrated_reasons,
+            "calibrated_region": self.calibrated_region,
+            "rows": self.rows, "skipped": self.skipped, "gaps": self.gaps,
+            "share_gauss_gate_open": self.share_gauss(), "share_wass_gate_open": self.share_wass(),
+            "first_deploy_gauss": self.first_deploy_gauss,
+            "first_deploy_wass": self.first_deploy_wass,
+            "share_calibrated_gate_open": self.share_calibrated(),
+            "first_deploy_calibrated": self.first_deploy_calibrated,
+            "share_nonlinear_gate_open": self.share_nonlinear(),
+            "first_deploy_nonlinear": self.first_deploy_nonlinear,
+            "last_time": self.last_time,
+            "output_scale_ratio": self.output_scale_ratio(),
+            "warning": self.units_warning(cfg),
+        })
+    }
+}

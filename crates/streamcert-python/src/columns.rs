@@ -1,0 +1,128 @@
+//! [`EvidenceColumns`]: a block of evidence in columns, as numpy and pandas want it.
+
+use streamcert_certificate::{Evidence, EvidenceRow, Interval, NotCertified};
+
+/// The number columns, in the order of the command line's CSV (`EVIDENCE_COLUMNS`, without
+/// the gates, windows and reasons); an absent value is NaN.
+pub const FLOAT_COLUMNS: [&str; 13] = [
+    "t",
+    "beta_hat",
+    "rho",
+    "eps",
+    "kurtosis",
+    "spike_fraction",
+    "cert_gauss",
+    "cert_wass",
+    "rho_calibrated",
+    "cert_calibrated",
+    "cert_nonlinear",
+    "nonlinear_y_lo",
+    "nonlinear_y_hi",
+];
+
+/// The four gates, in the CSV's order: `gauss_open`, `wass_open`, `calibrated_open`,
+/// `nonlinear_open`; their reasons are `reason_<gate>` (without `_open`).
+pub const GATES: [&str; 4] = ["gauss", "wass", "calibrated", "nonlinear"];
+
+/// The window-length columns (`M_w` of the calibrated and nonlinear looks); absent is NaN.
+pub const WINDOW_COLUMNS: [&str; 2] = ["calibrated_window", "nonlinear_window"];
+
+/// Evidence of consecutive samples, one vector per column: the values the command line
+/// writes into its CSV, as numbers (bit for bit the same `f64`s: the CSV prints the shortest
+/// text that reads back to them).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct EvidenceColumns {
+    /// One vector per [`FLOAT_COLUMNS`] name.
+    pub floats: [Vec<f64>; 13],
+    /// One vector per [`GATES`] name: whether that gate is open.
+    pub open: [Vec<bool>; 4],
+    /// One vector per [`WINDOW_COLUMNS`] name.
+    pub windows: [Vec<f64>; 2],
+    /// One vector per [`GATES`] name: why that gate is closed (`None` when open).
+    pub reasons: [Vec<Option<NotCertified>>; 4],
+    /// The region columns' names (`region_lo_<channel>`, `region_hi_<channel>`, as in the CSV).
+    pub region_names: Vec<String>,
+    /// One vector per region name; NaN where the CSV's field is empty (no region yet).
+    pub regions: Vec<Vec<f64>>,
+}
+
+impl EvidenceColumns {
+    /// Empty columns with room for `n` samples and the region columns `region_names`.
+    #[must_use]
+    pub fn with_capacity(n: usize, region_names: Vec<String>) -> Self {
+        let v = || Vec::with_capacity(n);
+        Self {
+            floats: std::array::from_fn(|_| v()),
+            open: std::array::from_fn(|_| Vec::with_capacity(n)),
+            windows: std::array::from_fn(|_| v()),
+            reasons: std::array::from_fn(|_| Vec::with_capacity(n)),
+            regions: region_names.iter().map(|_| v()).collect(),
+            region_names,
+        }
+    }
+
+    /// Samples held.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.floats[0].len()
+    }
+
+    /// Whether no sample is held.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Append one sample's evidence and its region values (one [`Interval`] per region
+    /// channel, as the command line's `write_with_region`: a missing or improper interval
+    /// is NaN).
+    pub fn push(&mut self, ev: &Evidence, region: &[Interval]) {
+        let r = EvidenceRow::from(ev);
+        let values = [
+            Some(r.t),
+            r.beta_hat,
+            r.rho,
+            r.eps,
+            r.kurtosis,
+            r.spike_fraction,
+            r.cert_gauss,
+            r.cert_wass,
+            r.rho_calibrated,
+            r.cert_calibrated,
+            r.cert_nonlinear,
+            r.nonlinear_y_lo,
+            r.nonlinear_y_hi,
+        ];
+        for (col, v) in self.floats.iter_mut().zip(values) {
+            col.push(v.unwrap_or(f64::NAN));
+        }
+        let gates = [&ev.gaussian, &ev.wasserstein, &ev.calibrated, &ev.nonlinear];
+        for ((open, reason), g) in self.open.iter_mut().zip(&mut self.reasons).zip(gates) {
+            open.push(g.open);
+            reason.push(g.reason);
+        }
+        let windows = [r.calibrated_window, r.nonlinear_window];
+        for (col, w) in self.windows.iter_mut().zip(windows) {
+            col.push(w.map_or(f64::NAN, |w| w as f64));
+        }
+        for (i, pair) in self.regions.chunks_exact_mut(2).enumerate() {
+            let r = region.get(i).copied().filter(Interval::is_proper);
+            pair[0].push(r.map_or(f64::NAN, |r| r.lo));
+            pair[1].push(r.map_or(f64::NAN, |r| r.hi));
+        }
+    }
+
+    /// The reason codes of gate `g` ([`GATES`] index): 0 where the gate is open, otherwise
+    /// [`NotCertified::code`] (1 to 18; names in [`NotCertified::KINDS`]).
+    #[must_use]
+    pub fn reason_codes(&self, g: usize) -> Vec<u8> {
+        self.reasons[g].iter().map(|r| r.map_or(0, |r| r.code())).collect()
+    }
+
+    /// The reason texts of gate `g`, exactly the CSV's `reason_<gate>` fields (empty where
+    /// the gate is open).
+    #[must_use]
+    pub fn reason_texts(&self, g: usize) -> Vec<String> {
+        self.reasons[g].iter().map(|r| r.map(|r| r.to_string()).unwrap_or_default()).collect()
+    }
+}

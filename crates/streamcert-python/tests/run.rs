@@ -1,0 +1,178 @@
+//! The array-level core against the command line: the same numbers bit for bit, checkpoints
+//! that resume at every sample, blocks refused whole.
+
+use streamcert_cli::certify::{self, BadRows, Format, Options};
+use streamcert_python::config::from_json_over_defaults;
+use streamcert_python::simulate::{G5Run, simulate_g5};
+use streamcert_python::{Error, EvidenceColumns, FLOAT_COLUMNS, GATES, Run};
+
+fn g5(steps: usize) -> G5Run {
+    simulate_g5(1, 0, Some(steps), None, false).unwrap()
+}
+
+/// Node b's columns: `t`, `y_b`, `u_b`.
+fn node_b(d: &G5Run) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let y = d.y.chunks(2).map(|r| r[1]).collect();
+    let u = d.u.chunks(2).map(|r| r[1]).collect();
+    (d.t.clone(), y, u)
+}
+
+fn csv_of(t: &[f64], y: &[f64], u: &[f64]) -> String {
+    let mut s = String::from("t,y_b,u_b\n");
+    for k in 0..t.len() {
+        s += &format!("{},{},{}\n", t[k], y[k], u[k]);
+    }
+    s
+}
+
+fn opts() -> Options {
+    Options {
+        format: Format::Csv,
+        bad_rows: BadRows::Stop,
+        checkpoint: None,
+        checkpoint_every: None,
+        resume: None,
+        flush_each_row: false,
+        plot: None,
+    }
+}
+
+#[test]
+fn columns_equal_the_command_lines_csv_bit_for_bit() {
+    let (t, y, u) = node_b(&g5(900));
+    let cfg = from_json_over_defaults(r#"{"regression": {"window": 100}}"#).unwrap();
+    let mut out = Vec::new();
+    let summary =
+        certify::run(&cfg.config, csv_of(&t, &y, &u).as_bytes(), "g5", &mut out, &opts()).unwrap();
+    let mut run = Run::new(cfg.config.clone()).unwrap();
+    let mut cols = run.columns(t.len());
+    run.push_block(&t, &y, &u, &mut cols).unwrap();
+    let text = String::from_utf8(out).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let rows: Vec<Vec<&str>> = lines.map(|l| split_csv(l)).collect();
+    assert_eq!(rows.len(), t.len());
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let number = |s: &str| if s.is_empty() { f64::NAN } else { s.parse::<f64>().unwrap() };
+    let same = |a: f64, b: f64| a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan());
+    for (name, v) in FLOAT_COLUMNS.iter().zip(&cols.floats) {
+        let c = col(name);
+        for k in 0..t.len() {
+            assert!(same(number(rows[k][c]), v[k]), "{name} row {k}: {} vs {}", rows[k][c], v[k]);
+        }
+    }
+    for (g, gate) in GATES.iter().enumerate() {
+        let (o, r) = (col(&format!("{gate}_open")), col(&format!("reason_{gate}")));
+        let texts = cols.reason_texts(g);
+        for k in 0..t.len() {
+            assert_eq!(rows[k][o] == "1", cols.open[g][k], "{gate} row {k}");
+            assert_eq!(rows[k][r].trim_matches('"'), texts[k], "{gate} reason row {k}");
+        }
+    }
+    for (name, v) in cols.region_names.iter().zip(&cols.regions) {
+        let c = col(name);
+        for k in 0..t.len() {
+            assert!(same(number(rows[k][c]), v[k]), "{name} row {k}");
+        }
+    }
+    // The same summary (the calibrated region of the end included).
+    assert_eq!(run.summary(), summary);
+    assert!(cols.open[2].iter().any(|&o| o), "the calibrated gate opens on G5's node b");
+}
+
+/// Fields of a CSV line (the reasons may be quoted and hold commas).
+fn split_csv(line: &str) -> Vec<&str> {
+    let (mut out, mut start, mut quoted) = (Vec::new(), 0, false);
+    for (i, c) in line.char_indices() {
+        match c {
+            '"' => quoted = !quoted,
+            ',' if !quoted => {
+                out.push(&line[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    out.push(&line[start..]);
+    out
+}
+
+#[test]
+fn a_checkpoint_after_any_sample_resumes_to_the_uninterrupted_run() {
+    let (t, y, u) = node_b(&g5(400));
+    let cfg = from_json_over_defaults(r#"{"regression": {"window": 60}}"#).unwrap().config;
+    let mut whole = Run::new(cfg.clone()).unwrap();
+    let mut expected = whole.columns(t.len());
+    whole.push_block(&t, &y, &u, &mut expected).unwrap();
+    // Every one of the first samples (the states right after the first sample hold NaN
+    // references), then every 37th.
+    for cut in (1..12).chain((12..t.len()).step_by(37)) {
+        let mut a = Run::new(cfg.clone()).unwrap();
+        let mut got = a.columns(t.len());
+        a.push_block(&t[..cut], &y[..cut], &u[..cut], &mut got).unwrap();
+        let text = a.checkpoint().unwrap();
+        let mut b = Run::restore(text.as_bytes(), cfg.clone()).unwrap();
+        b.push_block(&t[cut..], &y[cut..], &u[cut..], &mut got).unwrap();
+        let (g, e) = (format!("{got:?}"), format!("{expected:?}"));
+        if g != e {
+            let at = g.bytes().zip(e.bytes()).position(|(a, b)| a != b).unwrap_or(0);
+            panic!(
+                "cut at {cut}: {} vs {}",
+                &g[at.saturating_sub(300)..at + 80],
+                &e[at.saturating_sub(300)..at + 80]
+            );
+        }
+        assert_eq!(b.summary(), whole.summary(), "cut at {cut}");
+    }
+}
+
+#[test]
+fn a_refused_block_absorbs_nothing_and_names_row_and_column() {
+    let (t, y, mut u) = node_b(&g5(50));
+    let cfg = from_json_over_defaults("{}").unwrap().config;
+    let mut run = Run::new(cfg).unwrap();
+    let mut cols = run.columns(0);
+    run.push_block(&t[..10], &y[..10], &u[..10], &mut cols).unwrap();
+    let before = run.checkpoint().unwrap();
+    u[30] = f64::NAN;
+    let err = run.push_block(&t[10..], &y[10..], &u[10..], &mut cols).unwrap_err();
+    assert_eq!(
+        err,
+        Error::Data {
+            row: 20,
+            column: Some("u_b".into()),
+            message: "expected a finite number, found `NaN` (NaN and infinity are not accepted)"
+                .into()
+        }
+    );
+    assert_eq!(run.checkpoint().unwrap(), before);
+    assert_eq!(cols.len(), 10);
+    // A time that does not increase, against the last time absorbed.
+    let err = run.push_block(&[t[9]], &[0.0], &[0.0], &mut cols).unwrap_err();
+    assert!(
+        matches!(err, Error::Data { row: 0, ref column, .. } if column.as_deref() == Some("t"))
+    );
+    // Lengths that do not match p and m.
+    assert!(matches!(
+        run.push_block(&t[10..12], &y[10..11], &u[10..12], &mut cols),
+        Err(Error::Shape(_))
+    ));
+    let _ = EvidenceColumns::default();
+}
+
+#[test]
+fn a_checkpoint_of_another_configuration_or_damaged_is_refused() {
+    let (t, y, u) = node_b(&g5(30));
+    let cfg = from_json_over_defaults("{}").unwrap().config;
+    let other = from_json_over_defaults(r#"{"certificate": {"margin": 0.1}}"#).unwrap().config;
+    let mut run = Run::new(cfg.clone()).unwrap();
+    let mut cols = run.columns(0);
+    run.push_block(&t, &y, &u, &mut cols).unwrap();
+    let text = run.checkpoint().unwrap();
+    assert!(matches!(Run::restore(text.as_bytes(), other), Err(Error::Checkpoint(_))));
+    let mut damaged = text.into_bytes();
+    let at = damaged.len() / 2;
+    damaged[at] = if damaged[at] == b'1' { b'2' } else { b'1' };
+    assert!(matches!(Run::restore(&damaged, cfg.clone()), Err(Error::Checkpoint(_))));
+    assert!(matches!(Run::restore(b"\xff\xfe", cfg), Err(Error::Checkpoint(_))));
+}

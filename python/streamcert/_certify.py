@@ -100,6 +100,10 @@ class Certifier(_native.Certifier):
     every value as the command line checks a CSV row (``InputDataError`` with the row and
     the column); a block is checked whole before any of it is absorbed.
 
+    ``gates()`` gives every gate's state after the last sample (open, streak, when the
+    current opening began, the first opening of the run); ``summary()`` the run's summary
+    with the verdict; ``certified`` whether the verdict gate is open now.
+
     ``checkpoint()`` gives the command line's sealed checkpoint as bytes;
     ``Certifier.restore(data, config)`` resumes from one (a damaged or foreign checkpoint, or
     one of another configuration, raises ``CheckpointError`` with the command line's words).

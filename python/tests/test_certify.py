@@ -63,6 +63,11 @@ def test_update_one_by_one_and_blocks_equal_certify(g5):
         if reason is not None:
             assert reason == (whole["reason_code_calibrated"][k], whole.reason_text("calibrated")[k])
     assert c.summary() == whole.summary
+    gates = c.gates()
+    assert gates["calibrated"]["open"] == bool(whole["calibrated_open"][-1])
+    first = whole.summary["first_deploy_calibrated"]
+    assert gates["calibrated"]["first_opened_at"] == first
+    assert first is None or first == whole["t"][np.argmax(whole["calibrated_open"])]
     c2 = streamcert.Certifier()
     parts = [c2.update_many(t[a:b], y[a:b], u[a:b]) for a, b in [(0, 1), (1, 300), (300, 301), (301, 700)]]
     for name in streamcert._native.FLOAT_COLUMNS:

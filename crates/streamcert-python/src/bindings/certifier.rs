@@ -100,6 +100,25 @@ impl PyCertifier {
         columns_to_py(py, cols)
     }
 
+    /// Every gate's state after the last sample: `{gate: {"open", "streak", "opened_at",
+    /// "first_opened_at"}}` (`opened_at`: when the current opening began; `first_opened_at`:
+    /// the first opening of the run, the deployment decision).
+    fn gates<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        use streamcert_certificate::CertificateKind as K;
+        let d = PyDict::new(py);
+        let kinds = [K::Gaussian, K::Wasserstein, K::Calibrated, K::Nonlinear];
+        for (gate, kind) in GATES.iter().zip(kinds) {
+            let g = self.run.certifier().gate(kind);
+            let e = PyDict::new(py);
+            e.set_item("open", g.open)?;
+            e.set_item("streak", g.streak)?;
+            e.set_item("opened_at", g.opened_at)?;
+            e.set_item("first_opened_at", g.first_opened_at)?;
+            d.set_item(*gate, e)?;
+        }
+        Ok(d)
+    }
+
     /// The summary so far as JSON (`certify --summary FILE`'s object).
     fn summary_json(&self) -> String {
         let c = &self.config.inner.config;

@@ -135,6 +135,44 @@ pub enum NotCertified {
 }
 
 impl NotCertified {
+    /// The bits of a reason's numbers: `==` treats `0.0` and `-0.0` as equal, their texts differ.
+    /// The match lists every variant, so a new one with numbers must be added here.
+    fn number_bits(&self) -> [u64; 3] {
+        use NotCertified as N;
+        match *self {
+            N::BelowMargin { certificate, margin } => [certificate.to_bits(), margin.to_bits(), 0],
+            N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
+            N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
+            N::PlantChanged { beta_hat, newest_upper, .. } => {
+                [beta_hat.to_bits(), newest_upper.to_bits(), 0]
+            }
+            N::VaryingDynamics { statistic, threshold, .. }
+            | N::HiddenDynamics { statistic, threshold, .. }
+            | N::LibraryMisfit { statistic, threshold, .. } => {
+                [statistic.to_bits(), threshold.to_bits(), 0]
+            }
+            N::WarmingUp { .. }
+            | N::InsufficientExcitation
+            | N::WeakInstruments
+            | N::Accumulating { .. }
+            | N::SkippedSample
+            | N::NoAmbiguityModel
+            | N::NoCalibration
+            | N::LinearityUntested { .. }
+            | N::OrderUntested { .. }
+            | N::LibraryUntested { .. }
+            | N::NoNonlinearModel => [0; 3],
+        }
+    }
+
+    /// Whether two reasons have the same text: equal, with their numbers equal bit for bit
+    /// (`==` takes `0.0` and `-0.0` as equal, their texts differ). What a writer that reuses
+    /// a column's text while its reason is unchanged compares.
+    #[must_use]
+    pub fn identical(&self, other: &Self) -> bool {
+        self == other && self.number_bits() == other.number_bits()
+    }
+
     /// Every reason's name (the `reason` tag of its serde form) in the order of
     /// [`code`](Self::code), from code 1.
     pub const KINDS: [&'static str; 18] = [

@@ -38,8 +38,8 @@ pub struct EvidenceColumns {
     pub open: [Vec<bool>; 4],
     /// One vector per [`WINDOW_COLUMNS`] name.
     pub windows: [Vec<f64>; 2],
-    /// One vector per [`GATES`] name: why that gate is closed (`None` when open).
-    pub reasons: [Vec<Option<NotCertified>>; 4],
+    /// One column per [`GATES`] name: why that gate is closed.
+    pub reasons: [ReasonColumn; 4],
     /// The region columns' names (`region_lo_<channel>`, `region_hi_<channel>`, as in the CSV).
     pub region_names: Vec<String>,
     /// One vector per region name; NaN where the CSV's field is empty (no region yet).
@@ -55,7 +55,7 @@ impl EvidenceColumns {
             floats: std::array::from_fn(|_| v()),
             open: std::array::from_fn(|_| Vec::with_capacity(n)),
             windows: std::array::from_fn(|_| v()),
-            reasons: std::array::from_fn(|_| Vec::with_capacity(n)),
+            reasons: std::array::from_fn(|_| ReasonColumn::with_capacity(n)),
             regions: region_names.iter().map(|_| v()).collect(),
             region_names,
         }
@@ -115,14 +115,88 @@ impl EvidenceColumns {
     /// The reason codes of gate `g` ([`GATES`] index): 0 where the gate is open, otherwise
     /// [`NotCertified::code`] (1 to 18; names in [`NotCertified::KINDS`]).
     #[must_use]
-    pub fn reason_codes(&self, g: usize) -> Vec<u8> {
-        self.reasons[g].iter().map(|r| r.map_or(0, |r| r.code())).collect()
+    pub fn reason_codes(&self, g: usize) -> &[u8] {
+        &self.reasons[g].codes
     }
 
     /// The reason texts of gate `g`, exactly the CSV's `reason_<gate>` fields (empty where
     /// the gate is open).
     #[must_use]
     pub fn reason_texts(&self, g: usize) -> Vec<String> {
-        self.reasons[g].iter().map(|r| r.map(|r| r.to_string()).unwrap_or_default()).collect()
+        self.reasons[g].texts()
+    }
+}
+
+/// Why one gate is closed, sample by sample, in little memory: a code per sample and the
+/// reasons themselves only where they change (a run of samples with the same reason, such as
+/// "warming up" or "no nonlinear model configured", holds it once). A block of a million
+/// samples then takes 5 bytes per sample and gate instead of the reason's 32.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct ReasonColumn {
+    /// [`NotCertified::code`] per sample, 0 where the gate is open.
+    pub codes: Vec<u8>,
+    /// Per sample, the position of its reason in `values` (`u32::MAX` where open).
+    index: Vec<u32>,
+    values: Vec<NotCertified>,
+}
+
+impl ReasonColumn {
+    fn with_capacity(n: usize) -> Self {
+        Self { codes: Vec::with_capacity(n), index: Vec::with_capacity(n), values: Vec::new() }
+    }
+
+    /// Append one sample's reason (`None`: the gate is open).
+    pub fn push(&mut self, reason: Option<NotCertified>) {
+        let Some(r) = reason else {
+            self.codes.push(0);
+            self.index.push(u32::MAX);
+            return;
+        };
+        self.codes.push(r.code());
+        if !self.values.last().is_some_and(|last| last.identical(&r)) {
+            self.values.push(r);
+        }
+        // At most one value per sample, and a block's samples are counted in u32 by numpy's
+        // users long before this saturates; a saturated index still names a stored value.
+        let at = u32::try_from(self.values.len() - 1).unwrap_or(u32::MAX - 1);
+        self.index.push(at);
+    }
+
+    /// Samples held.
+    #[must_use]
+    pub fn len(&self) -> usize {
+        self.index.len()
+    }
+
+    /// Whether no sample is held.
+    #[must_use]
+    pub fn is_empty(&self) -> bool {
+        self.index.is_empty()
+    }
+
+    /// The reason of sample `k` (`None`: open or out of range).
+    #[must_use]
+    pub fn get(&self, k: usize) -> Option<NotCertified> {
+        self.index.get(k).and_then(|&i| self.values.get(i as usize)).copied()
+    }
+
+    /// The texts, exactly the CSV's `reason_<gate>` fields (`""` where open).
+    #[must_use]
+    pub fn texts(&self) -> Vec<String> {
+        let mut cache: Option<(u32, String)> = None;
+        self.index
+            .iter()
+            .map(|&i| match self.values.get(i as usize) {
+                None => String::new(),
+                Some(r) => match &cache {
+                    Some((j, text)) if *j == i => text.clone(),
+                    _ => {
+                        let text = r.to_string();
+                        cache = Some((i, text.clone()));
+                        text
+                    }
+                },
+            })
+            .collect()
     }
 }

@@ -30,7 +30,7 @@ pub mod simulate;
 #[cfg(feature = "python")]
 mod bindings;
 
-pub use columns::{EvidenceColumns, FLOAT_COLUMNS, GATES, WINDOW_COLUMNS};
+pub use columns::{EvidenceColumns, FLOAT_COLUMNS, GATES, ReasonColumn, WINDOW_COLUMNS};
 pub use error::Error;
 pub use network::NetworkRun;
 pub use run::Run;

@@ -65,41 +65,6 @@ pub(crate) fn push_text(buf: &mut Vec<u8>, field: &[u8]) {
     }
 }
 
-/// The bits of a reason's numbers: `==` treats `0.0` and `-0.0` as equal, their texts differ.
-/// The match lists every variant, so a new one with numbers must be added here.
-fn number_bits(r: &NotCertified) -> [u64; 3] {
-    use NotCertified as N;
-    match *r {
-        N::BelowMargin { certificate, margin } => [certificate.to_bits(), margin.to_bits(), 0],
-        N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
-        N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
-        N::PlantChanged { beta_hat, newest_upper, .. } => {
-            [beta_hat.to_bits(), newest_upper.to_bits(), 0]
-        }
-        N::VaryingDynamics { statistic, threshold, .. }
-        | N::HiddenDynamics { statistic, threshold, .. }
-        | N::LibraryMisfit { statistic, threshold, .. } => {
-            [statistic.to_bits(), threshold.to_bits(), 0]
-        }
-        N::WarmingUp { .. }
-        | N::InsufficientExcitation
-        | N::WeakInstruments
-        | N::Accumulating { .. }
-        | N::SkippedSample
-        | N::NoAmbiguityModel
-        | N::NoCalibration
-        | N::LinearityUntested { .. }
-        | N::OrderUntested { .. }
-        | N::LibraryUntested { .. }
-        | N::NoNonlinearModel => [0; 3],
-    }
-}
-
-/// Whether two reasons have the same text.
-fn identical(a: &NotCertified, b: &NotCertified) -> bool {
-    a == b && number_bits(a) == number_bits(b)
-}
-
 impl CsvRows {
     /// An encoder for rows with `regions` region values after the evidence columns.
     pub(crate) fn new(regions: usize) -> Self {
@@ -178,7 +143,7 @@ impl CsvRows {
     fn reason(&mut self, k: usize, r: Option<NotCertified>) {
         let Some(r) = r else { return };
         let cache = &mut self.reasons[k];
-        if !cache.last.is_some_and(|last| identical(&last, &r)) {
+        if !cache.last.is_some_and(|last| last.identical(&r)) {
             self.scratch.clear();
             // Writing into a String cannot fail.
             let _ = write!(self.scratch, "{r}");

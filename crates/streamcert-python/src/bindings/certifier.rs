@@ -6,7 +6,7 @@ use pyo3::types::{PyBytes, PyDict};
 use streamcert_certificate::{EvidenceRow, NotCertified};
 
 use super::{PyConfig, to_py};
-use crate::{Error, EvidenceColumns, FLOAT_COLUMNS, GATES, Run, WINDOW_COLUMNS};
+use crate::{Error, EvidenceColumns, FLOAT_COLUMNS, GATES, ReasonColumn, Run, WINDOW_COLUMNS};
 
 /// A streaming certifier with the command line's configuration, summary and checkpoints.
 #[pyclass(module = "streamcert._native", name = "Certifier", subclass)]
@@ -184,13 +184,15 @@ impl PyCertifier {
 
 fn columns_to_py(py: Python<'_>, c: EvidenceColumns) -> PyResult<(Bound<'_, PyDict>, PyReasons)> {
     let d = PyDict::new(py);
-    let codes: Vec<Vec<u8>> = (0..4).map(|g| c.reason_codes(g)).collect();
     for (name, v) in FLOAT_COLUMNS.iter().zip(c.floats) {
         d.set_item(*name, PyArray1::from_vec(py, v))?;
     }
-    for ((gate, open), code) in GATES.iter().zip(c.open).zip(codes) {
+    let [r0, r1, r2, r3] = c.reasons;
+    let mut reasons = [r0, r1, r2, r3];
+    for ((gate, open), reason) in GATES.iter().zip(c.open).zip(&mut reasons) {
         d.set_item(format!("{gate}_open"), PyArray1::from_vec(py, open))?;
-        d.set_item(format!("reason_code_{gate}"), PyArray1::from_vec(py, code))?;
+        let codes = std::mem::take(&mut reason.codes);
+        d.set_item(format!("reason_code_{gate}"), PyArray1::from_vec(py, codes))?;
     }
     for (name, v) in WINDOW_COLUMNS.iter().zip(c.windows) {
         d.set_item(*name, PyArray1::from_vec(py, v))?;
@@ -198,13 +200,14 @@ fn columns_to_py(py: Python<'_>, c: EvidenceColumns) -> PyResult<(Bound<'_, PyDi
     for (name, v) in c.region_names.iter().zip(c.regions) {
         d.set_item(name, PyArray1::from_vec(py, v))?;
     }
-    Ok((d, PyReasons { reasons: c.reasons }))
+    Ok((d, PyReasons { reasons }))
 }
 
 /// The reasons of a block, kept as values until their texts are asked for.
 #[pyclass(module = "streamcert._native", name = "Reasons", frozen)]
 pub(crate) struct PyReasons {
-    reasons: [Vec<Option<NotCertified>>; 4],
+    /// The reasons (their codes moved out into the result's arrays).
+    reasons: [ReasonColumn; 4],
 }
 
 #[pymethods]
@@ -215,7 +218,7 @@ impl PyReasons {
         let g = GATES.iter().position(|g| *g == gate).ok_or_else(|| {
             to_py(py, Error::Config(format!("no gate `{gate}`; the gates are {GATES:?}")))
         })?;
-        Ok(self.reasons[g].iter().map(|r| r.map(|r| r.to_string()).unwrap_or_default()).collect())
+        Ok(self.reasons[g].texts())
     }
 
     fn __len__(&self) -> usize {

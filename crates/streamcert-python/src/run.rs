@@ -7,6 +7,34 @@ use streamcert_cli::output::region_columns;
 
 use crate::{Error, EvidenceColumns};
 
+/// Blocks at least this long are certified and stored on two threads.
+const PIPELINE_MIN: usize = 1 << 15;
+/// Samples per chunk between the two threads.
+const CHUNK: usize = 2048;
+
+/// Certified samples on their way to the columns.
+struct Chunk {
+    evidence: Vec<Evidence>,
+    regions: Vec<Interval>,
+    region_ends: Vec<usize>,
+}
+
+impl Chunk {
+    fn new() -> Self {
+        Self {
+            evidence: Vec::with_capacity(CHUNK),
+            regions: Vec::with_capacity(CHUNK * 8),
+            region_ends: Vec::with_capacity(CHUNK),
+        }
+    }
+
+    fn clear(&mut self) {
+        self.evidence.clear();
+        self.regions.clear();
+        self.region_ends.clear();
+    }
+}
+
 /// A `certify` run fed from arrays: the same certifier, the same per-sample summary
 /// ([`certify::record`]) and the same checkpoints ([`certify::seal_checkpoint`]) as the
 /// command line, so its numbers equal the command line's on the same data bit for bit.
@@ -168,7 +196,9 @@ impl Run {
 
     /// Certify a block of `n = t.len()` samples (`y` row-major `n × p`, `u` row-major
     /// `n × m`), appending every sample's evidence to `out`. The block is checked whole
-    /// first: a refused block absorbs nothing.
+    /// first: a refused block absorbs nothing. A block of 32 768 samples or more is
+    /// certified on this thread while a second one stores the columns (the same values in
+    /// the same order).
     ///
     /// # Errors
     /// As [`check`](Self::check); a sample the certifier itself refuses after the check
@@ -182,11 +212,56 @@ impl Run {
     ) -> Result<(), Error> {
         self.check(t, y, u)?;
         let (p, m) = self.dims();
-        for k in 0..t.len() {
-            let ev = self.absorb(k, t[k], &y[k * p..(k + 1) * p], &u[k * m..(k + 1) * m])?;
-            out.push(&ev, &self.region);
+        if t.len() < PIPELINE_MIN {
+            for k in 0..t.len() {
+                let ev = self.absorb(k, t[k], &y[k * p..(k + 1) * p], &u[k * m..(k + 1) * m])?;
+                out.push(&ev, &self.region);
+            }
+            return Ok(());
         }
-        Ok(())
+        // A long block: this thread certifies, a second one stores the columns (for a million
+        // samples the result's fresh pages cost as much as the arithmetic), in chunks that
+        // travel back to be refilled. Order and values are those of the loop above.
+        std::thread::scope(|scope| {
+            let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Chunk>(4);
+            let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Chunk>();
+            scope.spawn(move || {
+                for chunk in full_rx {
+                    let mut from = 0;
+                    for (ev, &to) in chunk.evidence.iter().zip(&chunk.region_ends) {
+                        out.push(ev, &chunk.regions[from..to]);
+                        from = to;
+                    }
+                    // The certifying side may have finished: a failed return is harmless.
+                    let _ = empty_tx.send(chunk);
+                }
+            });
+            for start in (0..t.len()).step_by(CHUNK) {
+                let mut chunk = empty_rx.try_recv().unwrap_or_else(|_| Chunk::new());
+                chunk.clear();
+                let mut failed = None;
+                for k in start..t.len().min(start + CHUNK) {
+                    let (yk, uk) = (&y[k * p..(k + 1) * p], &u[k * m..(k + 1) * m]);
+                    match self.absorb(k, t[k], yk, uk) {
+                        Ok(ev) => {
+                            chunk.evidence.push(ev);
+                            chunk.regions.extend_from_slice(&self.region);
+                            chunk.region_ends.push(chunk.regions.len());
+                        }
+                        Err(e) => {
+                            failed = Some(e);
+                            break;
+                        }
+                    }
+                }
+                // The storing side ends only when this side drops its sender: it is alive.
+                let _ = full_tx.send(chunk);
+                if let Some(e) = failed {
+                    return Err(e);
+                }
+            }
+            Ok(())
+        })
     }
 
     /// Empty evidence columns for `n` samples of this run.

@@ -176,3 +176,20 @@ fn a_checkpoint_of_another_configuration_or_damaged_is_refused() {
     assert!(matches!(Run::restore(&damaged, cfg.clone()), Err(Error::Checkpoint(_))));
     assert!(matches!(Run::restore(b"\xff\xfe", cfg), Err(Error::Checkpoint(_))));
 }
+
+#[test]
+fn a_long_block_on_two_threads_equals_the_samples_one_by_one() {
+    let (t, y, u) = node_b(&g5(40_000));
+    let cfg = from_json_over_defaults("{}").unwrap().config;
+    let mut whole = Run::new(cfg.clone()).unwrap();
+    let mut got = whole.columns(t.len());
+    whole.push_block(&t, &y, &u, &mut got).unwrap();
+    let mut single = Run::new(cfg).unwrap();
+    let mut expected = single.columns(t.len());
+    for k in 0..t.len() {
+        let ev = single.push(t[k], &y[k..=k], &u[k..=k]).unwrap();
+        expected.push(&ev, single.last_region());
+    }
+    assert_eq!(format!("{got:?}"), format!("{expected:?}"));
+    assert_eq!(whole.summary(), single.summary());
+}

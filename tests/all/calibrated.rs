@@ -280,7 +280,7 @@ fn contracting_candidates_are_certified_and_a_plant_change_closes_the_gate() {
     assert!(opened.count() >= 18);
     // At 20 s the plant's a jumps from 0.5 to 1.6: the same K then gives rate −0.1.
     let switched = LinearScenario {
-        switch: Some(PlantSwitch { at: 20.0, a: vec![1.6] }),
+        switch: Some(PlantSwitch { at: 20.0, a: vec![1.6], ramp: 0.0 }),
         ..short_window_plant()
     };
     let mut delays = Vec::new();

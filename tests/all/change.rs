@@ -93,7 +93,7 @@ fn change_runs(to: f64, cal: Calibration, runs: u64) -> (usize, Vec<f64>, usize,
         dt: 0.02,
         steps: 2000,
         dither_hold: 0.2,
-        switch: Some(PlantSwitch { at: 20.0, a: vec![-(to + k)] }),
+        switch: Some(PlantSwitch { at: 20.0, a: vec![-(to + k)], ramp: 0.0 }),
         ..scalar(-(3.0 + k), -2.0, Process::Gaussian { sigma: 0.1 }, 1.0)
     };
     let span = (150 + H - 1) as f64 * 0.02;

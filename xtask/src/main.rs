@@ -65,6 +65,10 @@ enum Command {
         /// Output folder.
         #[arg(long, default_value = "target/validity")]
         out: PathBuf,
+        /// Only the plant-change table (steps and slow drifts), with this many runs per
+        /// cell, written to CHANGE.md.
+        #[arg(long)]
+        only_change: Option<usize>,
     },
     /// The two public plant records of examples/real/ (the heat exchanger and the cascaded
     /// tanks), checked by SHA-256, converted, certified, and the exchanger compared in °C
@@ -233,7 +237,8 @@ fn main() -> Result<()> {
         Command::Reproduce(run) => report::reproduce(&run.options()?, true, true),
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
-        Command::Validity { runs, out } => validity::run(runs, &out),
+        Command::Validity { runs, out, only_change: None } => validity::run(runs, &out),
+        Command::Validity { out, only_change: Some(runs), .. } => validity::change_only(runs, &out),
         Command::Real { from, out } => real::run(&from, &out),
         Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {

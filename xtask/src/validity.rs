@@ -189,6 +189,14 @@ impl Efficiency {
     }
 }
 
+/// The plant-change table alone, `runs` per cell, into `CHANGE.md` under `out`.
+pub(crate) fn change_only(runs: usize, out: &Path) -> Result<()> {
+    let bar = progress(change::CELLS * runs, "plant change");
+    let s = change::table(runs, &bar)?;
+    bar.finish_and_clear();
+    write(&out.join("CHANGE.md"), &s)
+}
+
 /// Run the study (`runs` per near-margin cell, `runs / 5` per power cell, at least 50);
 /// write `VALIDITY.md` under `out`.
 pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
@@ -196,7 +204,10 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let change_runs = (runs / 5).clamp(20, 200);
     let near = near_margin_cells();
     let power = power_cells();
-    let bar = progress(near.len() * runs + power.len() * power_runs + 8 * change_runs, "validity");
+    let bar = progress(
+        near.len() * runs + power.len() * power_runs + change::CELLS * change_runs,
+        "validity",
+    );
     let mut s = String::new();
     let _ = writeln!(
         s,

@@ -8,14 +8,33 @@ use crate::{
     LinearSystem, NoiseScaling, Process, SimConfig, Trajectory, seeded_rng, simulate,
 };
 
-/// A change of the plant during a run: from time `at` on, the state matrix is `a`.
+/// A change of the plant during a run: from time `at` the state matrix moves from the
+/// scenario's `A` to `a`, at once (`ramp = 0`, a step) or linearly over `ramp` seconds (a slow
+/// drift): `A(t) = A + s(t) (a − A)`, `s(t) = clamp((t − at) / ramp, 0, 1)`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PlantSwitch {
-    /// Switching time in seconds.
+    /// Switching time (the drift's start) in seconds.
     pub at: f64,
     /// The new `A`, `n × n` row-major.
     pub a: Vec<f64>,
+    /// Seconds over which `A` drifts to `a` (0: a step at `at`).
+    #[serde(default)]
+    pub ramp: f64,
+}
+
+impl PlantSwitch {
+    /// The share `s(t) ∈ [0, 1]` of the change in force at time `t`.
+    #[must_use]
+    pub fn share(&self, t: f64) -> f64 {
+        if t < self.at {
+            0.0
+        } else if self.ramp > 0.0 {
+            ((t - self.at) / self.ramp).min(1.0)
+        } else {
+            1.0
+        }
+    }
 }
 
 /// `dx = (A x + B u) dt + E dη` (SDE scaling), measured as `y = x + v` with white Gaussian
@@ -63,7 +82,7 @@ pub struct LinearScenario {
 /// `LinearSystem` with `y = x`, whose `A` may switch once.
 struct Plant {
     sys: LinearSystem,
-    switch: Option<(f64, Vec<f64>)>,
+    switch: Option<PlantSwitch>,
 }
 
 impl Dynamics for Plant {
@@ -81,13 +100,14 @@ impl Dynamics for Plant {
     }
     fn drift(&self, t: f64, x: &[f64], u: &[f64], dx: &mut [f64]) {
         self.sys.drift(t, x, u, dx);
-        if let Some((at, a2)) = &self.switch {
-            if t >= *at {
-                // Replace A x by A₂ x.
-                let (n, a) = (x.len(), self.sys.a());
+        if let Some(sw) = &self.switch {
+            let share = sw.share(t);
+            if share > 0.0 {
+                // Replace A x by A(t) x = (A + s (A₂ − A)) x.
+                let (n, a, a2) = (x.len(), self.sys.a(), &sw.a);
                 for i in 0..n {
                     for j in 0..n {
-                        dx[i] += (a2[i * n + j] - a[i * n + j]) * x[j];
+                        dx[i] += share * (a2[i * n + j] - a[i * n + j]) * x[j];
                     }
                 }
             }
@@ -102,12 +122,16 @@ impl Dynamics for Plant {
 }
 
 impl LinearScenario {
-    /// The state matrix in force at time `t` (`A`, or the switched one).
+    /// The state matrix in force at time `t`: `A`, the switched one, or between the two
+    /// during a drift ([`PlantSwitch`]).
     #[must_use]
-    pub fn a_at(&self, t: f64) -> &[f64] {
+    pub fn a_at(&self, t: f64) -> Vec<f64> {
         match &self.switch {
-            Some(s) if t >= s.at => &s.a,
-            _ => &self.a,
+            Some(s) => {
+                let share = s.share(t);
+                self.a.iter().zip(&s.a).map(|(a, a2)| a + share * (a2 - a)).collect()
+            }
+            None => self.a.clone(),
         }
     }
 
@@ -137,7 +161,12 @@ impl LinearScenario {
                 for &v in &s.a {
                     crate::finite("switch.a", v)?;
                 }
-                Some((crate::finite("switch.at", s.at)?, s.a.clone()))
+                crate::finite("switch.at", s.at)?;
+                crate::finite("switch.ramp", s.ramp)?;
+                if s.ramp < 0.0 {
+                    return Err(DynamicsError::Negative { name: "switch.ramp", value: s.ramp });
+                }
+                Some(s.clone())
             }
             None => None,
         };

@@ -1,5 +1,6 @@
 //! The plant-change table of `cargo xtask validity`: a contracting loop (`β* = 3`) whose plant
-//! changes at 20 s, with the default configuration (every guard on).
+//! changes at 20 s, or drifts slowly from 10 s, with the default configuration (every guard
+//! on).
 
 use std::fmt::Write as _;
 
@@ -7,6 +8,7 @@ use anyhow::Result;
 use streamcert_certificate::{Certifier, NotCertified};
 use streamcert_dynamics::{LinearScenario, PlantSwitch, Process};
 
+use super::MARGIN;
 use super::cells::{plain, scenario};
 use super::quantile;
 use crate::common::{markdown, median};
@@ -15,6 +17,10 @@ use crate::common::{markdown, median};
 const K: f64 = -1.5;
 const SWITCH: f64 = 20.0;
 const M: usize = 150;
+/// Cells of the table: four steps at each of two sampling steps, two drifts.
+pub(super) const CELLS: usize = 10;
+/// Where a slow drift starts.
+const DRIFT_START: f64 = 10.0;
 
 /// What one run shows after the change.
 struct Run {
@@ -29,7 +35,9 @@ struct Run {
     changed: usize,
 }
 
-fn one(s: &LinearScenario, seed: u64) -> Result<Run> {
+/// One run, its events measured from `reference` (the change, or the time a drift's true
+/// rate crosses the margin).
+fn one(s: &LinearScenario, seed: u64, reference: f64) -> Result<Run> {
     let traj = s.run(seed)?;
     let cell = plain("change".into(), s.clone(), vec![K], M, 10);
     let mut cert = Certifier::new(cell.config(None))?;
@@ -39,7 +47,7 @@ fn one(s: &LinearScenario, seed: u64) -> Result<Run> {
         let t = traj.t[i];
         let ev = cert.push(t, traj.output(i), traj.input(i))?;
         let open = ev.calibrated.open;
-        if t < SWITCH {
+        if t < reference {
             run.open_at_switch = open;
             continue;
         }
@@ -47,10 +55,10 @@ fn one(s: &LinearScenario, seed: u64) -> Result<Run> {
         run.changed +=
             usize::from(matches!(ev.calibrated.reason, Some(NotCertified::PlantChanged { .. })));
         if !open && run.delay.is_infinite() {
-            run.delay = t - SWITCH;
+            run.delay = t - reference;
         }
         if open {
-            run.last_open = Some(t - SWITCH);
+            run.last_open = Some(t - reference);
         }
     }
     Ok(run)
@@ -60,26 +68,36 @@ fn one(s: &LinearScenario, seed: u64) -> Result<Run> {
 /// `−0.2`, `0`, `0.04` (below the margin) and `1` (still contracting).
 pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
     let mut rows = Vec::new();
-    for (ci, dt) in [0.01, 0.02].into_iter().enumerate() {
-        // The shortest window's span: its M columns of h intervals cover M + h − 1 steps.
-        let span = (M + super::H - 1) as f64 * dt;
-        for (cj, after) in [-0.2, 0.0, 0.04, 1.0].into_iter().enumerate() {
+    // Steps at 20 s at both sampling steps, then slow drifts from 10 s at dt = 0.02: `(dt,
+    // rate after, ramp seconds)`.
+    let steps = [0.01, 0.02].into_iter().flat_map(|dt| {
+        [-0.2, 0.0, 0.04, 1.0].into_iter().map(move |after| (dt, after, 0.0))
+    });
+    let drifts = [(0.02, -0.2, 10.0), (0.02, -0.2, 20.0)];
+    for (cell, (dt, after, ramp)) in steps.chain(drifts).enumerate() {
+        {
+            // The shortest window's span: its M columns of h intervals cover M + h − 1 steps.
+            let span = (M + super::H - 1) as f64 * dt;
+            let at = if ramp > 0.0 { DRIFT_START } else { SWITCH };
+            // Events are measured from the time the true rate crosses the margin (the change
+            // itself for a step).
+            let reference = at + ramp * ((3.0 - MARGIN) / (3.0 - after)).min(1.0);
             let s = LinearScenario {
                 dt,
                 steps: (40.0 / dt).round() as usize,
-                switch: Some(PlantSwitch { at: SWITCH, a: vec![-(after + K)] }),
+                switch: Some(PlantSwitch { at, a: vec![-(after + K)], ramp }),
                 ..scenario(1, vec![-(3.0 + K)], -2.0, Process::Gaussian { sigma: 0.1 })
             };
-            let base = 95_000_000 + 1_000_000 * (4 * ci + cj) as u64;
+            let base = 95_000_000 + 1_000_000 * cell as u64;
             let half = runs / 2;
             let results = std::thread::scope(|scope| -> Result<Vec<Run>> {
                 let a = scope.spawn(|| {
-                    (0..half).map(|r| one(&s, base + r as u64)).collect::<Result<Vec<_>>>()
+                    (0..half).map(|r| one(&s, base + r as u64, reference)).collect::<Result<Vec<_>>>()
                 });
                 let b = (half..runs)
                     .map(|r| {
                         bar.inc(2);
-                        one(&s, base + r as u64)
+                        one(&s, base + r as u64, reference)
                     })
                     .collect::<Result<Vec<_>>>();
                 let mut a = a.join().expect("worker thread")?;
@@ -95,7 +113,11 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
             let unsafe_change = after < 0.05;
             rows.push(vec![
                 format!("{dt}"),
-                format!("3 → {after}"),
+                if ramp > 0.0 {
+                    format!("3 → {after}, drift over {ramp} s from {at} s (crosses at {reference:.1} s)")
+                } else {
+                    format!("3 → {after}")
+                },
                 format!("{:.2}", span),
                 format!("{} / {runs}", open.len()),
                 if unsafe_change {
@@ -121,7 +143,7 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "## Plant change (the default configuration: every guard on)\n\n`ẏ = a y + u + w`, K = {K}, σ = 0.1, exploration K_e = −2, M = {M}, h = 5, n_s = 10, 40 s: `a` gives β* = 3 until {SWITCH} s, then the rate after the change; {runs} runs per cell. `span`: the shortest window's span (M + h − 1 steps). `open late`: the runs whose gate was open later than 1.5 spans after the change (for the changes below the margin: a deployment on the new plant, target at most 5 %). `closing delay`: from the change to the first closed sample (∞ when never closed). `closed by the change guard`: the share of post-change samples whose reason is the change guard's. `open after`: runs whose gate was open at some time after the change (for 3 → 1 the new plant still contracts, and reopening is power).\n"
+        "## Plant change (the default configuration: every guard on)\n\n`ẏ = a y + u + w`, K = {K}, σ = 0.1, exploration K_e = −2, M = {M}, h = 5, n_s = 10, 40 s: `a` gives β* = 3 until {SWITCH} s, then the rate after the change; in the drift rows `a` moves linearly from β* = 3 to the rate after over the ramp, and every time below is measured from the moment the true rate crosses the margin {MARGIN} (for a step, the change); {runs} runs per cell. `span`: the shortest window's span (M + h − 1 steps). `open late`: the runs whose gate was open later than 1.5 spans after the change (for the changes below the margin: a deployment on the new plant, target at most 5 %). `closing delay`: from the change to the first closed sample (∞ when never closed). `closed by the change guard`: the share of post-change samples whose reason is the change guard's. `open after`: runs whose gate was open at some time after the change (for 3 → 1 the new plant still contracts, and reopening is power).\n"
     );
     let _ = writeln!(
         s,

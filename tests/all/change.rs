@@ -275,3 +275,29 @@ fn a_candidate_just_below_the_margin_is_rarely_deployed_at_the_smallest_window()
         );
     }
 }
+
+/// A drifting plant: `A(t)` moves linearly from `A` to the new matrix over the ramp, the
+/// trajectory equals the unchanged plant's (same seed) until the drift starts and departs
+/// from it after, and a negative ramp is refused.
+#[test]
+fn a_slow_drift_moves_the_plant_linearly() {
+    let base = LinearScenario {
+        dt: 0.02,
+        steps: 1000,
+        ..scalar(-1.5, -2.0, Process::Gaussian { sigma: 0.1 }, 1.0)
+    };
+    let sw = PlantSwitch { at: 5.0, a: vec![1.0], ramp: 10.0 };
+    let drift = LinearScenario { switch: Some(sw.clone()), ..base.clone() };
+    assert_eq!(drift.a_at(4.9), vec![-1.5]);
+    assert!((drift.a_at(10.0)[0] - (-1.5 + 0.5 * 2.5)).abs() < 1e-15);
+    assert_eq!(drift.a_at(15.0), vec![1.0]);
+    assert_eq!(sw.share(5.0), 0.0);
+    let step = PlantSwitch { ramp: 0.0, ..sw.clone() };
+    assert_eq!((step.share(4.99), step.share(5.0)), (0.0, 1.0));
+    let (a, b) = (run_scenario(&base, 7), run_scenario(&drift, 7));
+    let split = a.t.iter().position(|&t| t > 5.0).expect("the run passes 5 s");
+    assert_eq!(a.output(split - 1), b.output(split - 1));
+    assert_ne!(a.output(a.len() - 1), b.output(b.len() - 1));
+    let bad = LinearScenario { switch: Some(PlantSwitch { ramp: -1.0, ..sw }), ..base };
+    assert!(bad.run(7).is_err());
+}

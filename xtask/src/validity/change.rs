@@ -70,9 +70,9 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
     let mut rows = Vec::new();
     // Steps at 20 s at both sampling steps, then slow drifts from 10 s at dt = 0.02: `(dt,
     // rate after, ramp seconds)`.
-    let steps = [0.01, 0.02].into_iter().flat_map(|dt| {
-        [-0.2, 0.0, 0.04, 1.0].into_iter().map(move |after| (dt, after, 0.0))
-    });
+    let steps = [0.01, 0.02]
+        .into_iter()
+        .flat_map(|dt| [-0.2, 0.0, 0.04, 1.0].into_iter().map(move |after| (dt, after, 0.0)));
     let drifts = [(0.02, -0.2, 10.0), (0.02, -0.2, 20.0)];
     for (cell, (dt, after, ramp)) in steps.chain(drifts).enumerate() {
         {
@@ -92,7 +92,9 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
             let half = runs / 2;
             let results = std::thread::scope(|scope| -> Result<Vec<Run>> {
                 let a = scope.spawn(|| {
-                    (0..half).map(|r| one(&s, base + r as u64, reference)).collect::<Result<Vec<_>>>()
+                    (0..half)
+                        .map(|r| one(&s, base + r as u64, reference))
+                        .collect::<Result<Vec<_>>>()
                 });
                 let b = (half..runs)
                     .map(|r| {
@@ -114,7 +116,9 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
             rows.push(vec![
                 format!("{dt}"),
                 if ramp > 0.0 {
-                    format!("3 → {after}, drift over {ramp} s from {at} s (crosses at {reference:.1} s)")
+                    format!(
+                        "3 → {after}, drift over {ramp} s from {at} s (crosses at {reference:.1} s)"
+                    )
                 } else {
                     format!("3 → {after}")
                 },

@@ -49,6 +49,16 @@ pub struct Calibration {
     /// certificate keeps batches of one block.
     #[serde(default = "default_batch", skip_serializing_if = "is_default_batch")]
     pub batch_blocks: usize,
+    /// Blocks per batch of a second covariance computed beside the first at every look of a
+    /// window long enough for it (more than `2d` batches, `d` the regressors), each radius at
+    /// half the look's risk, the smaller standing (valid by the union bound); 0 turns it off
+    /// (default 8). Sensor noise telescopes across blocks, which batches of one block count
+    /// at every block boundary and so overstate the spread (VALIDITY.md's sensor cells);
+    /// batches of `b` count it once per batch. Without sensor noise the first radius is
+    /// mostly the smaller, at the cost of half the risk. The linear calibrated certificate's
+    /// looks only: the nonlinear certificate and the guards keep batches of one block.
+    #[serde(default = "default_auto_batch")]
+    pub auto_batch: usize,
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
     /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
     /// at risk `δ / W` per look of each of the `W` windows; where any window's latest test
@@ -91,6 +101,10 @@ fn default_true() -> bool {
 fn default_batch() -> usize {
     1
 }
+
+fn default_auto_batch() -> usize {
+    8
+}
 #[allow(clippy::trivially_copy_pass_by_ref)] // serde's `skip_serializing_if` passes a reference
 fn is_default_batch(b: &usize) -> bool {
     *b == 1
@@ -118,6 +132,7 @@ impl Calibration {
             instrument_lag: default_lag(),
             instrument_intervals: default_intervals(),
             batch_blocks: default_batch(),
+            auto_batch: default_auto_batch(),
             hidden_dynamics: true,
             nonlinearity: true,
             plant_change: true,
@@ -226,6 +241,12 @@ impl Calibration {
                      got {}",
                     self.batch_blocks
                 ),
+            );
+        }
+        if !(self.auto_batch == 0 || (2..=64).contains(&self.auto_batch)) {
+            return bad(
+                "calibration.auto_batch",
+                format!("must be 0 (off) or lie in 2..=64, got {}", self.auto_batch),
             );
         }
         // The affine model's intercept is one more unknown; the model guard's larger fit has

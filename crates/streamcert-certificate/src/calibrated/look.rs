@@ -44,9 +44,34 @@ impl CalibratedState {
             let look = CouplingLook { w, k, t, share: self.shares[w], nu, window };
             c.look(&look, &self.windows, &mut self.est, p);
         }
-        let radius = calibrated_radius(variance, nu, risk);
-        let upper =
-            (beta_hat < margin).then(|| beta_hat + calibrated_radius(variance, nu, self.cal.delta));
+        // The second covariance (batches of `auto_batch` blocks) on the windows long enough
+        // for it: each radius at half the risk, the smaller standing.
+        let (mut variance, mut nu) = (variance, nu);
+        let mut radius;
+        let upper_radius;
+        match self.auto_rate(w) {
+            Some((_, v2, nu2)) => {
+                radius = calibrated_radius(variance, nu, risk / 2.0);
+                let r2 = calibrated_radius(v2, nu2, risk / 2.0);
+                let delta = self.cal.delta / 2.0;
+                upper_radius =
+                    calibrated_radius(variance, nu, delta).min(calibrated_radius(v2, nu2, delta));
+                if r2 < radius {
+                    (radius, variance, nu) = (r2, v2, nu2);
+                }
+            }
+            None if self.auto_applies(w) => {
+                // Not ready with batches (cannot happen on a full window): the first radius
+                // at the half of the risk it was given.
+                radius = calibrated_radius(variance, nu, risk / 2.0);
+                upper_radius = calibrated_radius(variance, nu, self.cal.delta / 2.0);
+            }
+            None => {
+                radius = calibrated_radius(variance, nu, risk);
+                upper_radius = calibrated_radius(variance, nu, self.cal.delta);
+            }
+        }
+        let upper = (beta_hat < margin).then(|| beta_hat + upper_radius);
         self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
             window: self.windows.window(w),
             look: k,
@@ -57,6 +82,31 @@ impl CalibratedState {
             nu,
             upper,
         });
+    }
+
+    /// Whether window `w` carries the second covariance ([`Calibration::auto_batch`]): on,
+    /// the first covariance in batches of one block, and more than `2d` batches of the
+    /// window's blocks (`d` regressors). Fixed by the window's length, so the risk split is
+    /// decided before any data.
+    ///
+    /// [`Calibration::auto_batch`]: crate::Calibration::auto_batch
+    pub(super) fn auto_applies(&self, w: usize) -> bool {
+        let b = self.cal.auto_batch;
+        let p = self.sym.len().isqrt();
+        let d = self.tmat.len() / p;
+        let blocks = self.windows.window(w) / self.horizon;
+        b > 1 && self.cal.batch_blocks == 1 && blocks.div_ceil(b) > 2 * d
+    }
+
+    /// Window `w`'s estimate with the second covariance, when it applies and is ready.
+    fn auto_rate(&mut self, w: usize) -> Option<(f64, f64, f64)> {
+        if !self.auto_applies(w) {
+            return None;
+        }
+        self.windows.set_batch(self.cal.auto_batch);
+        let r = self.rate(w, 0);
+        self.windows.set_batch(self.cal.batch_blocks);
+        r
     }
 
     /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest

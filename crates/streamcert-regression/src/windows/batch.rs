@@ -33,6 +33,13 @@ impl InstrumentedWindows {
         Ok(self)
     }
 
+    /// Compute the following estimates with batches of `batch >= 1` blocks (the window sums
+    /// do not depend on it): for a second covariance beside the first at the same look. A
+    /// window with at most `d` batches is then not ready.
+    pub fn set_batch(&mut self, batch: usize) {
+        self.batch = batch.max(1);
+    }
+
     /// Blocks per batch ([`with_batch`](Self::with_batch)).
     #[must_use]
     pub fn batch(&self) -> usize {

@@ -27,6 +27,26 @@ pub const GATES: [&str; 4] = ["gauss", "wass", "calibrated", "nonlinear"];
 /// The window-length columns (`M_w` of the calibrated and nonlinear looks); absent is NaN.
 pub const WINDOW_COLUMNS: [&str; 2] = ["calibrated_window", "nonlinear_window"];
 
+/// The values of the [`FLOAT_COLUMNS`] of one row, in that order.
+#[must_use]
+pub fn float_values(r: &EvidenceRow) -> [Option<f64>; 13] {
+    [
+        Some(r.t),
+        r.beta_hat,
+        r.rho,
+        r.eps,
+        r.kurtosis,
+        r.spike_fraction,
+        r.cert_gauss,
+        r.cert_wass,
+        r.rho_calibrated,
+        r.cert_calibrated,
+        r.cert_nonlinear,
+        r.nonlinear_y_lo,
+        r.nonlinear_y_hi,
+    ]
+}
+
 /// Evidence of consecutive samples, one vector per column: the values the command line
 /// writes into its CSV, as numbers (bit for bit the same `f64`s: the CSV prints the shortest
 /// text that reads back to them).
@@ -78,21 +98,7 @@ impl EvidenceColumns {
     /// is NaN).
     pub fn push(&mut self, ev: &Evidence, region: &[Interval]) {
         let r = EvidenceRow::from(ev);
-        let values = [
-            Some(r.t),
-            r.beta_hat,
-            r.rho,
-            r.eps,
-            r.kurtosis,
-            r.spike_fraction,
-            r.cert_gauss,
-            r.cert_wass,
-            r.rho_calibrated,
-            r.cert_calibrated,
-            r.cert_nonlinear,
-            r.nonlinear_y_lo,
-            r.nonlinear_y_hi,
-        ];
+        let values = float_values(&r);
         for (col, v) in self.floats.iter_mut().zip(values) {
             col.push(v.unwrap_or(f64::NAN));
         }

@@ -30,7 +30,9 @@ pub mod simulate;
 #[cfg(feature = "python")]
 mod bindings;
 
-pub use columns::{EvidenceColumns, FLOAT_COLUMNS, GATES, ReasonColumn, WINDOW_COLUMNS};
+pub use columns::{
+    EvidenceColumns, FLOAT_COLUMNS, GATES, ReasonColumn, WINDOW_COLUMNS, float_values,
+};
 pub use error::Error;
 pub use network::NetworkRun;
 pub use run::Run;

@@ -71,7 +71,7 @@ impl CalibratedState {
                 upper_radius = calibrated_radius(variance, nu, self.cal.delta);
             }
         }
-        let upper = (beta_hat < margin).then(|| beta_hat + upper_radius);
+        let upper = (beta_hat < margin).then_some(beta_hat + upper_radius);
         self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
             window: self.windows.window(w),
             look: k,

@@ -316,21 +316,7 @@ impl PyEvidence {
     fn to_dict<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
         let r = &self.row;
         let d = PyDict::new(py);
-        let floats = [
-            Some(r.t),
-            r.beta_hat,
-            r.rho,
-            r.eps,
-            r.kurtosis,
-            r.spike_fraction,
-            r.cert_gauss,
-            r.cert_wass,
-            r.rho_calibrated,
-            r.cert_calibrated,
-            r.cert_nonlinear,
-            r.nonlinear_y_lo,
-            r.nonlinear_y_hi,
-        ];
+        let floats = crate::columns::float_values(r);
         for (name, v) in FLOAT_COLUMNS.iter().zip(floats) {
             d.set_item(*name, v)?;
         }

@@ -387,9 +387,7 @@ proptest! {
         // The certificate's arithmetic, without the lack-of-fit check (which only closes gates).
         let mut cfg = config(k, 0.05, window, 1);
         cfg.nonlinear = Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(1) });
-        // The guards gate the linear certificate only, and only the linear certificate has
-        // the second, batched covariance (`auto_batch`): the nonlinear look keeps batches of
-        // one block.
+        // Guards and the batched second covariance (`auto_batch`) are the linear one's only.
         cfg.calibration =
             cfg.calibration.map(|c| Calibration { auto_batch: 0, ..Calibration::unguarded(c) });
         let mut cert = Certifier::new(cfg).expect("valid");

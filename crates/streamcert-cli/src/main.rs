@@ -114,6 +114,11 @@ struct ClusterArgs {
     /// localhost:2101, localhost:2102, ...).
     #[arg(long)]
     hostfile: Option<PathBuf>,
+    /// Seconds of wall-clock silence of this process's (live) input after which its clock
+    /// advances by the time elapsed since its last row, so that its subsystems turn stale
+    /// (`stale_after`) instead of holding every epoch back. Default: wait for the input.
+    #[arg(long)]
+    silence: Option<f64>,
 }
 
 /// For scripts: the exit status says whether the verdict at the end is "certified".
@@ -314,8 +319,8 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 resume,
                 plot,
             };
-            let ClusterArgs { workers, processes, process, hostfile } = cluster;
-            let cluster = network::Cluster { workers, processes, process, hostfile };
+            let ClusterArgs { workers, processes, process, hostfile, silence } = cluster;
+            let cluster = network::Cluster { workers, processes, process, hostfile, silence };
             if cluster.is_set() && opts.plot.is_some() {
                 return Err(CliError::Config {
                     path: path.clone(),
@@ -326,15 +331,44 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             }
             let s = if !cluster.is_set() {
                 network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?
-            } else if cluster.index() == 0 {
-                let input: Box<dyn std::io::Read + Send> = Box::new(open_input(&io.input)?);
-                network::run_timely(&cfg, input, &io.input, &mut out, &opts, &cluster)?
             } else {
-                // Another process: it certifies its shards; process 0 reads and writes.
-                let empty: Box<dyn std::io::Read + Send> = Box::new(std::io::empty());
-                network::run_timely(&cfg, empty, "-", std::io::sink(), &opts, &cluster)?;
-                eprintln!("process {}: done", cluster.index());
-                return Ok(Outcome::Done);
+                // Every process reads its own input (its subsystems' rows); process 0 writes.
+                let name = io.input.clone();
+                let opened = std::cell::Cell::new(false);
+                let open = move || -> Result<Box<dyn std::io::Read + Send>, CliError> {
+                    if name == "-" && opened.replace(true) {
+                        return Err(CliError::Input {
+                            file: "-".into(),
+                            message: "standard input cannot be read again after a restart".into(),
+                        });
+                    }
+                    Ok(Box::new(open_input(&name)?))
+                };
+                if cluster.index() == 0 {
+                    network::run_timely(&cfg, &open, &io.input, &mut out, &opts, &cluster)?.0
+                } else {
+                    let (_, site) = network::run_timely(
+                        &cfg,
+                        &open,
+                        &io.input,
+                        std::io::sink(),
+                        &opts,
+                        &cluster,
+                    )?;
+                    eprintln!(
+                        "process {}: done, {} rows certified, {} bytes of snapshots sent to \
+                         process 0{}",
+                        cluster.index(),
+                        site.rows,
+                        site.bytes_sent,
+                        if site.rejoins > 0 {
+                            format!(", {} rejoins", site.rejoins)
+                        } else {
+                            String::new()
+                        }
+                    );
+                    return Ok(Outcome::Done);
+                }
             };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(

@@ -297,6 +297,8 @@ fn two_timely_processes_write_the_one_process_rows() {
         .replace("# risk = 0.01", "risk = 0.04")
         .replace("[ambiguity]", "[calibration]\nenabled = true\n\n[ambiguity]");
     for (tag, body) in [("given", example.clone()), ("estimated", estimated)] {
+        // B is read by process 1.
+        let body = body.replace("gain = [[-3.0]]", "gain = [[-3.0]]\nprocess = 1");
         let cfg = tmp(&format!("timely-{tag}.toml"));
         std::fs::write(&cfg, body).expect("write");
         let cfg = cfg.to_str().expect("utf8");
@@ -335,7 +337,9 @@ fn two_timely_processes_write_the_one_process_rows() {
                 .spawn()
                 .expect("spawn")
         };
-        let second = process("1", &[]);
+        // Each process reads its own file: the wide file's columns of its subsystem (and, for
+        // an estimated coupling, of the driving output it measures).
+        let second = process("1", &["--input", input.to_str().expect("utf8")]);
         let first = process(
             "0",
             &["--input", input.to_str().expect("utf8"), "--output", output.to_str().expect("utf8")],
@@ -349,9 +353,10 @@ fn two_timely_processes_write_the_one_process_rows() {
     }
 }
 
-/// The timely path refuses checkpoints (one-process runs only) with a configuration error.
+/// The timely path checkpoints at every epoch boundary: a row period is refused with a
+/// configuration error.
 #[test]
-fn timely_runs_refuse_checkpoints() {
+fn timely_runs_refuse_a_checkpoint_period() {
     let example = run(&["network", "--print-config"], b"");
     let cfg = tmp("timely-checkpoint.toml");
     std::fs::write(&cfg, &example.stdout).expect("write");
@@ -365,9 +370,11 @@ fn timely_runs_refuse_checkpoints() {
             "2",
             "--checkpoint",
             ckpt.to_str().expect("utf8"),
+            "--checkpoint-every",
+            "10",
         ],
         b"t,y_a,u_a,y_b,u_b\n0,0,0,0,0\n",
     );
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
-    assert!(text(&out.stderr).contains("one-process run"), "{}", text(&out.stderr));
+    assert!(text(&out.stderr).contains("every epoch boundary"), "{}", text(&out.stderr));
 }

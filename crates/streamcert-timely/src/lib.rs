@@ -1,53 +1,68 @@
 //! # streamcert-timely
 //!
-//! The live network certificate of `streamcert-network` across threads, processes and
-//! machines, on [timely-dataflow](https://github.com/TimelyDataflow/timely-dataflow): the
-//! subsystems are sharded over timely's workers (subsystem `i` lives on worker
-//! `i mod workers`, samples exchanged by subsystem id), and at every composition point every
-//! worker sends the newest snapshots of the subsystems it advanced to worker 0, which composes
-//! the epochs with the same [`Composer`] as the one-process
-//! [`NetworkCertifier`].
+//! The live network certificate of `streamcert-network` across processes and machines, on
+//! [timely-dataflow](https://github.com/TimelyDataflow/timely-dataflow). Every process is a
+//! *site*: it reads its own input, holding only the subsystems the [`Placement`] gives it,
+//! and certifies them itself. Raw samples never leave a site; what crosses to worker 0 (process
+//! 0), which composes the epochs with the same [`Composer`] as the one-process
+//! [`NetworkCertifier`](streamcert_network::NetworkCertifier), is per epoch the snapshots
+//! ([`LocalSnapshot`]: time, verdict, coupling bounds) of the subsystems whose samples changed
+//! them, and two marks (the site's first epoch, the epochs its rows made due).
 //!
-//! **Same verdicts as one process, bit for bit.** Worker 0 reads the rows in order and runs
-//! the epoch clock ([`Composer::due`]) on each row's time, as the one-process certifier does
-//! on each sample: the rows between two composition points form one timely timestamp (a
-//! *segment*). A worker advances its subsystems through a segment's samples in row order once
-//! timely's frontier says the segment is complete, and worker 0 composes the epochs due after
-//! a segment once every worker's snapshots of that segment have arrived. Each subsystem sees
-//! exactly its samples in order, and each epoch is composed from exactly the snapshots the
-//! one-process run composes it from, with the same code (tested over two processes).
+//! **Event time.** The timely timestamp is the epoch index `k` (composed at `t = k · epoch`
+//! from every sample at `t < k · epoch`). A site runs its own epoch clock ([`Composer::due`])
+//! on its rows; when a row crosses the boundaries `a..b` it sends the changed snapshots at
+//! timestamp `a` and advances its input to `b`. Worker 0 composes epoch `k` once timely's
+//! frontier has passed `k`: every site has passed it. The epochs composed are those the
+//! one-process run over the sites' rows merged in time order composes, from the same
+//! snapshots, with the same code: the same reports, bit for bit (tested over three processes).
 //!
-//! **Processes.** [`run`] takes timely's own arguments: `-w` threads per process, `-n`
-//! processes, `-p` this process's index, `-h` a host file (one `host:port` per process, in
-//! process order). Every process runs the same configuration; the rows are read and the
-//! epoch reports produced in process 0 only (the `source` of the other processes is never
-//! called).
+//! **Pace and memory.** Before a site crosses a boundary `a` it waits until worker 0 has
+//! composed every epoch before `a` (a probe on the composer, which holds a capability at its
+//! next epoch): no site runs more than one epoch ahead of the composition, so nothing queues
+//! without bound when one site is slow, behind in event time, or down. The network runs at
+//! the pace of its slowest site. A site whose live input is silent for
+//! [`Placement::silence`] of wall-clock time advances its own clock by the wall-clock time
+//! elapsed since its last row (the one-process run's `advance` on a clock tick), so its
+//! subsystems turn stale under `stale_after` and the network is not certified, instead of
+//! holding every epoch back. A time far ahead at one site (within `max_epoch_jump`) makes the
+//! epochs up to it due, where the other sites' subsystems are stale, as in one process; beyond
+//! `max_epoch_jump` it stops that site with [`NetworkError::TimeJump`].
 //!
-//! **Failures.** A row the source rejects, a time too far ahead
-//! ([`NetworkError::TimeJump`]) or a sample a subsystem rejects stops the run like the
-//! one-process run: the epochs due before that row are composed and reported, no later one,
-//! and the first failure (in row order) is returned.
+//! **Checkpoints and restart.** With checkpoints on, every site hands out its [`SiteState`]
+//! at every boundary it crosses (after worker 0 composed the epochs before it, before it
+//! sends anything of the new ones), and process 0 its [`ComposerState`] after every batch of
+//! epochs it composes (after their reports were handed out, before its next epoch shows on
+//! the probe). The caller writes them; the worker waits until the caller says they are
+//! written. Hence at any crash the newest composer checkpoint's next epoch `K` lies within
+//! every site's newest checkpoint (`valid_from <= K <= next`): a run restarted with every
+//! process's own newest checkpoint ([`Resume`]) composes from `K` what the uninterrupted run
+//! composed (each site re-sends its snapshots at `K` and replays its input past the rows it
+//! holds). At the start every process broadcasts what it resumes from; a process whose
+//! checkpoint is of another configuration or placement, or does not cover `K`, is refused
+//! ([`TimelyError::Checkpoint`]) and the others get [`TimelyError::PeerRefused`]. Timely
+//! takes the whole computation down when one process dies (its connections fail):
+//! the others return [`TimelyError::PeerLost`], and may rejoin from their own checkpoints;
+//! no epoch is composed while a process is down (held back until it returns).
+//!
+//! **Failures.** A row the source rejects, a time too far ahead or a sample a subsystem
+//! rejects stops that site, like the one-process run: the epochs before it are composed and
+//! reported, no later one; the site returns its error and process 0
+//! [`TimelyError::Remote`] naming the site.
 
-mod shard;
+mod compose;
+mod handshake;
+mod site;
 mod wire;
+mod worker;
 
-use std::cell::RefCell;
-use std::collections::{BTreeMap, VecDeque};
-use std::ops::Range;
-use std::rc::Rc;
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex, mpsc};
+use std::time::Duration;
 
-use serde::{Deserialize, Serialize};
-use shard::Shard;
-use streamcert_network::{
-    Composer, EpochReport, LocalSnapshot, NetworkCertifier, NetworkConfig, NetworkError,
-};
-use timely::container::CapacityContainerBuilder;
-use timely::dataflow::channels::pact::Exchange;
-use timely::dataflow::operators::generic::operator::Operator;
-use timely::dataflow::operators::{Capability, Input, Probe};
-use timely::dataflow::{InputHandle, ProbeHandle};
-use wire::WireSnapshot;
+pub use compose::ComposerState;
+pub use site::SiteState;
+use streamcert_network::{EpochReport, NetworkConfig, NetworkError};
 
 /// One input row: its time and the samples it carries, `(subsystem, outputs then inputs)`.
 #[derive(Debug, Clone, PartialEq)]
@@ -60,19 +75,105 @@ pub struct Row {
     pub samples: Vec<(usize, Vec<f64>)>,
 }
 
+/// Which process reads and certifies each subsystem, this process, and timely's setup.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Placement {
+    /// `process_of[i]`: the process that reads subsystem `i`'s samples.
+    pub process_of: Vec<usize>,
+    /// Number of processes (timely's `-n`).
+    pub processes: usize,
+    /// This process (timely's `-p`).
+    pub process: usize,
+    /// Worker threads per process (timely's `-w`); the first reads and certifies the site,
+    /// worker 0 also composes, the others only route.
+    pub workers: usize,
+    /// One `host:port` per process, in process order (timely's `-h`).
+    pub hosts: Option<PathBuf>,
+    /// A site whose input gives no row for this long (wall clock) advances its clock by the
+    /// time elapsed since its last row. `None`: wait for the input.
+    pub silence: Option<Duration>,
+}
+
+impl Placement {
+    /// Every subsystem in one process with `workers` threads.
+    #[must_use]
+    pub fn local(n: usize, workers: usize) -> Self {
+        Self {
+            process_of: vec![0; n],
+            processes: 1,
+            process: 0,
+            workers,
+            hosts: None,
+            silence: None,
+        }
+    }
+
+    fn args(&self) -> Vec<String> {
+        let mut args = vec!["-w".to_string(), self.workers.max(1).to_string()];
+        if self.processes > 1 {
+            args.extend(["-n".into(), self.processes.to_string()]);
+            args.extend(["-p".into(), self.process.to_string()]);
+            if let Some(h) = &self.hosts {
+                args.extend(["-h".into(), h.display().to_string()]);
+            }
+        }
+        args
+    }
+
+    /// The fingerprint of `cfg` with this placement (what every process must agree on).
+    ///
+    /// # Errors
+    /// The configuration cannot be serialised.
+    pub fn fingerprint(&self, cfg: &NetworkConfig) -> Result<u64, String> {
+        streamcert_certificate::config_fingerprint(&(cfg, &self.process_of, self.processes))
+            .map_err(|e| e.to_string())
+    }
+}
+
+/// What a process resumes from: its own site, and (process 0) the composer.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Resume {
+    /// This process's site, as checkpointed (`None`: it had crossed no boundary).
+    pub site: Option<SiteState>,
+    /// Process 0: the composer, as checkpointed.
+    pub composer: Option<ComposerState>,
+}
+
+/// What the run hands the caller, on the calling thread, in order.
+#[derive(Debug)]
+pub enum Output<'a> {
+    /// Process 0: an epoch's report.
+    Epoch(&'a EpochReport),
+    /// Write this process's site checkpoint (checkpoints on).
+    Site(&'a SiteState),
+    /// Process 0: write the composer's checkpoint (checkpoints on), after the epochs before.
+    Composer(&'a ComposerState),
+}
+
 /// What a run read.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Outcome {
-    /// Rows read (process 0; 0 elsewhere).
+    /// Rows this process certified (counted over resumes).
     pub rows: u64,
-    /// Time of the last row read.
+    /// Time of its last row.
     pub last_time: Option<f64>,
+    /// Process 0: rows over every site, and the latest time.
+    pub network_rows: u64,
+    /// Process 0: the latest time over every site.
+    pub network_last_time: Option<f64>,
+    /// Bytes of the messages this process sent to process 0 (bincode, as timely serialises
+    /// them; 0 on process 0, whose messages do not cross a process boundary).
+    pub bytes_sent: u64,
+    /// Messages this process sent to the composer.
+    pub messages: u64,
+    /// The epoch this run resumed at (`None`: a new run).
+    pub resumed_at: Option<u64>,
 }
 
 /// Why a run stopped.
 #[derive(Debug, thiserror::Error)]
 pub enum TimelyError<E: std::error::Error + 'static> {
-    /// Timely's arguments or its start failed.
+    /// Timely's arguments or its start failed, or the placement is invalid.
     #[error("timely configuration: {0}")]
     Config(String),
     /// The source rejected the row after row number `row` (1-based count of rows read).
@@ -84,7 +185,7 @@ pub enum TimelyError<E: std::error::Error + 'static> {
         source: E,
     },
     /// The network refused the row named `line` (a time too far ahead, a subsystem it does
-    /// not have).
+    /// not have or another process reads).
     #[error("line {line}: {source}")]
     Network {
         /// The row's [`Row::line`].
@@ -92,8 +193,24 @@ pub enum TimelyError<E: std::error::Error + 'static> {
         /// The refusal.
         source: NetworkError,
     },
-    /// A subsystem rejected its sample of the row named `line` (the message crossed processes
-    /// as text).
+    /// The row named `line` carries a sample of a subsystem another process reads.
+    #[error(
+        "line {line}: subsystem {index} (`{name}`) is read by process {owner}, not by this \
+         process ({process}): each process's input holds only the subsystems placed on it"
+    )]
+    NotOwned {
+        /// The row's [`Row::line`].
+        line: u64,
+        /// Subsystem index.
+        index: usize,
+        /// Its name.
+        name: String,
+        /// The process it is placed on.
+        owner: usize,
+        /// This process.
+        process: usize,
+    },
+    /// A subsystem rejected its sample of the row named `line`.
     #[error("line {line}: subsystem {index} (`{name}`): {message}")]
     Subsystem {
         /// The row's [`Row::line`].
@@ -105,64 +222,100 @@ pub enum TimelyError<E: std::error::Error + 'static> {
         /// The certifier's error.
         message: String,
     },
+    /// Process 0: another site stopped (its own process returns the error itself).
+    #[error("process {process} stopped at line {line} of its input: {message}")]
+    Remote {
+        /// The site's process.
+        process: usize,
+        /// The line of its input.
+        line: u64,
+        /// Its error.
+        message: String,
+    },
+    /// This process's checkpoint does not fit the run (the start's check).
+    #[error("{0}")]
+    Checkpoint(String),
+    /// Another process's start was refused (its checkpoint or configuration).
+    #[error("{0}")]
+    PeerRefused(String),
+    /// A connection to another process failed (it died): the run is down until every
+    /// process is back.
+    #[error("a peer process was lost: {0}")]
+    PeerLost(String),
+    /// The caller's output or checkpoint writer failed.
+    #[error("{0}")]
+    Output(String),
     /// A worker failed (a panic, or a composition error on worker 0).
     #[error("worker: {0}")]
     Worker(String),
 }
 
-/// A sample on its way to the subsystem's worker.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-struct Sample {
-    row: u64,
-    line: u64,
-    index: u32,
-    t: f64,
-    values: Vec<f64>,
-}
-
-/// What a worker tells worker 0 about one segment.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-enum ShardMsg {
-    Snapshot { index: u32, snapshot: WireSnapshot },
-    Failed { row: u64, line: u64, index: u32, message: String },
-}
-
-/// What worker 0 tells the calling thread.
-enum Event<E> {
-    Epoch(EpochReport),
+/// What workers tell the calling thread.
+pub(crate) enum Event<E> {
+    Epoch(Box<EpochReport>),
+    Site(Box<SiteState>, mpsc::SyncSender<bool>),
+    Composer(Box<ComposerState>, mpsc::SyncSender<bool>),
     Failed(Failure<E>),
+    /// This site's outcome.
     Done(Outcome),
+    /// Process 0: rows over every site and the latest time.
+    Network(u64, Option<f64>),
 }
 
-enum Failure<E> {
+pub(crate) enum Failure<E> {
     Source { row: u64, source: E },
-    Network { row: u64, line: u64, source: NetworkError },
-    Subsystem { row: u64, line: u64, index: usize, message: String },
+    Network { line: u64, source: NetworkError },
+    NotOwned { line: u64, index: usize, owner: usize },
+    Subsystem { line: u64, index: usize, message: String },
+    Remote { process: usize, line: u64, message: String },
+    Checkpoint(String),
+    PeerRefused(String),
+    Output(String),
     Compose(NetworkError),
 }
 
-impl<E> Failure<E> {
-    fn row(&self) -> u64 {
-        match self {
-            Self::Source { row, .. } | Self::Network { row, .. } | Self::Subsystem { row, .. } => {
-                *row
-            }
-            Self::Compose(_) => 0,
-        }
+/// The sender every worker shares.
+pub(crate) type Tx<E> = Arc<Mutex<mpsc::Sender<Event<E>>>>;
+
+pub(crate) fn send<E>(tx: &Tx<E>, e: Event<E>) {
+    if let Ok(tx) = tx.lock() {
+        let _ = tx.send(e);
     }
 }
 
-/// Certify the network `cfg` on timely with timely's arguments `args` (for example
-/// `["-w", "2"]`, or `["-n", "2", "-p", "0", "-h", "hosts.txt"]`); process 0 reads `source`
-/// and hands every epoch report to `on_epoch` as it is composed, on the calling thread.
+/// Send the event `make` builds and wait for the calling thread's answer (`false`: stop).
+pub(crate) fn ask<E>(tx: &Tx<E>, make: impl FnOnce(mpsc::SyncSender<bool>) -> Event<E>) -> bool {
+    let (ack, answer) = mpsc::sync_channel(1);
+    send(tx, make(ack));
+    answer.recv().unwrap_or(false)
+}
+
+/// What every worker reads.
+pub(crate) struct Shared<S> {
+    pub(crate) cfg: NetworkConfig,
+    pub(crate) place: Placement,
+    pub(crate) fingerprint: u64,
+    pub(crate) checkpoints: bool,
+    pub(crate) resume: Mutex<Option<Resume>>,
+    pub(crate) source: Mutex<Option<S>>,
+}
+
+/// Certify the network `cfg` over the processes of `place`; this process reads `source` (the
+/// rows of the subsystems placed on it) and hands what the run produces to `handler` on the
+/// calling thread: process 0 every epoch report as it is composed, and with `checkpoints`
+/// every process its checkpoints to write (the run waits for `handler` to return; an error
+/// stops it). `resume`: this process's own checkpoints.
 ///
 /// # Errors
-/// [`TimelyError`]: the first failure in row order (the epochs before it are reported).
+/// [`TimelyError`]: this site's first failure; on process 0 also another site's
+/// ([`TimelyError::Remote`]); a refused start; a lost peer.
 pub fn run<E, S, I>(
     cfg: NetworkConfig,
-    args: &[String],
+    place: &Placement,
+    resume: Option<Resume>,
+    checkpoints: bool,
     source: S,
-    mut on_epoch: impl FnMut(&EpochReport),
+    mut handler: impl FnMut(Output<'_>) -> Result<(), String>,
 ) -> Result<Outcome, TimelyError<E>>
 where
     E: std::error::Error + Send + 'static,
@@ -170,264 +323,141 @@ where
     I: Iterator<Item = Result<Row, E>>,
 {
     // Every check of the one-process certifier, including each subsystem's certifier, before
-    // any worker starts (a worker must not meet a configuration it cannot build).
-    NetworkCertifier::new(cfg.clone()).map_err(|e| TimelyError::Config(e.to_string()))?;
-    let config = timely::Config::from_args(args.iter().cloned()).map_err(TimelyError::Config)?;
+    // any worker starts.
+    streamcert_network::NetworkCertifier::new(cfg.clone())
+        .map_err(|e| TimelyError::Config(e.to_string()))?;
+    let n = cfg.subsystems.len();
+    let processes = place.processes.max(1);
+    if place.process_of.len() != n {
+        return Err(TimelyError::Config(format!(
+            "the placement names {} subsystems, the network has {n}",
+            place.process_of.len()
+        )));
+    }
+    if let Some(&p) = place.process_of.iter().find(|&&p| p >= processes) {
+        return Err(TimelyError::Config(format!(
+            "a subsystem is placed on process {p}, but there are {processes} processes"
+        )));
+    }
+    if place.process >= processes {
+        return Err(TimelyError::Config(format!("process {} of {processes}", place.process)));
+    }
+    if let Some(r) = &resume {
+        if place.process != 0 && r.composer.is_some() {
+            return Err(TimelyError::Checkpoint(
+                "only process 0 resumes a composer: this is process 0's checkpoint".into(),
+            ));
+        }
+    }
+    let config =
+        timely::Config::from_args(place.args().into_iter()).map_err(TimelyError::Config)?;
+    let fingerprint = place.fingerprint(&cfg).map_err(TimelyError::Config)?;
     let (tx, rx) = mpsc::channel::<Event<E>>();
-    let tx = Arc::new(Mutex::new(tx));
-    let source = Arc::new(Mutex::new(Some(source)));
-    let cfg = Arc::new(cfg);
+    let tx: Tx<E> = Arc::new(Mutex::new(tx));
     let names: Vec<String> = cfg.subsystems.iter().map(|s| s.name.clone()).collect();
-    let guards = timely::execute(config, move |worker| {
-        let send = |e: Event<E>| {
-            if let Ok(tx) = tx.lock() {
-                let _ = tx.send(e);
-            }
-        };
-        worker_main(worker, &cfg, &source, &send)
-    })
-    .map_err(TimelyError::Config)?;
+    let shared = Arc::new(Shared {
+        cfg,
+        place: place.clone(),
+        fingerprint,
+        checkpoints,
+        resume: Mutex::new(resume),
+        source: Mutex::new(Some(source)),
+    });
+    let guards = timely::execute(config, move |w| worker::main(w, &shared, &tx))
+        .map_err(TimelyError::Config)?;
     let mut outcome = Outcome::default();
-    let mut failure = None;
+    let mut failure: Option<Failure<E>> = None;
+    let mut output_failed = false;
+    let mut out = |o: Output<'_>, failure: &mut Option<Failure<E>>| -> bool {
+        if output_failed {
+            return false;
+        }
+        match handler(o) {
+            Ok(()) => true,
+            Err(e) => {
+                output_failed = true;
+                *failure = Some(Failure::Output(e));
+                false
+            }
+        }
+    };
     for event in rx {
         match event {
-            Event::Epoch(r) => on_epoch(&r),
-            Event::Done(o) => outcome = o,
-            // The earliest failure in row order (a composition failure first).
+            Event::Epoch(r) => {
+                out(Output::Epoch(&r), &mut failure);
+            }
+            Event::Site(s, ack) => {
+                let _ = ack.send(out(Output::Site(&s), &mut failure));
+            }
+            Event::Composer(c, ack) => {
+                let _ = ack.send(out(Output::Composer(&c), &mut failure));
+            }
+            Event::Done(o) => {
+                outcome = Outcome {
+                    network_rows: outcome.network_rows,
+                    network_last_time: outcome.network_last_time,
+                    ..o
+                };
+            }
+            Event::Network(rows, last) => {
+                outcome.network_rows = rows;
+                outcome.network_last_time = last;
+            }
             Event::Failed(f) => {
-                if failure.as_ref().is_none_or(|g: &Failure<E>| f.row() < g.row()) {
+                // This site's own failure before another site's, else the first one.
+                let remote = |f: &Failure<E>| matches!(f, Failure::Remote { .. });
+                if failure.as_ref().is_none_or(|g| remote(g) && !remote(&f)) {
                     failure = Some(f);
                 }
             }
         }
     }
-    for result in guards.join() {
-        result.map_err(TimelyError::Worker)?;
+    // When a peer died, timely's communication threads panicked, and dropping the guards
+    // (which joins them) panics too: caught, it is the same lost peer.
+    let joined = std::panic::catch_unwind(std::panic::AssertUnwindSafe(move || guards.join()));
+    let lost = match joined {
+        Ok(results) => results.into_iter().find_map(Result::err),
+        Err(panic) => Some(
+            panic
+                .downcast_ref::<String>()
+                .cloned()
+                .or_else(|| panic.downcast_ref::<&str>().map(|s| (*s).to_string()))
+                .map_or_else(
+                    || "timely communication error".to_string(),
+                    |m| format!("timely communication error: {m}"),
+                ),
+        ),
+    };
+    if let Some(e) = lost {
+        // Timely reports a worker's panic without its message; with several processes it is
+        // the cascade of a failed connection (this crate's workers do not panic).
+        return Err(if processes > 1 {
+            TimelyError::PeerLost(format!("a connection to another process failed ({e})"))
+        } else {
+            TimelyError::Worker(e)
+        });
     }
     match failure {
         None => Ok(outcome),
         Some(Failure::Source { row, source }) => Err(TimelyError::Source { row, source }),
-        Some(Failure::Network { line, source, .. }) => Err(TimelyError::Network { line, source }),
-        Some(Failure::Subsystem { line, index, message, .. }) => {
+        Some(Failure::Network { line, source }) => Err(TimelyError::Network { line, source }),
+        Some(Failure::NotOwned { line, index, owner }) => Err(TimelyError::NotOwned {
+            line,
+            index,
+            name: names.get(index).cloned().unwrap_or_default(),
+            owner,
+            process: place.process,
+        }),
+        Some(Failure::Subsystem { line, index, message }) => {
             let name = names.get(index).cloned().unwrap_or_default();
             Err(TimelyError::Subsystem { line, index, name, message })
         }
+        Some(Failure::Remote { process, line, message }) => {
+            Err(TimelyError::Remote { process, line, message })
+        }
+        Some(Failure::Checkpoint(m)) => Err(TimelyError::Checkpoint(m)),
+        Some(Failure::PeerRefused(m)) => Err(TimelyError::PeerRefused(m)),
+        Some(Failure::Output(m)) => Err(TimelyError::Output(m)),
         Some(Failure::Compose(e)) => Err(TimelyError::Worker(e.to_string())),
-    }
-}
-
-type Boundaries = Rc<RefCell<VecDeque<(u64, Range<u64>)>>>;
-
-/// One worker: the shard operator, worker 0's composer and reader.
-fn worker_main<E, S, I>(
-    worker: &mut timely::worker::Worker,
-    cfg: &Arc<NetworkConfig>,
-    source: &Mutex<Option<S>>,
-    send: &dyn Fn(Event<E>),
-) where
-    E: std::error::Error + Send + 'static,
-    S: FnOnce() -> I + Send + 'static,
-    I: Iterator<Item = Result<Row, E>>,
-{
-    let (index, peers) = (worker.index(), worker.peers());
-    let mut input = InputHandle::<u64, CapacityContainerBuilder<Vec<Sample>>>::new();
-    let probe = ProbeHandle::new();
-    let composer = Rc::new(RefCell::new(Composer::new()));
-    let boundaries: Boundaries = Rc::new(RefCell::new(VecDeque::new()));
-    let reports: Rc<RefCell<Vec<Event<E>>>> = Rc::new(RefCell::new(Vec::new()));
-    worker.dataflow::<u64, _, _>(|scope| {
-        let shard_cfg = Arc::clone(cfg);
-        let snapshots = scope.input_from(&mut input).unary_frontier(
-            Exchange::new(|s: &Sample| u64::from(s.index)),
-            "Shard",
-            move |_, _| {
-                let mut shard = Shard::new(&shard_cfg, index, peers);
-                let mut queues: BTreeMap<u64, (Capability<u64>, Vec<Sample>)> = BTreeMap::new();
-                move |(input, frontier), output| {
-                    input.for_each_stamp(|cap, data| {
-                        if let Some(cap) = cap.retain_least(output.output_index()) {
-                            let q = queues.entry(*cap.time()).or_insert_with(|| (cap, Vec::new()));
-                            for batch in data {
-                                q.1.append(batch);
-                            }
-                        }
-                    });
-                    while let Some(entry) = queues.first_entry() {
-                        if frontier.less_equal(entry.key()) {
-                            break;
-                        }
-                        let (cap, samples) = entry.remove();
-                        let mut session = output.session(&cap);
-                        shard.segment(&shard_cfg, samples, |m| session.give(m));
-                    }
-                }
-            },
-        );
-        let compose_cfg = Arc::clone(cfg);
-        let (composer, boundaries, reports) =
-            (Rc::clone(&composer), Rc::clone(&boundaries), Rc::clone(&reports));
-        snapshots
-            .unary_frontier::<CapacityContainerBuilder<Vec<()>>, _, _, _>(
-                Exchange::new(|_: &ShardMsg| 0),
-                "Compose",
-                move |_, _| {
-                    let mut merged = Merged::new(compose_cfg.subsystems.len());
-                    move |(input, frontier), _output| {
-                        input.for_each_stamp(|cap, data| {
-                            if let Some(&t) = cap.least() {
-                                let q = merged.stash.entry(t).or_default();
-                                for batch in data {
-                                    q.append(batch);
-                                }
-                            }
-                        });
-                        let complete = |t: &u64| !frontier.less_equal(t);
-                        loop {
-                            let next = boundaries.borrow().front().cloned();
-                            let Some((segment, due)) = next else { break };
-                            if !complete(&segment) {
-                                break;
-                            }
-                            merged.merge_until(&complete, segment, &reports);
-                            boundaries.borrow_mut().pop_front();
-                            if merged.stopped {
-                                continue;
-                            }
-                            for k in due {
-                                match composer.borrow_mut().compose(&compose_cfg, k, &merged.last) {
-                                    Ok(r) => reports.borrow_mut().push(Event::Epoch(r)),
-                                    Err(e) => {
-                                        merged.stopped = true;
-                                        reports
-                                            .borrow_mut()
-                                            .push(Event::Failed(Failure::Compose(e)));
-                                        break;
-                                    }
-                                }
-                            }
-                        }
-                        // Complete segments after the last composition point: only failures
-                        // matter there (no epoch is due after them).
-                        merged.merge_until(&complete, u64::MAX, &reports);
-                    }
-                },
-            )
-            .probe_with(&probe);
-    });
-    let flush = || {
-        for e in reports.borrow_mut().drain(..) {
-            send(e);
-        }
-    };
-    if index == 0 {
-        let take = source.lock().ok().and_then(|mut s| s.take());
-        let mut outcome = Outcome::default();
-        if let Some(source) = take {
-            let mut segment = 0u64;
-            for (row, item) in (1u64..).zip(source()) {
-                let r = match item {
-                    Ok(r) => r,
-                    Err(source) => {
-                        send(Event::Failed(Failure::Source { row, source }));
-                        break;
-                    }
-                };
-                let due = composer.borrow_mut().due(cfg, r.t);
-                match due {
-                    Ok(due) if due.is_empty() => {}
-                    Ok(due) => {
-                        boundaries.borrow_mut().push_back((segment, due));
-                        segment += 1;
-                        input.advance_to(segment);
-                        worker.step();
-                        flush();
-                    }
-                    Err(source) => {
-                        send(Event::Failed(Failure::Network { row, line: r.line, source }));
-                        break;
-                    }
-                }
-                // A sample of a subsystem the network does not have stops the run, as in one
-                // process (`NetworkError::UnknownSubsystem`), before anything of its row is sent.
-                let len = cfg.subsystems.len();
-                if let Some(&(index, _)) = r.samples.iter().find(|(i, _)| *i >= len) {
-                    let source = NetworkError::UnknownSubsystem { index, len };
-                    send(Event::Failed(Failure::Network { row, line: r.line, source }));
-                    break;
-                }
-                outcome.rows = row;
-                outcome.last_time = Some(r.t);
-                for (i, values) in r.samples {
-                    let index = u32::try_from(i).unwrap_or(u32::MAX);
-                    input.send(Sample { row, line: r.line, index, t: r.t, values });
-                }
-                if row % 4096 == 0 {
-                    worker.step();
-                    flush();
-                }
-            }
-        }
-        drop(input);
-        while !probe.done() {
-            worker.step();
-            flush();
-        }
-        flush();
-        send(Event::Done(outcome));
-    } else {
-        drop(input);
-        while !probe.done() {
-            worker.step();
-        }
-    }
-}
-
-/// Worker 0's view of the shards: every subsystem's newest snapshot, the shards' messages
-/// of segments not merged yet, and whether a failure stopped the compositions.
-struct Merged {
-    last: Vec<Option<LocalSnapshot>>,
-    stash: BTreeMap<u64, Vec<ShardMsg>>,
-    stopped: bool,
-}
-
-impl Merged {
-    fn new(n: usize) -> Self {
-        Self { last: vec![None; n], stash: BTreeMap::new(), stopped: false }
-    }
-
-    /// Merge the complete segments up to `bound` into the newest snapshots; the first segment
-    /// with a failure reports its earliest failure and stops the compositions.
-    fn merge_until<E>(
-        &mut self,
-        complete: &impl Fn(&u64) -> bool,
-        bound: u64,
-        reports: &RefCell<Vec<Event<E>>>,
-    ) {
-        while let Some(entry) = self.stash.first_entry() {
-            if *entry.key() > bound || !complete(entry.key()) {
-                break;
-            }
-            let mut first_failure: Option<(u64, u64, u32, String)> = None;
-            for m in entry.remove() {
-                match m {
-                    ShardMsg::Snapshot { index, snapshot } => {
-                        if let Some(slot) = self.last.get_mut(index as usize) {
-                            *slot = Some(snapshot.into());
-                        }
-                    }
-                    ShardMsg::Failed { row, line, index, message } => {
-                        if first_failure.as_ref().is_none_or(|f| row < f.0) {
-                            first_failure = Some((row, line, index, message));
-                        }
-                    }
-                }
-            }
-            if let (Some((row, line, index, message)), false) = (first_failure, self.stopped) {
-                self.stopped = true;
-                let index = index as usize;
-                let failure = Failure::Subsystem { row, line, index, message };
-                reports.borrow_mut().push(Event::Failed(failure));
-            }
-        }
     }
 }

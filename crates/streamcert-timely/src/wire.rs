@@ -33,6 +33,21 @@ enum ReasonDef {
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]
 struct Reason(#[serde(with = "ReasonDef")] NotCertified);
 
+/// What a site sends the composing worker, at the timely timestamp of the epoch it concerns.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub(crate) enum Msg {
+    /// The site's first row makes epochs `< first` due and starts its clock (timestamp 0).
+    Start { first: u64 },
+    /// The site's rows make the epochs `< end` due.
+    Reached { end: u64 },
+    /// Subsystem `index`'s newest snapshot, valid from this timestamp's epoch on.
+    Snap { index: u32, snapshot: WireSnapshot },
+    /// The site's row count and last time (at the end of its input).
+    Rows { process: u32, rows: u64, last_time: Option<f64> },
+    /// The site stopped at `line` (a rejected row, sample or time).
+    Failed { process: u32, line: u64, message: String },
+}
+
 /// A [`LocalSnapshot`] in bincode-friendly form.
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub(crate) struct WireSnapshot {

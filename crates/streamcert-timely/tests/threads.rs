@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use streamcert_certificate::CertifierConfig;
 use streamcert_network::{EpochReport, NetworkCertifier, NetworkConfig, SubsystemSpec};
 use streamcert_regression::RegressionConfig;
-use streamcert_timely::{Row, TimelyError, run};
+use streamcert_timely::{Output, Placement, Row, TimelyError, run};
 
 /// `n` scalar subsystems `ẏ = a y + u + w` under `u = k y + PRBS`, Euler steps of 10 ms, all
 /// in one row per step.
@@ -60,6 +60,16 @@ fn serial(cfg: &NetworkConfig, rows: &[Row]) -> (Vec<EpochReport>, Option<String
     (out, None)
 }
 
+/// A handler that keeps the epoch reports.
+fn collect(out: &mut Vec<EpochReport>) -> impl FnMut(Output<'_>) -> Result<(), String> + '_ {
+    |o| {
+        if let Output::Epoch(r) = o {
+            out.push(r.clone());
+        }
+        Ok(())
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 #[error("bad row")]
 struct BadRow;
@@ -69,13 +79,14 @@ fn timely(
     rows: Vec<Row>,
     workers: usize,
 ) -> (Vec<EpochReport>, Option<String>) {
-    let args = vec!["-w".to_string(), workers.to_string()];
     let mut out = Vec::new();
     let result = run(
         cfg.clone(),
-        &args,
+        &Placement::local(cfg.subsystems.len(), workers),
+        None,
+        false,
         move || rows.into_iter().map(Ok::<Row, BadRow>),
-        |r| out.push(r.clone()),
+        collect(&mut out),
     );
     (out, result.err().map(|e| e.to_string()))
 }
@@ -117,17 +128,25 @@ fn a_bad_row_and_a_time_jump_stop_the_run() {
     let head = data[..400].to_vec();
     let result = run(
         cfg.clone(),
-        &["-w".to_string(), "2".to_string()],
+        &Placement::local(3, 2),
+        None,
+        false,
         move || head.into_iter().map(Ok).chain(std::iter::once(Err(BadRow))),
-        |r| out.push(r.clone()),
+        collect(&mut out),
     );
     assert!(matches!(result, Err(TimelyError::Source { row: 401, .. })));
     assert_eq!(out, want);
     let mut jump = data[..400].to_vec();
     jump.push(Row { line: 999, t: 1e9, samples: vec![(0, vec![0.0, 0.0])] });
     let mut out = Vec::new();
-    let result =
-        run(cfg, &[], move || jump.into_iter().map(Ok::<Row, BadRow>), |r| out.push(r.clone()));
+    let result = run(
+        cfg,
+        &Placement::local(3, 1),
+        None,
+        false,
+        move || jump.into_iter().map(Ok::<Row, BadRow>),
+        collect(&mut out),
+    );
     assert!(matches!(result, Err(TimelyError::Network { line: 999, .. })), "{result:?}");
     assert_eq!(out, want);
 }
@@ -168,9 +187,11 @@ fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
     let mut out = Vec::new();
     let result = run(
         cfg,
-        &["-w".to_string(), "2".to_string()],
+        &Placement::local(3, 2),
+        None,
+        false,
         move || data.into_iter().map(Ok::<Row, BadRow>),
-        |r| out.push(r.clone()),
+        collect(&mut out),
     );
     match result {
         Err(TimelyError::Network { line, source }) => {
@@ -184,6 +205,13 @@ fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
     // starts (no panic in a worker).
     let mut bad = network(2);
     bad.subsystems[1].certifier.gain = vec![1.0, 2.0];
-    let result = run(bad, &[], std::iter::empty::<Result<Row, BadRow>>, |_| {});
+    let result = run(
+        bad,
+        &Placement::local(2, 1),
+        None,
+        false,
+        std::iter::empty::<Result<Row, BadRow>>,
+        |_| Ok(()),
+    );
     assert!(matches!(result, Err(TimelyError::Config(ref m)) if m.contains("gain")), "{result:?}");
 }

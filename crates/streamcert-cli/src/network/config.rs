@@ -38,6 +38,7 @@ name = "A"
 outputs = ["y_a"]
 inputs = ["u_a"]
 gain = [[-2.5]]
+# process = 0           # over several processes (--processes): the one that reads A's samples
 
 [[subsystem]]
 name = "B"
@@ -132,6 +133,10 @@ struct SubsystemEntry {
     outputs: Vec<String>,
     inputs: Vec<String>,
     gain: Vec<Vec<f64>>,
+    /// The process (site) that reads this subsystem's samples in a run over several
+    /// processes (`--processes`); default 0.
+    #[serde(default, skip_serializing)]
+    process: usize,
 }
 
 #[derive(Debug, Deserialize)]
@@ -158,6 +163,8 @@ pub struct NetConfig {
     pub network: NetworkConfig,
     /// Wide or long input rows.
     pub layout: InputLayout,
+    /// The process that reads each subsystem (`[[subsystem]] process`, default 0).
+    pub process_of: Vec<usize>,
 }
 
 /// Parse and validate; `path` names the file in errors.
@@ -243,6 +250,7 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
             outputs: s.outputs.clone(),
             inputs: s_inputs,
             gain: s_gain,
+            process: s.process,
         };
         let mut t = table.clone();
         let mut cols = columns_table.clone();
@@ -334,7 +342,8 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     // Build once: every check of the network and of each certifier.
     NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
     let columns = Columns { time, outputs, inputs, delimiter };
-    Ok(NetConfig { columns, dims, network, layout: section.input })
+    let process_of = subsystems.iter().map(|s| s.process).collect();
+    Ok(NetConfig { columns, dims, network, layout: section.input, process_of })
 }
 
 #[cfg(test)]

@@ -1,12 +1,23 @@
 //! `streamcert network` on timely-dataflow (`--workers`, `--processes`, `--process`,
-//! `--hostfile`: timely's own `-w`, `-n`, `-p`, `-h`): the subsystems sharded over the
-//! workers of every process, process 0 reading the input and writing the epoch rows. The
-//! rows are those of the one-process run, byte for byte (tested with two processes).
+//! `--hostfile`: timely's own `-w`, `-n`, `-p`, `-h`). Every process is a site: it reads its
+//! own `--input`, holding the subsystems whose `[[subsystem]] process` is its index, and
+//! certifies them; only their epoch snapshots cross to process 0, which composes and writes
+//! the epoch rows: those of the one-process run over the sites' rows merged in time order,
+//! byte for byte (tested over three processes).
+//!
+//! **Checkpoints.** `--checkpoint FILE` on a process writes its own sealed checkpoint (the
+//! configuration's and placement's fingerprint, its process, its site at the newest epoch
+//! boundary it crossed, and on process 0 the composer and the summary). When a peer dies,
+//! the other processes reload their own checkpoints and wait for it (their inputs must be
+//! files: they are read again from the start, the rows a checkpoint holds passed over);
+//! the dead process is restarted with `--resume FILE`. Process 0 writes no epoch row twice
+//! while it stays up.
 
 use std::io::{Read, Write};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use streamcert_timely::{Row, TimelyError};
+use serde::{Deserialize, Serialize};
+use streamcert_timely::{ComposerState, Output, Placement, Resume, Row, SiteState, TimelyError};
 
 use super::config::NetConfig;
 use super::input::Rows;
@@ -15,7 +26,7 @@ use super::{NetOptions, NetSummary, estimated_columns};
 use crate::{CliError, RowError};
 
 /// Timely's process configuration.
-#[derive(Debug, Clone, Default, PartialEq, Eq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Cluster {
     /// Worker threads per process (`-w`, default 1).
     pub workers: Option<usize>,
@@ -25,6 +36,9 @@ pub struct Cluster {
     pub process: Option<usize>,
     /// One `host:port` per process, in process order (`-h`; default `localhost:2101` and up).
     pub hostfile: Option<PathBuf>,
+    /// A site whose input is silent this long (wall clock, seconds) advances its clock (its
+    /// subsystems turn stale instead of holding every epoch back).
+    pub silence: Option<f64>,
 }
 
 impl Cluster {
@@ -40,21 +54,90 @@ impl Cluster {
         self.process.unwrap_or(0)
     }
 
-    /// Timely's arguments.
-    fn args(&self) -> Vec<String> {
-        let mut args = Vec::new();
-        let mut put = |flag: &str, v: Option<String>| {
-            if let Some(v) = v {
-                args.push(flag.to_string());
-                args.push(v);
+    fn placement(&self, cfg: &NetConfig) -> Result<Placement, String> {
+        let silence = match self.silence {
+            Some(s) if s.is_finite() && s > 0.0 => Some(std::time::Duration::from_secs_f64(s)),
+            Some(s) => {
+                return Err(format!("--silence must be a positive number of seconds, got {s}"));
             }
+            None => None,
         };
-        put("-w", self.workers.map(|w| w.to_string()));
-        put("-n", self.processes.map(|n| n.to_string()));
-        put("-p", self.process.map(|p| p.to_string()));
-        put("-h", self.hostfile.as_ref().map(|h| h.display().to_string()));
-        args
+        let processes = self.processes.unwrap_or(1);
+        Ok(Placement {
+            // One process reads every subsystem, wherever the configuration places it.
+            process_of: if processes > 1 {
+                cfg.process_of.clone()
+            } else {
+                vec![0; cfg.dims.len()]
+            },
+            processes,
+            process: self.index(),
+            workers: self.workers.unwrap_or(1),
+            hosts: self.hostfile.clone(),
+            silence,
+        })
     }
+}
+
+/// One process's checkpoint on the distributed path.
+#[derive(Serialize, Deserialize)]
+struct SiteFile {
+    process: usize,
+    processes: usize,
+    site: Option<SiteState>,
+    composer: Option<ComposerState>,
+    summary: Option<NetSummary>,
+}
+
+fn sealed_config<'a>(
+    cfg: &'a NetConfig,
+    place: &'a Placement,
+) -> (&'a streamcert_network::NetworkConfig, &'a Vec<usize>, usize) {
+    (&cfg.network, &place.process_of, place.processes)
+}
+
+fn save(path: &Path, cfg: &NetConfig, place: &Placement, file: &SiteFile) -> Result<(), String> {
+    let json = serde_json::to_string(file).map_err(|e| e.to_string())?;
+    let text = streamcert_certificate::seal(&json, &sealed_config(cfg, place))
+        .map_err(|e| e.to_string())?;
+    crate::certify::write_atomic(path, &text).map_err(|e| e.to_string())
+}
+
+fn load(path: &Path, cfg: &NetConfig, place: &Placement) -> Result<SiteFile, CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
+    let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
+    let text = std::str::from_utf8(&bytes)
+        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
+    let json =
+        streamcert_certificate::unseal(text, Some(&sealed_config(cfg, place))).map_err(|e| {
+            bad(format!(
+                "{e} (or another placement of the subsystems on the processes, or another \
+                 number of processes)"
+            ))
+        })?;
+    let file: SiteFile = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    if file.process != place.process || file.processes != place.processes {
+        return Err(bad(format!(
+            "the checkpoint is process {}'s of {}, not process {}'s of {}: give every process \
+             its own checkpoint",
+            file.process, file.processes, place.process, place.processes
+        )));
+    }
+    let site = match file.site {
+        Some(s) => Some(s.verify(&cfg.network, place.process, &place.process_of).map_err(bad)?),
+        None => None,
+    };
+    let composer = match file.composer {
+        Some(c) if place.process == 0 => {
+            Some(c.verify(&cfg.network, place.processes).map_err(bad)?)
+        }
+        Some(_) => return Err(bad("only process 0's checkpoint holds the composer".into())),
+        None if place.process == 0 => {
+            return Err(bad("process 0's checkpoint holds no composer".into()));
+        }
+        None => None,
+    };
+    Ok(SiteFile { site, composer, ..file })
 }
 
 /// The rows of `input` as timely rows.
@@ -87,70 +170,199 @@ impl<R: Read> Iterator for RowIter<R> {
     }
 }
 
-/// Run the network on timely. Process 0 reads `input` and writes the epoch rows to `out`;
-/// the other processes certify their shards and write nothing.
+/// What a distributed run reports beside the summary.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct SiteReport {
+    /// Rows this process certified.
+    pub rows: u64,
+    /// Bytes this process sent to process 0 (0 on process 0).
+    pub bytes_sent: u64,
+    /// Times the run rejoined after a lost peer.
+    pub rejoins: u64,
+}
+
+/// Quiet the panics timely's threads raise when a peer's connection fails (the run reports
+/// the lost peer in one line); every other panic keeps the default report.
+fn quiet_timely_panics() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        let default = std::panic::take_hook();
+        std::panic::set_hook(Box::new(move |info| {
+            let message = info
+                .payload()
+                .downcast_ref::<String>()
+                .map(String::as_str)
+                .or_else(|| info.payload().downcast_ref::<&str>().copied())
+                .unwrap_or("");
+            let timely = ["timely communication error", "MergeQueue poisoned", "Send thread panic"];
+            let worker = std::thread::current().name().is_some_and(|n| n.starts_with("timely:"));
+            if !(timely.iter().any(|m| message.contains(m)) || worker && message.is_empty()) {
+                default(info);
+            }
+        }));
+    });
+}
+
+/// Opens this process's input again (the run reads it from the start after a restart).
+pub type Reopen = dyn Fn() -> Result<Box<dyn Read + Send>, CliError>;
+
+/// Run this process of the network on timely: read its own input (`open` opens it, again
+/// after a lost peer), certify its subsystems; process 0 also writes the epoch rows to `out`.
 ///
 /// # Errors
-/// Checkpoints are refused (`--checkpoint`, `--resume`: one-process runs only); timely's
-/// configuration; the input, row and output errors of the one-process run.
+/// Timely's configuration; this process's input, row, output and checkpoint errors; a
+/// refused start; a lost peer when the run cannot rejoin (no checkpoint, or standard input).
 pub fn run_timely<W: Write>(
     cfg: &NetConfig,
-    input: Box<dyn Read + Send>,
+    open: &Reopen,
     input_name: &str,
     out: W,
     opts: &NetOptions,
     cluster: &Cluster,
-) -> Result<NetSummary, CliError> {
+) -> Result<(NetSummary, SiteReport), CliError> {
     let bad = |message: String| CliError::Config { path: "timely".into(), message };
-    if opts.checkpoint.is_some() || opts.resume.is_some() {
+    let place = cluster.placement(cfg).map_err(bad)?;
+    if place.processes > 1 {
+        quiet_timely_panics();
+    }
+    if opts.checkpoint_every.is_some() {
         return Err(bad(
-            "--checkpoint and --resume need a one-process run (no timely options)".into()
+            "--checkpoint-every is for one-process runs: over timely, every process checkpoints \
+             at every epoch boundary it crosses"
+                .into(),
         ));
     }
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
+    let (mut resume, mut summary) = match &opts.resume {
+        Some(path) => {
+            let file = load(path, cfg, &place)?;
+            let summary = file.summary.clone().unwrap_or_default();
+            (Some(Resume { site: file.site, composer: file.composer }), summary)
+        }
+        None => (None, NetSummary::default()),
+    };
     let mut writer = EpochWriter::new(
         out,
         opts.format,
         opts.flush_each_row,
-        true,
+        opts.resume.is_none(),
         estimated_columns(&cfg.network, &names),
     );
-    let mut summary = NetSummary::default();
-    let mut failed: Option<std::io::Error> = None;
-    let (rows_cfg, name) = (cfg.clone(), input_name.to_string());
-    let source = move || {
-        let (rows, first) = match Rows::new(&rows_cfg, input, &name) {
-            Ok(rows) => (Some(rows), None),
-            Err(e) => (None, Some(e)),
+    let mut report = SiteReport::default();
+    // The newest epoch whose row was written (no row twice after a rejoin).
+    let mut written: Option<u64> = None;
+    loop {
+        let mut site_latest: Option<SiteState> = resume.as_ref().and_then(|r| r.site.clone());
+        let (rows_cfg, name, process) = (cfg.clone(), input_name.to_string(), place.process);
+        let process_of = place.process_of.clone();
+        let input = open()?;
+        let source = move || {
+            let (rows, first) = match Rows::for_site(&rows_cfg, &process_of, process, input, &name)
+            {
+                Ok(rows) => (Some(rows), None),
+                Err(e) => (None, Some(e)),
+            };
+            RowIter { rows, first, values: Vec::new(), items: Vec::new() }
         };
-        RowIter { rows, first, values: Vec::new(), items: Vec::new() }
-    };
-    let result = streamcert_timely::run(cfg.network.clone(), &cluster.args(), source, |r| {
-        if failed.is_none() {
-            if let Err(e) = writer.write(r, &names, &mut summary) {
-                failed = Some(e);
+        let checkpoint = opts.checkpoint.clone();
+        // Process 0's file holds its site and the composer with the summary of the rows
+        // written when the composer was checkpointed; either event rewrites it whole.
+        let mut composer_latest: Option<(ComposerState, NetSummary)> = None;
+        let result = streamcert_timely::run(
+            cfg.network.clone(),
+            &place,
+            resume.take(),
+            checkpoint.is_some(),
+            source,
+            |o| {
+                match o {
+                    Output::Epoch(r) => {
+                        if written.is_some_and(|w| r.epoch <= w) {
+                            return Ok(());
+                        }
+                        written = Some(r.epoch);
+                        return writer
+                            .write(r, &names, &mut summary)
+                            .map_err(|e| format!("writing output: {e}"));
+                    }
+                    Output::Site(s) => site_latest = Some(s.clone()),
+                    Output::Composer(c) => {
+                        writer.flush().map_err(|e| format!("writing output: {e}"))?;
+                        composer_latest = Some((c.clone(), summary.clone()));
+                    }
+                }
+                let Some(path) = &checkpoint else { return Ok(()) };
+                let (composer, summary) = composer_latest.clone().unzip();
+                let file = SiteFile {
+                    process: place.process,
+                    processes: place.processes,
+                    site: site_latest.clone(),
+                    composer,
+                    summary,
+                };
+                save(path, cfg, &place, &file)
+            },
+        );
+        match result {
+            Ok(outcome) => {
+                writer.flush().map_err(|e| CliError::io("writing output", e))?;
+                summary.rows = outcome.network_rows;
+                summary.last_time = outcome.network_last_time;
+                report.rows = outcome.rows;
+                report.bytes_sent += outcome.bytes_sent;
+                return Ok((summary, report));
             }
+            Err(e @ (TimelyError::PeerLost(_) | TimelyError::PeerRefused(_))) => {
+                let rejoin = opts.checkpoint.as_ref().filter(|_| input_name != "-");
+                let Some(path) = rejoin else {
+                    return Err(bad(format!(
+                        "{e}; the run is lost (rejoining needs --checkpoint and an input file)"
+                    )));
+                };
+                writer.flush().map_err(|e| CliError::io("writing output", e))?;
+                report.rejoins += 1;
+                eprintln!(
+                    "process {}: {e}; rejoining from {} once every process is back",
+                    place.process,
+                    path.display()
+                );
+                resume = if path.exists() {
+                    let file = load(path, cfg, &place)?;
+                    Some(Resume { site: file.site, composer: file.composer })
+                } else {
+                    None
+                };
+            }
+            Err(e) => return Err(map_error(e, input_name, &bad)),
         }
-    });
-    let io = |e: std::io::Error| CliError::io("writing output", e);
-    if let Some(e) = failed {
-        return Err(io(e));
     }
-    writer.flush().map_err(io)?;
+}
+
+fn map_error(
+    e: TimelyError<CliError>,
+    input_name: &str,
+    bad: &dyn Fn(String) -> CliError,
+) -> CliError {
     let row = |line: u64, message: String| {
         CliError::Row(RowError { file: input_name.into(), line, column: None, message })
     };
-    match result {
-        Ok(outcome) => {
-            summary.rows = outcome.rows;
-            summary.last_time = outcome.last_time;
-            Ok(summary)
+    match e {
+        TimelyError::Source { source, .. } => source,
+        TimelyError::Network { line, source } => row(line, source.to_string()),
+        e @ TimelyError::NotOwned { line, .. } => {
+            let text = e.to_string();
+            let message = text.split_once(": ").map_or(text.clone(), |(_, m)| m.to_string());
+            row(line, message)
         }
-        Err(TimelyError::Source { source, .. }) => Err(source),
-        Err(TimelyError::Network { line, source }) => Err(row(line, source.to_string())),
-        Err(TimelyError::Subsystem { line, index, name, message }) => {
-            Err(row(line, format!("subsystem {index} (`{name}`): {message}")))
+        TimelyError::Subsystem { line, index, name, message } => {
+            row(line, format!("subsystem {index} (`{name}`): {message}"))
         }
-        Err(e @ (TimelyError::Config(_) | TimelyError::Worker(_))) => Err(bad(e.to_string())),
+        TimelyError::Checkpoint(m) => CliError::Checkpoint { path: "--resume".into(), message: m },
+        TimelyError::Output(m) => CliError::io(m, std::io::Error::other("the run stopped")),
+        e @ (TimelyError::Remote { .. }
+        | TimelyError::Config(_)
+        | TimelyError::Worker(_)
+        | TimelyError::PeerLost(_)
+        | TimelyError::PeerRefused(_)) => bad(e.to_string()),
     }
 }

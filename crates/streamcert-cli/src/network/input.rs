@@ -11,7 +11,13 @@ use crate::input::{RecordReader, Sample, SampleReader, read_error};
 /// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
 /// the row, `(index, start of its outputs in values, p, m)`.
 pub(super) enum Rows<R: Read> {
-    Wide { reader: SampleReader<R>, sample: Sample, dims: Vec<(usize, usize)> },
+    /// `ids[k]`: the subsystem of the `k`-th `(p, m)` of `dims`.
+    Wide {
+        reader: SampleReader<R>,
+        sample: Sample,
+        dims: Vec<(usize, usize)>,
+        ids: Vec<usize>,
+    },
     Long(LongReader<R>),
 }
 
@@ -22,8 +28,45 @@ impl<R: Read> Rows<R> {
                 reader: SampleReader::new(input, name, &cfg.columns)?,
                 sample: Sample::default(),
                 dims: cfg.dims.clone(),
+                ids: (0..cfg.dims.len()).collect(),
             },
             InputLayout::Long => Self::Long(LongReader::new(cfg, input, name)?),
+        })
+    }
+
+    /// The rows of one site (`process`): in the wide layout only the columns of the
+    /// subsystems placed on it; in the long layout every row names its subsystem (a row of
+    /// another site's subsystem is refused by the run).
+    pub(super) fn for_site(
+        cfg: &NetConfig,
+        process_of: &[usize],
+        process: usize,
+        input: R,
+        name: &str,
+    ) -> Result<Self, CliError> {
+        if cfg.layout == InputLayout::Long {
+            return Self::new(cfg, input, name);
+        }
+        let mut columns = cfg.columns.clone();
+        columns.outputs.clear();
+        columns.inputs.clear();
+        let (mut dims, mut ids) = (Vec::new(), Vec::new());
+        let (mut yo, mut uo) = (0, 0);
+        for (i, &(p, m)) in cfg.dims.iter().enumerate() {
+            if process_of.get(i) == Some(&process) {
+                columns.outputs.extend_from_slice(&cfg.columns.outputs[yo..yo + p]);
+                columns.inputs.extend_from_slice(&cfg.columns.inputs[uo..uo + m]);
+                dims.push((p, m));
+                ids.push(i);
+            }
+            yo += p;
+            uo += m;
+        }
+        Ok(Self::Wide {
+            reader: SampleReader::new(input, name, &columns)?,
+            sample: Sample::default(),
+            dims,
+            ids,
         })
     }
 
@@ -35,13 +78,13 @@ impl<R: Read> Rows<R> {
         values.clear();
         items.clear();
         match self {
-            Self::Wide { reader, sample, dims } => {
+            Self::Wide { reader, sample, dims, ids } => {
                 if let Err(e) = reader.next_into(sample)? {
                     return Some(Err(e));
                 }
                 // The reader gives all outputs, then all inputs, in subsystem order.
                 let (mut yo, mut uo) = (0, 0);
-                for (i, &(p, m)) in dims.iter().enumerate() {
+                for (&i, &(p, m)) in ids.iter().zip(dims.iter()) {
                     items.push((i, values.len(), p, m));
                     values.extend_from_slice(&sample.y[yo..yo + p]);
                     values.extend_from_slice(&sample.u[uo..uo + m]);

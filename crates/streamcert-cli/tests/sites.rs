@@ -1,0 +1,323 @@
+//! `streamcert network` over three timely processes on localhost, each reading only its own
+//! subsystem's long-layout file: process 0's epoch rows are those of the one-process run over
+//! the merged file, byte for byte, with given and estimated couplings; after one process is
+//! killed (SIGKILL) mid-stream and restarted from its checkpoint, still; a damaged or
+//! another process's checkpoint is refused (exit 5) and the others wait undisturbed.
+
+mod common;
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{bin, run, text, tmp};
+
+const CONFIG: &str = r#"
+[network]
+epoch = 0.5
+stale_after = 2.5
+input = "long"
+
+[columns]
+time = "t"
+
+[[subsystem]]
+name = "A"
+outputs = ["y_a"]
+inputs = ["u_a"]
+gain = [[-2.0]]
+process = 0
+
+[[subsystem]]
+name = "B"
+outputs = ["y_b"]
+inputs = ["u_b"]
+gain = [[-2.5]]
+process = 1
+
+[[subsystem]]
+name = "C"
+outputs = ["y_c"]
+inputs = ["u_c"]
+gain = [[-3.0]]
+process = 2
+
+[[coupling]]
+from = "B"
+to = "A"
+gamma = 0.3
+
+[[coupling]]
+from = "C"
+to = "B"
+gamma = 0.3
+
+# Measured at C's site: its rows carry y_a (the driving output) as an input.
+[[coupling]]
+from = "A"
+to = "C"
+estimate = true
+
+[certificate]
+conservatism = 0.3
+margin = 0.1
+consecutive = 10
+
+[regression]
+window = 150
+horizon = 5
+ridge = 1e-4
+input_integral = "zero_order_hold"
+
+[ambiguity]
+enabled = false
+"#;
+
+/// A portable seeded generator (xorshift64*), uniform in [-1, 1).
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        let x = self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11;
+        x as f64 / (1u64 << 52) as f64 - 1.0
+    }
+}
+
+/// Three coupled scalar loops (`ẏ_i = a_i y_i + u_i + 0.2 y_j + w`, `u_i = k_i y_i + PRBS`),
+/// Euler steps of 10 ms; the long rows of each site (C's at a 5 ms offset, carrying `y_a`
+/// when `carry`) and all of them merged in time order.
+fn data(steps: usize, carry: bool) -> ([String; 3], String) {
+    let mut rng = Rng(0x5eed_0003);
+    let (a, k) = ([0.4, 0.3, 0.2], [-2.0, -2.5, -3.0]);
+    let (mut y, mut d) = ([0.0f64; 3], [1.0f64; 3]);
+    let mut sites = [String::new(), String::new(), String::new()];
+    let mut merged = String::new();
+    for step in 0..steps {
+        let t = step as f64 * 0.01;
+        for i in 0..3 {
+            if step % 20 == 0 && rng.next() > 0.0 {
+                d[i] = -d[i];
+            }
+        }
+        let u: Vec<f64> = (0..3).map(|i| k[i] * y[i] + d[i]).collect();
+        let tc = t + 0.005;
+        let rows = [
+            format!("{t},A,{},{}\n", y[0], u[0]),
+            format!("{t},B,{},{}\n", y[1], u[1]),
+            if carry {
+                format!("{tc},C,{},{},{}\n", y[2], u[2], y[0])
+            } else {
+                format!("{tc},C,{},{}\n", y[2], u[2])
+            },
+        ];
+        for (site, row) in sites.iter_mut().zip(&rows) {
+            site.push_str(row);
+            merged.push_str(row);
+        }
+        let next: Vec<f64> = (0..3)
+            .map(|i| {
+                let drive = 0.2 * y[(i + 1) % 3];
+                y[i] + 0.01 * (a[i] * y[i] + u[i] + drive) + 0.02 * rng.next()
+            })
+            .collect();
+        y.copy_from_slice(&next);
+    }
+    (sites, merged)
+}
+
+fn hostfile(tag: &str) -> PathBuf {
+    let ports: Vec<u16> = (0..3)
+        .map(|_| {
+            let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+            l.local_addr().expect("addr").port()
+        })
+        .collect();
+    let hosts = tmp(&format!("sites-hosts-{tag}.txt"));
+    let body: String = ports.iter().map(|p| format!("127.0.0.1:{p}\n")).collect();
+    std::fs::write(&hosts, body).expect("write");
+    hosts
+}
+
+fn process(cfg: &Path, hosts: &Path, index: usize, extra: &[&str], stdin: Stdio) -> Child {
+    let mut c: Command = bin();
+    c.args(["network", "--config", cfg.to_str().expect("utf8"), "--processes", "3"])
+        .args(["--process", &index.to_string(), "--hostfile", hosts.to_str().expect("utf8")])
+        .args(extra)
+        .stdin(stdin)
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    c.spawn().expect("spawn")
+}
+
+/// Wait for `child` at most `secs` seconds (killed and reported after).
+fn wait(mut child: Child, secs: u64, what: &str) -> std::process::Output {
+    let start = Instant::now();
+    loop {
+        match child.try_wait().expect("try_wait") {
+            Some(_) => return child.wait_with_output().expect("output"),
+            None if start.elapsed().as_secs() >= secs => {
+                let _ = child.kill();
+                let out = child.wait_with_output().expect("output");
+                panic!("{what} did not finish in {secs} s: {}", text(&out.stderr));
+            }
+            None => std::thread::sleep(Duration::from_millis(20)),
+        }
+    }
+}
+
+struct Setup {
+    cfg: PathBuf,
+    files: Vec<PathBuf>,
+    want: Vec<u8>,
+    site2: String,
+}
+
+fn setup(tag: &str, config: &str, steps: usize) -> Setup {
+    let (sites, merged) = data(steps, config.contains("estimate = true"));
+    let cfg = tmp(&format!("sites-{tag}.toml"));
+    std::fs::write(&cfg, config).expect("write");
+    let merged_path = tmp(&format!("sites-{tag}-merged.csv"));
+    std::fs::write(&merged_path, &merged).expect("write");
+    let files: Vec<PathBuf> = sites
+        .iter()
+        .enumerate()
+        .map(|(i, body)| {
+            let p = tmp(&format!("sites-{tag}-{i}.csv"));
+            std::fs::write(&p, body).expect("write");
+            p
+        })
+        .collect();
+    let one = run(
+        &[
+            "network",
+            "--config",
+            cfg.to_str().expect("utf8"),
+            "--input",
+            merged_path.to_str().expect("utf8"),
+        ],
+        b"",
+    );
+    assert!(one.status.success(), "{}", text(&one.stderr));
+    let site2 = sites[2].clone();
+    Setup { cfg, files, want: one.stdout, site2 }
+}
+
+fn path(p: &Path) -> &str {
+    p.to_str().expect("utf8")
+}
+
+#[test]
+fn three_sites_write_the_one_process_rows() {
+    for (tag, config) in [
+        ("given", CONFIG.replace("estimate = true", "gamma = 0.3")),
+        ("estimated", CONFIG.to_string()),
+    ] {
+        let s = setup(tag, &config, 3000);
+        let rows = text(&s.want).lines().count();
+        assert!(rows >= 55, "{tag}: {rows} epoch rows");
+        if tag == "estimated" {
+            assert!(text(&s.want).lines().next().is_some_and(|h| h.contains("gamma_A_C")));
+        }
+        let hosts = hostfile(tag);
+        let out = tmp(&format!("sites-{tag}-out.csv"));
+        let _ = std::fs::remove_file(&out);
+        let children: Vec<Child> = (0..3)
+            .map(|i| {
+                let mut extra = vec!["--input", path(&s.files[i])];
+                if i == 0 {
+                    extra.extend(["--output", path(&out)]);
+                }
+                process(&s.cfg, &hosts, i, &extra, Stdio::null())
+            })
+            .collect();
+        for (i, c) in children.into_iter().enumerate() {
+            let o = wait(c, 120, &format!("{tag}: process {i}"));
+            assert!(o.status.success(), "{tag}: process {i}: {}", text(&o.stderr));
+            if i > 0 {
+                // Only snapshots crossed: far fewer bytes than the site's raw rows.
+                let err = text(&o.stderr);
+                let bytes: u64 = err
+                    .split(" bytes of snapshots")
+                    .next()
+                    .and_then(|h| h.rsplit(", ").next())
+                    .and_then(|b| b.trim().parse().ok())
+                    .unwrap_or_else(|| panic!("{tag}: no byte count in: {err}"));
+                let raw = std::fs::metadata(&s.files[i]).expect("size").len();
+                assert!(bytes > 0 && bytes * 5 < raw, "{tag}: process {i} sent {bytes} of {raw}");
+            }
+        }
+        let got = std::fs::read(&out).expect("process 0's output");
+        assert_eq!(text(&got), text(&s.want), "{tag}: three processes");
+    }
+}
+
+#[test]
+fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
+    let s = setup("fault", CONFIG, 3000);
+    let hosts = hostfile("fault");
+    let out = tmp("sites-fault-out.csv");
+    let ck: Vec<PathBuf> = (0..3).map(|i| tmp(&format!("sites-fault-{i}.ckpt"))).collect();
+    for c in &ck {
+        let _ = std::fs::remove_file(c);
+    }
+    let _ = std::fs::remove_file(&out);
+    let site = |i: usize, input: &str, extra: &[&str], stdin: Stdio| {
+        let mut args = vec!["--input", input, "--checkpoint", path(&ck[i])];
+        args.extend_from_slice(extra);
+        if i == 0 {
+            args.extend(["--output", path(&out)]);
+        }
+        process(&s.cfg, &hosts, i, &args, stdin)
+    };
+    let p0 = site(0, path(&s.files[0]), &[], Stdio::null());
+    let p1 = site(1, path(&s.files[1]), &[], Stdio::null());
+    // Process 2 reads its standard input: the first 40 % of its rows, then nothing.
+    let mut p2 = site(2, "-", &[], Stdio::piped());
+    let lines: Vec<&str> = s.site2.lines().collect();
+    let head: String = lines[..lines.len() * 2 / 5].iter().map(|l| format!("{l}\n")).collect();
+    let mut pipe = p2.stdin.take().expect("stdin");
+    pipe.write_all(head.as_bytes()).expect("feed");
+    // Mid-stream: epochs written and process 2's checkpoint there; then SIGKILL.
+    let start = Instant::now();
+    while !(ck[2].exists() && std::fs::read(&out).is_ok_and(|o| text(&o).lines().count() > 10)) {
+        assert!(start.elapsed() < Duration::from_secs(60), "no progress before the kill");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    let before = text(&std::fs::read(&out).expect("out")).lines().count();
+    p2.kill().expect("SIGKILL");
+    let _ = p2.wait();
+    drop(pipe);
+    // While it is down no epoch is composed (held back).
+    std::thread::sleep(Duration::from_millis(1500));
+    let during = text(&std::fs::read(&out).expect("out")).lines().count();
+    assert!(before < s.want.len() && during <= text(&s.want).lines().count() / 2 + 5);
+    // A damaged checkpoint, then process 1's, are refused (exit 5); the others wait.
+    let damaged = tmp("sites-fault-damaged.ckpt");
+    let mut bytes = std::fs::read(&ck[2]).expect("checkpoint");
+    let mid = bytes.len() / 2;
+    bytes[mid] ^= 0x01;
+    std::fs::write(&damaged, &bytes).expect("write");
+    let foreign = tmp("sites-fault-foreign.ckpt");
+    std::fs::copy(&ck[1], &foreign).expect("copy");
+    for (what, bad) in [("damaged", &damaged), ("foreign", &foreign)] {
+        let args = ["--resume", path(bad)];
+        let refused = wait(site(2, path(&s.files[2]), &args, Stdio::null()), 60, what);
+        assert_eq!(refused.status.code(), Some(5), "{what}: {}", text(&refused.stderr));
+    }
+    // Restarted from its own checkpoint, reading its whole file.
+    let p2 = site(2, path(&s.files[2]), &["--resume", path(&ck[2])], Stdio::null());
+    let o2 = wait(p2, 120, "restarted process 2");
+    let o0 = wait(p0, 120, "process 0");
+    let o1 = wait(p1, 120, "process 1");
+    for (i, o) in [(0, &o0), (1, &o1), (2, &o2)] {
+        assert!(o.status.success(), "process {i}: {}", text(&o.stderr));
+    }
+    assert!(text(&o0.stderr).contains("rejoining"), "{}", text(&o0.stderr));
+    let got = std::fs::read(&out).expect("process 0's output");
+    assert_eq!(text(&got), text(&s.want), "the run with a crash and a restart");
+}

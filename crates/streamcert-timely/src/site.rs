@@ -1,0 +1,262 @@
+//! [`SiteState`]: the subsystems one process reads and certifies, with its epoch clock.
+
+use serde::{Deserialize, Serialize};
+use streamcert_certificate::{Certifier, CertifyError};
+use streamcert_network::{Composer, LocalSnapshot, NetworkConfig, NetworkError};
+
+use crate::wire::WireSnapshot;
+
+/// What one process (a *site*) holds: the certifiers of the subsystems it owns, their newest
+/// snapshots, and its epoch clock. Serde-serialisable: it is the site's checkpoint, written at
+/// an epoch boundary (before the row that crossed it is certified).
+///
+/// The snapshots it holds are those of every epoch `k` with `valid_from <= k < next` (its
+/// clock's next epoch), and of every later epoch as well once its input has ended
+/// (`finished`): a site resumed from this state re-sends them for the epoch its composer
+/// resumes at, so a restarted run composes what the uninterrupted one composed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SiteState {
+    process: usize,
+    owned: Vec<usize>,
+    certifiers: Vec<Certifier>,
+    snapshots: Vec<Option<LocalSnapshot>>,
+    clock: Composer,
+    valid_from: u64,
+    finished: bool,
+    rows: u64,
+    last_time: Option<f64>,
+    /// Position of every subsystem in `owned` (`u32::MAX`: another process's).
+    #[serde(skip)]
+    slot: Vec<u32>,
+    #[serde(skip)]
+    changed: Vec<bool>,
+    #[serde(skip)]
+    touched: Vec<u32>,
+}
+
+impl SiteState {
+    /// The site of `process`: the subsystems `i` with `process_of[i] == process`, each with a
+    /// new certifier.
+    ///
+    /// # Errors
+    /// [`NetworkError::Subsystem`] for a certifier configuration that is refused.
+    pub fn new(
+        cfg: &NetworkConfig,
+        process: usize,
+        process_of: &[usize],
+    ) -> Result<Self, NetworkError> {
+        let owned: Vec<usize> =
+            (0..cfg.subsystems.len()).filter(|&i| process_of.get(i) == Some(&process)).collect();
+        let certifiers = owned
+            .iter()
+            .map(|&i| {
+                Certifier::new(cfg.subsystems[i].certifier.clone()).map_err(|source| {
+                    NetworkError::Subsystem {
+                        index: i,
+                        name: cfg.subsystems[i].name.clone(),
+                        source,
+                    }
+                })
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let mut s = Self {
+            process,
+            snapshots: vec![None; owned.len()],
+            owned,
+            certifiers,
+            clock: Composer::new(),
+            valid_from: 0,
+            finished: false,
+            rows: 0,
+            last_time: None,
+            slot: Vec::new(),
+            changed: Vec::new(),
+            touched: Vec::new(),
+        };
+        s.index(cfg.subsystems.len());
+        Ok(s)
+    }
+
+    fn index(&mut self, n: usize) {
+        self.slot = vec![u32::MAX; n];
+        for (k, &i) in self.owned.iter().enumerate() {
+            if let Some(s) = self.slot.get_mut(i) {
+                *s = u32::try_from(k).unwrap_or(u32::MAX);
+            }
+        }
+        self.changed = vec![false; self.owned.len()];
+        self.touched.clear();
+    }
+
+    /// Check a state read back from a checkpoint against this run: the same process, the
+    /// same subsystems, each certifier valid ([`Certifier::verify`]) and built from its
+    /// subsystem's configuration, every stored number finite. A state that fails is refused.
+    ///
+    /// # Errors
+    /// A message naming what is wrong.
+    pub fn verify(
+        mut self,
+        cfg: &NetworkConfig,
+        process: usize,
+        process_of: &[usize],
+    ) -> Result<Self, String> {
+        if self.process != process {
+            return Err(format!(
+                "the checkpoint is process {}'s, not process {process}'s",
+                self.process
+            ));
+        }
+        let owned: Vec<usize> =
+            (0..cfg.subsystems.len()).filter(|&i| process_of.get(i) == Some(&process)).collect();
+        if owned != self.owned {
+            return Err("the checkpoint holds other subsystems than this process owns".into());
+        }
+        if self.certifiers.len() != owned.len() || self.snapshots.len() != owned.len() {
+            return Err("the checkpoint's certifiers do not match its subsystems".into());
+        }
+        let mut certifiers = Vec::with_capacity(owned.len());
+        for (c, &i) in std::mem::take(&mut self.certifiers).into_iter().zip(&owned) {
+            let c = c.verify().map_err(|e| format!("subsystem {i}: {e}"))?;
+            if c.config() != &cfg.subsystems[i].certifier {
+                return Err(format!("subsystem {i} has another configuration"));
+            }
+            certifiers.push(c);
+        }
+        self.certifiers = certifiers;
+        let bad = self.snapshots.iter().flatten().any(|s| !s.is_valid())
+            || self.last_time.is_some_and(|t| !t.is_finite());
+        if bad {
+            return Err("a stored time or certificate is not finite".into());
+        }
+        self.index(cfg.subsystems.len());
+        Ok(self)
+    }
+
+    /// The process this site is.
+    #[must_use]
+    pub fn process(&self) -> usize {
+        self.process
+    }
+
+    /// The subsystems it owns (indices in the network).
+    #[must_use]
+    pub fn owned(&self) -> &[usize] {
+        &self.owned
+    }
+
+    /// The first epoch whose snapshots this state holds.
+    #[must_use]
+    pub fn valid_from(&self) -> u64 {
+        self.valid_from
+    }
+
+    /// Its clock's next epoch (`None` before its first row).
+    #[must_use]
+    pub fn next_epoch(&self) -> Option<u64> {
+        self.clock.next_epoch()
+    }
+
+    /// Whether the state was written after the site's input ended.
+    #[must_use]
+    pub fn finished(&self) -> bool {
+        self.finished
+    }
+
+    /// Rows the site has certified.
+    #[must_use]
+    pub fn rows(&self) -> u64 {
+        self.rows
+    }
+
+    /// Time of its last row.
+    #[must_use]
+    pub fn last_time(&self) -> Option<f64> {
+        self.last_time
+    }
+
+    /// Whether this site owns subsystem `i`.
+    pub(crate) fn owns(&self, i: usize) -> bool {
+        self.slot.get(i).is_some_and(|&s| s != u32::MAX)
+    }
+
+    /// Whether subsystem `i`'s certifier already holds a sample at time `t` or later (a row
+    /// replayed after a restart).
+    pub(crate) fn held(&self, i: usize, t: f64) -> bool {
+        self.slot
+            .get(i)
+            .and_then(|&s| self.certifiers.get(s as usize))
+            .and_then(|c| c.regression().last_time())
+            .is_some_and(|l| t <= l)
+    }
+
+    /// The epochs made due by a row at `t` on this site's clock.
+    pub(crate) fn due(
+        &mut self,
+        cfg: &NetworkConfig,
+        t: f64,
+    ) -> Result<std::ops::Range<u64>, NetworkError> {
+        self.clock.due(cfg, t)
+    }
+
+    /// Mark the state as holding the epochs from `from` on (`finished`: and after its clock).
+    pub(crate) fn seal_at(&mut self, from: u64, finished: bool) {
+        self.valid_from = from;
+        self.finished = finished;
+    }
+
+    /// Certify one sample of owned subsystem `i`.
+    pub(crate) fn push(
+        &mut self,
+        cfg: &NetworkConfig,
+        i: usize,
+        t: f64,
+        values: &[f64],
+    ) -> Result<(), CertifyError> {
+        let Some(&s) = self.slot.get(i) else { return Ok(()) };
+        let k = s as usize;
+        let (Some(c), Some(slot)) = (self.certifiers.get_mut(k), self.snapshots.get_mut(k)) else {
+            return Ok(());
+        };
+        let p = c.config().regression.outputs.min(values.len());
+        let (y, u) = values.split_at(p);
+        let ev = c.push(t, y, u)?;
+        let v = *ev.verdict(cfg.certificate);
+        match slot {
+            Some(snap) => snap.update(t, v, c),
+            None => *slot = Some(LocalSnapshot::new(t, v, c)),
+        }
+        if !self.changed[k] {
+            self.changed[k] = true;
+            self.touched.push(s);
+        }
+        Ok(())
+    }
+
+    /// One row certified at `t`.
+    pub(crate) fn count(&mut self, t: f64) {
+        self.rows += 1;
+        self.last_time = Some(t);
+    }
+
+    /// Every owned subsystem's snapshot counts as changed (after a restart).
+    pub(crate) fn mark_all(&mut self) {
+        self.touched.clear();
+        for (k, c) in self.changed.iter_mut().enumerate() {
+            *c = true;
+            self.touched.push(u32::try_from(k).unwrap_or(u32::MAX));
+        }
+    }
+
+    /// Hand out the snapshots changed since the last call, in subsystem order.
+    pub(crate) fn drain_changed(&mut self, mut give: impl FnMut(u32, WireSnapshot)) {
+        self.touched.sort_unstable();
+        for &s in &self.touched {
+            let k = s as usize;
+            self.changed[k] = false;
+            if let Some(snap) = &self.snapshots[k] {
+                give(u32::try_from(self.owned[k]).unwrap_or(u32::MAX), snap.into());
+            }
+        }
+        self.touched.clear();
+    }
+}

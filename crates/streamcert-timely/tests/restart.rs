@@ -1,0 +1,110 @@
+//! A run restarted from the checkpoints it had written at any moment composes, from the
+//! composer's checkpointed epoch on, the reports of the uninterrupted run.
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use streamcert_certificate::CertifierConfig;
+use streamcert_network::{EpochReport, NetworkConfig, SubsystemSpec};
+use streamcert_regression::RegressionConfig;
+use streamcert_timely::{ComposerState, Output, Placement, Resume, Row, SiteState, run};
+
+#[derive(Debug, thiserror::Error)]
+#[error("bad row")]
+struct BadRow;
+
+fn network(n: usize) -> NetworkConfig {
+    let specs = (0..n)
+        .map(|i| {
+            let reg = RegressionConfig::new(1, 1, 60, 5, 1e-4);
+            let c = CertifierConfig::new(reg, vec![-1.0 - 0.2 * i as f64], 0.3, 0.1, 3);
+            SubsystemSpec::new(&format!("s{i}"), c)
+        })
+        .collect();
+    let edges = (0..n).map(|i| ((i + 1) % n, i, 0.05)).collect();
+    NetworkConfig::new(specs, edges, 0.25).split_risk(0.05)
+}
+
+/// One sample per row, subsystem `i` at its own times.
+fn rows(n: usize, steps: usize, seed: u64) -> Vec<Row> {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut y = vec![0.0; n];
+    let mut out = Vec::new();
+    for k in 0..steps {
+        for i in 0..n {
+            let u = -1.5 * y[i] + if rng.random::<bool>() { 1.0 } else { -1.0 };
+            out.push(Row {
+                line: out.len() as u64 + 2,
+                t: k as f64 * 0.01 + 0.001 * i as f64,
+                samples: vec![(i, vec![y[i], u])],
+            });
+            y[i] += 0.01 * (-0.2 * y[i] + u) + 0.01 * rng.random_range(-1.0..1.0);
+        }
+    }
+    out
+}
+
+/// What a run handed out, in order.
+#[derive(Clone)]
+enum Seen {
+    Epoch(Box<EpochReport>),
+    Site(Box<SiteState>),
+    Composer(Box<ComposerState>),
+}
+
+fn go(cfg: &NetworkConfig, data: Vec<Row>, resume: Option<Resume>) -> Vec<Seen> {
+    let mut seen = Vec::new();
+    let place = Placement::local(cfg.subsystems.len(), 1);
+    run(
+        cfg.clone(),
+        &place,
+        resume,
+        true,
+        move || data.into_iter().map(Ok::<Row, BadRow>),
+        |o| {
+            seen.push(match o {
+                Output::Epoch(r) => Seen::Epoch(Box::new(r.clone())),
+                Output::Site(s) => Seen::Site(Box::new(s.clone())),
+                Output::Composer(c) => Seen::Composer(Box::new(c.clone())),
+            });
+            Ok(())
+        },
+    )
+    .expect("run");
+    seen
+}
+
+fn epochs(seen: &[Seen]) -> Vec<EpochReport> {
+    seen.iter()
+        .filter_map(|s| if let Seen::Epoch(r) = s { Some((**r).clone()) } else { None })
+        .collect()
+}
+
+#[test]
+fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
+    let cfg = network(3);
+    let data = rows(3, 900, 21);
+    let whole = go(&cfg, data.clone(), None);
+    let want = epochs(&whole);
+    assert!(want.len() >= 30, "{} epochs", want.len());
+    let mut resumed = 0;
+    // A crash after any event: the newest checkpoints written by then.
+    for cut in (5..whole.len()).step_by(4) {
+        let site = whole[..cut].iter().rev().find_map(|s| match s {
+            Seen::Site(s) => Some((**s).clone()),
+            _ => None,
+        });
+        let composer = whole[..cut].iter().rev().find_map(|s| match s {
+            Seen::Composer(c) => Some((**c).clone()),
+            _ => None,
+        });
+        let Some(composer) = composer else { continue };
+        let from = composer.next_epoch().expect("started");
+        let site = site.map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
+        let again =
+            epochs(&go(&cfg, data.clone(), Some(Resume { site, composer: Some(composer) })));
+        let tail: Vec<EpochReport> = want.iter().filter(|r| r.epoch >= from).cloned().collect();
+        assert_eq!(again, tail, "crash after event {cut}, resumed at epoch {from}");
+        resumed += 1;
+    }
+    assert!(resumed >= 20, "{resumed} restarts");
+}

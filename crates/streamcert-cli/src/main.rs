@@ -119,6 +119,9 @@ struct ClusterArgs {
     /// (`stale_after`) instead of holding every epoch back. Default: wait for the input.
     #[arg(long)]
     silence: Option<f64>,
+    /// With --checkpoint: every process checkpoints every N epochs (default 1).
+    #[arg(long, value_name = "N")]
+    checkpoint_epochs: Option<u64>,
 }
 
 /// For scripts: the exit status says whether the verdict at the end is "certified".
@@ -319,8 +322,16 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 resume,
                 plot,
             };
-            let ClusterArgs { workers, processes, process, hostfile, silence } = cluster;
-            let cluster = network::Cluster { workers, processes, process, hostfile, silence };
+            let ClusterArgs { workers, processes, process, hostfile, silence, checkpoint_epochs } =
+                cluster;
+            let cluster = network::Cluster {
+                workers,
+                processes,
+                process,
+                hostfile,
+                silence,
+                checkpoint_epochs,
+            };
             if cluster.is_set() && opts.plot.is_some() {
                 return Err(CliError::Config {
                     path: path.clone(),

@@ -24,6 +24,9 @@ pub struct ComposerState {
     target: u64,
     /// Rows and last time per process, as last reported.
     sites: Vec<(u64, Option<f64>)>,
+    /// The run this state belongs to.
+    #[serde(default)]
+    run: u64,
 }
 
 /// A failure a site reported, in the composer's hands.
@@ -45,7 +48,18 @@ impl ComposerState {
             start: None,
             target: 0,
             sites: vec![(0, None); processes],
+            run: 0,
         }
+    }
+
+    /// The run this state belongs to.
+    #[must_use]
+    pub fn run_id(&self) -> u64 {
+        self.run
+    }
+
+    pub(crate) fn set_run(&mut self, run: u64) {
+        self.run = run;
     }
 
     /// The next epoch to compose (`None` before the run's first epoch is known).
@@ -121,15 +135,17 @@ impl ComposerState {
     }
 
     /// Compose every epoch that is complete (`complete(k)`: no site can still send for
-    /// timestamps `<= k`), handing each report to `epoch`; returns whether anything advanced
-    /// and the first failure merged.
+    /// timestamps `<= k`), handing each report to `epoch`, and pause when the next epoch is
+    /// the run's start or a multiple of `every` (a checkpoint is due); returns whether
+    /// anything advanced, whether it paused, and the first failure merged.
     pub(crate) fn advance(
         &mut self,
         cfg: &NetworkConfig,
         stash: &mut BTreeMap<u64, Vec<Msg>>,
         complete: &impl Fn(u64) -> bool,
+        every: u64,
         mut epoch: impl FnMut(EpochReport),
-    ) -> Result<(bool, Option<Reported>), NetworkError> {
+    ) -> Result<(bool, bool, Option<Reported>), NetworkError> {
         let mut progressed = false;
         loop {
             let k = match self.next {
@@ -140,13 +156,12 @@ impl ComposerState {
                         break;
                     }
                     if let Some(f) = self.merge_until(stash, 0) {
-                        return Ok((progressed, Some(f)));
+                        return Ok((progressed, false, Some(f)));
                     }
                     match self.start {
                         Some(s) => {
                             self.next = Some(s);
-                            progressed = true;
-                            continue;
+                            return Ok((true, true, None));
                         }
                         None => break,
                     }
@@ -156,7 +171,7 @@ impl ComposerState {
                 break;
             }
             if let Some(f) = self.merge_until(stash, k) {
-                return Ok((progressed, Some(f)));
+                return Ok((progressed, false, Some(f)));
             }
             if k >= self.target {
                 break;
@@ -165,8 +180,11 @@ impl ComposerState {
             epoch(report);
             self.next = Some(k + 1);
             progressed = true;
+            if (k + 1) % every.max(1) == 0 {
+                return Ok((true, true, None));
+            }
         }
-        Ok((progressed, None))
+        Ok((progressed, false, None))
     }
 
     /// Merge everything left (the end of the run: no epoch is due after it).

@@ -16,13 +16,14 @@ pub(crate) struct Hello {
     pub(crate) process: u32,
     /// Fingerprint of the network configuration and the placement.
     pub(crate) fingerprint: u64,
+    /// The run its checkpoints belong to (process 0 on a new run: a new identifier).
+    pub(crate) run: u64,
     /// Process 0: the resumed composer's next epoch (`None`: a new run).
     pub(crate) composer_next: Option<u64>,
-    /// Whether this process resumes its site from a checkpoint.
+    /// Whether this process resumes from a checkpoint.
     pub(crate) resumed: bool,
-    pub(crate) valid_from: u64,
-    pub(crate) clock_next: Option<u64>,
-    pub(crate) finished: bool,
+    /// The first epoch its checkpointed site holds (`None`: it had written none).
+    pub(crate) valid_from: Option<u64>,
 }
 
 /// Broadcast `mine` (the process's first worker has one) and collect every process's.
@@ -56,110 +57,105 @@ pub(crate) struct Refusal {
     pub(crate) refused: Vec<(usize, String)>,
 }
 
-/// The epoch the run resumes at (`None`: a new run), or the processes whose start is refused.
-pub(crate) fn decide(hellos: &[Hello], processes: usize) -> Result<Option<u64>, Refusal> {
+/// How the run starts.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) struct Plan {
+    /// The epoch the run resumes at (`None`: a new run).
+    pub(crate) start: Option<u64>,
+    /// The run's identifier.
+    pub(crate) run: u64,
+    /// Per process: whether it resumes its checkpointed site (else it reads its input
+    /// again from the start: its checkpoint holds epochs after the composer's).
+    pub(crate) use_site: Vec<bool>,
+}
+
+/// The plan every process computes from the same hellos, or the processes refused.
+pub(crate) fn decide(hellos: &[Hello], processes: usize) -> Result<Plan, Refusal> {
     let mut refused = Vec::new();
     let Some(zero) = hellos.iter().find(|h| h.process == 0) else {
         return Err(Refusal { refused: vec![(0, "process 0 did not start".into())] });
     };
+    let mut use_site = vec![false; processes];
     for p in 0..processes {
         let Some(h) = hellos.iter().find(|h| h.process as usize == p) else {
             refused.push((p, format!("process {p} did not start")));
             continue;
         };
+        let refuse = |why: String| (p, why);
         if h.fingerprint != zero.fingerprint {
-            refused.push((
-                p,
-                format!(
-                    "process {p} runs another configuration or subsystem placement than \
-                     process 0 (fingerprint {:016x}, process 0's {:016x})",
-                    h.fingerprint, zero.fingerprint
-                ),
-            ));
+            refused.push(refuse(format!(
+                "process {p} runs another configuration or subsystem placement than process 0 \
+                 (fingerprint {:016x}, process 0's {:016x})",
+                h.fingerprint, zero.fingerprint
+            )));
             continue;
         }
         match zero.composer_next {
-            None if h.resumed => refused.push((
-                p,
-                format!(
-                    "process 0 starts a new run, but process {p} resumes a checkpoint: start \
-                     process {p} without --resume, or resume process 0 from its checkpoint"
-                ),
-            )),
+            None if h.resumed => refused.push(refuse(format!(
+                "process 0 starts a new run, but process {p} resumes a checkpoint: start process \
+                 {p} without --resume, or resume process 0 from its checkpoint"
+            ))),
             None => {}
-            Some(k) if !h.resumed => refused.push((
-                p,
-                format!(
-                    "process 0 resumes at epoch {k}: process {p} must resume from its own \
-                     checkpoint (--resume), or every process starts over"
-                ),
-            )),
-            Some(k) => {
-                let fits =
-                    h.valid_from <= k && (h.finished || h.clock_next.is_none_or(|next| k <= next));
-                if !fits {
-                    let upto = if h.finished {
-                        "on".to_string()
-                    } else {
-                        format!("to {}", h.clock_next.map_or(0, |n| n.saturating_sub(1)))
-                    };
-                    refused.push((
-                        p,
-                        format!(
-                            "process {p}'s checkpoint holds epochs {} {upto}, but process 0 \
-                             composes from epoch {k}: resume process {p} from its newest \
-                             checkpoint (its own file, written with this run)",
-                            h.valid_from
-                        ),
-                    ));
-                }
-            }
+            Some(k) if !h.resumed => refused.push(refuse(format!(
+                "process 0 resumes at epoch {k}: process {p} must resume from its own \
+                 checkpoint (--resume), or every process starts over"
+            ))),
+            Some(_) if h.run != zero.run => refused.push(refuse(format!(
+                "process {p}'s checkpoint is of another run than process 0's (run {:016x}, \
+                 process 0's {:016x}): give it its own checkpoint of this run",
+                h.run, zero.run
+            ))),
+            Some(k) => use_site[p] = h.valid_from.is_some_and(|v| v <= k),
         }
     }
-    if refused.is_empty() { Ok(zero.composer_next) } else { Err(Refusal { refused }) }
+    if refused.is_empty() {
+        Ok(Plan { start: zero.composer_next, run: zero.run, use_site })
+    } else {
+        Err(Refusal { refused })
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn hello(process: u32, resumed: bool, valid_from: u64, next: Option<u64>) -> Hello {
-        Hello {
-            process,
-            fingerprint: 7,
-            composer_next: None,
-            resumed,
-            valid_from,
-            clock_next: next,
-            finished: false,
-        }
+    fn hello(process: u32, resumed: bool, valid_from: Option<u64>) -> Hello {
+        Hello { process, fingerprint: 7, run: 42, composer_next: None, resumed, valid_from }
     }
 
     #[test]
-    fn a_resumed_run_needs_every_site_at_the_composers_epoch() {
-        let fresh = [hello(0, false, 0, None), hello(1, false, 0, None)];
-        assert_eq!(decide(&fresh, 2).ok(), Some(None));
-        let mut zero = hello(0, true, 10, Some(12));
+    fn a_resumed_run_starts_at_the_composers_epoch() {
+        let fresh = [hello(0, false, None), hello(1, false, None)];
+        let plan = decide(&fresh, 2).ok().expect("a new run");
+        assert_eq!((plan.start, plan.run), (None, 42));
+        let mut zero = hello(0, true, Some(10));
         zero.composer_next = Some(11);
-        // Site 1 holds epochs 9..11 (valid from 9, next 12): it covers 11.
-        assert_eq!(decide(&[zero.clone(), hello(1, true, 9, Some(12))], 2).ok(), Some(Some(11)));
-        // Its next epoch is exactly the composer's: it sends at its next boundary.
-        assert!(decide(&[zero.clone(), hello(1, true, 9, Some(11))], 2).is_ok());
-        // An older checkpoint (epochs 3..5) or a newer one (from 12) is refused, naming it.
-        for late in [hello(1, true, 3, Some(6)), hello(1, true, 12, Some(13))] {
-            let r = decide(&[zero.clone(), late], 2).expect_err("refused");
+        // A site whose checkpoint holds epochs from 9 resumes it; one from 12 (written after
+        // the composer's) reads its input again; one with none too.
+        for (valid_from, used) in
+            [(Some(9), true), (Some(11), true), (Some(12), false), (None, false)]
+        {
+            let plan = decide(&[zero.clone(), hello(1, true, valid_from)], 2).ok().expect("ok");
+            assert_eq!(plan.start, Some(11));
+            assert_eq!(plan.use_site, vec![true, used], "{valid_from:?}");
+        }
+        // Refused, naming the process: a fresh process beside a resumed composer, a resumed
+        // one beside a new run, another run's checkpoint, another configuration, a missing one.
+        let mut other_run = hello(1, true, Some(9));
+        other_run.run = 43;
+        let mut other_cfg = hello(1, false, None);
+        other_cfg.fingerprint = 8;
+        for (hellos, needle) in [
+            (vec![zero.clone(), hello(1, false, None)], "must resume"),
+            (vec![hello(0, false, None), hello(1, true, Some(3))], "starts a new run"),
+            (vec![zero.clone(), other_run], "another run"),
+            (vec![hello(0, false, None), other_cfg], "another configuration"),
+            (vec![hello(0, false, None)], "did not start"),
+        ] {
+            let r = decide(&hellos, 2).expect_err(needle);
             assert_eq!(r.refused.len(), 1);
             assert_eq!(r.refused[0].0, 1);
-            assert!(r.refused[0].1.contains("composes from epoch 11"), "{}", r.refused[0].1);
+            assert!(r.refused[0].1.contains(needle), "{}", r.refused[0].1);
         }
-        // A fresh process beside a resumed composer, a resumed one beside a new run, another
-        // configuration, a missing process.
-        assert!(decide(&[zero.clone(), hello(1, false, 0, None)], 2).is_err());
-        assert!(decide(&[hello(0, false, 0, None), hello(1, true, 0, Some(3))], 2).is_err());
-        let mut other = hello(1, false, 0, None);
-        other.fingerprint = 8;
-        let r = decide(&[hello(0, false, 0, None), other], 2).expect_err("refused");
-        assert!(r.refused[0].1.contains("another configuration"));
-        assert!(decide(&[hello(0, false, 0, None)], 2).is_err());
     }
 }

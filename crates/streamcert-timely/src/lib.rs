@@ -29,21 +29,24 @@
 //! epochs up to it due, where the other sites' subsystems are stale, as in one process; beyond
 //! `max_epoch_jump` it stops that site with [`NetworkError::TimeJump`].
 //!
-//! **Checkpoints and restart.** With checkpoints on, every site hands out its [`SiteState`]
-//! at every boundary it crosses (after worker 0 composed the epochs before it, before it
-//! sends anything of the new ones), and process 0 its [`ComposerState`] after every batch of
-//! epochs it composes (after their reports were handed out, before its next epoch shows on
-//! the probe). The caller writes them; the worker waits until the caller says they are
-//! written. Hence at any crash the newest composer checkpoint's next epoch `K` lies within
-//! every site's newest checkpoint (`valid_from <= K <= next`): a run restarted with every
-//! process's own newest checkpoint ([`Resume`]) composes from `K` what the uninterrupted run
-//! composed (each site re-sends its snapshots at `K` and replays its input past the rows it
-//! holds). At the start every process broadcasts what it resumes from; a process whose
-//! checkpoint is of another configuration or placement, or does not cover `K`, is refused
-//! ([`TimelyError::Checkpoint`]) and the others get [`TimelyError::PeerRefused`]. Timely
-//! takes the whole computation down when one process dies (its connections fail):
-//! the others return [`TimelyError::PeerLost`], and may rejoin from their own checkpoints;
-//! no epoch is composed while a process is down (held back until it returns).
+//! **Checkpoints and restart.** With checkpoints every `e` epochs, every site hands out its
+//! [`SiteState`] when a row crosses a boundary range `a..b` holding a multiple of `e` (before
+//! it sends anything of the new epochs) and when its input ends, and process 0 its
+//! [`ComposerState`] at the run's first epoch and whenever its next epoch is a multiple of
+//! `e` (after the reports before it were handed out, before its next epoch shows on the
+//! probe). The caller writes them; the worker waits until the caller says they are written.
+//! A restarted run resumes at the composer's checkpointed epoch `K`: every site whose
+//! checkpoint holds epochs from `valid_from <= K` resumes it and re-sends its snapshots at
+//! `K`; a site whose checkpoint is newer than the composer's reads its input again from the
+//! start (every send is at a timestamp no earlier than `K`, so the composer sees at `K` the
+//! state its rows give at `K`). Either way the reports from `K` on are the uninterrupted
+//! run's (tested by restarting from the checkpoints of every moment of a run). At the start
+//! every process broadcasts what it resumes from; a process whose checkpoint is of another
+//! configuration, placement or run is refused ([`TimelyError::Checkpoint`]) and the others
+//! get [`TimelyError::PeerRefused`]. Timely takes the whole computation down when one
+//! process dies (its connections fail): the others return [`TimelyError::PeerLost`] and may
+//! rejoin from their own checkpoints; no epoch is composed while a process is down (held
+//! back until it returns).
 //!
 //! **Failures.** A row the source rejects, a time too far ahead or a sample a subsystem
 //! rejects stops that site, like the one-process run: the epochs before it are composed and
@@ -295,16 +298,17 @@ pub(crate) struct Shared<S> {
     pub(crate) cfg: NetworkConfig,
     pub(crate) place: Placement,
     pub(crate) fingerprint: u64,
-    pub(crate) checkpoints: bool,
+    pub(crate) checkpoints: Option<u64>,
     pub(crate) resume: Mutex<Option<Resume>>,
     pub(crate) source: Mutex<Option<S>>,
 }
 
 /// Certify the network `cfg` over the processes of `place`; this process reads `source` (the
 /// rows of the subsystems placed on it) and hands what the run produces to `handler` on the
-/// calling thread: process 0 every epoch report as it is composed, and with `checkpoints`
-/// every process its checkpoints to write (the run waits for `handler` to return; an error
-/// stops it). `resume`: this process's own checkpoints.
+/// calling thread: process 0 every epoch report as it is composed, and with
+/// `checkpoints = Some(e)` every process its checkpoints to write, every `e` epochs (the run
+/// waits for `handler` to return; an error stops it). `resume`: this process's own
+/// checkpoints.
 ///
 /// # Errors
 /// [`TimelyError`]: this site's first failure; on process 0 also another site's
@@ -313,7 +317,7 @@ pub fn run<E, S, I>(
     cfg: NetworkConfig,
     place: &Placement,
     resume: Option<Resume>,
-    checkpoints: bool,
+    checkpoints: Option<u64>,
     source: S,
     mut handler: impl FnMut(Output<'_>) -> Result<(), String>,
 ) -> Result<Outcome, TimelyError<E>>
@@ -359,7 +363,7 @@ where
         cfg,
         place: place.clone(),
         fingerprint,
-        checkpoints,
+        checkpoints: checkpoints.map(|e| e.max(1)),
         resume: Mutex::new(resume),
         source: Mutex::new(Some(source)),
     });

@@ -25,6 +25,9 @@ pub struct SiteState {
     finished: bool,
     rows: u64,
     last_time: Option<f64>,
+    /// The run this state belongs to (set at the start of every run).
+    #[serde(default)]
+    run: u64,
     /// Position of every subsystem in `owned` (`u32::MAX`: another process's).
     #[serde(skip)]
     slot: Vec<u32>,
@@ -69,6 +72,7 @@ impl SiteState {
             finished: false,
             rows: 0,
             last_time: None,
+            run: 0,
             slot: Vec::new(),
             changed: Vec::new(),
             touched: Vec::new(),
@@ -172,6 +176,16 @@ impl SiteState {
     #[must_use]
     pub fn last_time(&self) -> Option<f64> {
         self.last_time
+    }
+
+    /// The run this state belongs to.
+    #[must_use]
+    pub fn run_id(&self) -> u64 {
+        self.run
+    }
+
+    pub(crate) fn set_run(&mut self, run: u64) {
+        self.run = run;
     }
 
     /// Whether this site owns subsystem `i`.

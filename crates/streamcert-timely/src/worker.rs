@@ -30,18 +30,21 @@ where
     let site_worker = index == sh.place.process * sh.place.workers.max(1);
     let resume = if site_worker { sh.resume.lock().ok().and_then(|mut r| r.take()) } else { None };
     let site_resumed = resume.as_ref().and_then(|r| r.site.as_ref());
+    let composer_resumed = resume.as_ref().and_then(|r| r.composer.as_ref());
     let hello = site_worker.then(|| handshake::Hello {
         process: u32::try_from(sh.place.process).unwrap_or(u32::MAX),
         fingerprint: sh.fingerprint,
-        composer_next: resume.as_ref().and_then(|r| r.composer.as_ref()?.next_epoch()),
+        run: composer_resumed
+            .map(ComposerState::run_id)
+            .or_else(|| site_resumed.map(SiteState::run_id))
+            .unwrap_or_else(new_run_id),
+        composer_next: composer_resumed.and_then(ComposerState::next_epoch),
         resumed: resume.is_some(),
-        valid_from: site_resumed.map_or(0, SiteState::valid_from),
-        clock_next: site_resumed.and_then(SiteState::next_epoch),
-        finished: site_resumed.is_some_and(SiteState::finished),
+        valid_from: site_resumed.map(SiteState::valid_from),
     });
     let hellos = handshake::exchange(worker, hello);
-    let start = match handshake::decide(&hellos, sh.place.processes.max(1)) {
-        Ok(k) => k,
+    let plan = match handshake::decide(&hellos, sh.place.processes.max(1)) {
+        Ok(plan) => plan,
         Err(r) => {
             if site_worker {
                 let mine = r.refused.iter().find(|(p, _)| *p == sh.place.process);
@@ -62,15 +65,20 @@ where
             return;
         }
     };
+    let start = plan.start;
     let (composer, site) = match resume {
         Some(r) => (r.composer, r.site),
         None => (None, None),
     };
     let composer = (index == 0).then(|| {
-        composer.unwrap_or_else(|| {
+        let mut c = composer.unwrap_or_else(|| {
             ComposerState::new(sh.cfg.subsystems.len(), sh.place.processes.max(1))
-        })
+        });
+        c.set_run(plan.run);
+        c
     });
+    // A site checkpointed after the composer's epoch reads its input again from the start.
+    let site = site.filter(|_| plan.use_site.get(sh.place.process).copied().unwrap_or(false));
     let mut input = MsgInput::new();
     let probe = ProbeHandle::new();
     worker.dataflow::<u64, _, _>(|scope| {
@@ -105,30 +113,35 @@ where
                             return;
                         };
                         let complete = |k: u64| !frontier.less_equal(&k);
-                        let epoch = |r| send(&tx, Event::Epoch(Box::new(r)));
-                        let failed = match st.advance(&cfg, &mut stash, &complete, epoch) {
-                            Ok((progressed, failed)) => {
-                                // The epochs' reports were handed out; the checkpoint is
-                                // written before the probe shows the next epoch.
-                                let written = !(progressed && checkpoints)
-                                    || ask(&tx, |a| Event::Composer(Box::new(st.clone()), a));
-                                if !written {
-                                    cap = None;
-                                    state = None;
-                                    return;
-                                }
-                                if let (Some(c), Some(k)) = (cap.as_mut(), st.next_epoch()) {
-                                    if progressed {
+                        let every = checkpoints.unwrap_or(u64::MAX);
+                        let failed: Option<Failure<E>> = loop {
+                            let epoch = |r| send(&tx, Event::Epoch(Box::new(r)));
+                            match st.advance(&cfg, &mut stash, &complete, every, epoch) {
+                                Ok((progressed, paused, failed)) => {
+                                    // The epochs' reports were handed out; a due checkpoint
+                                    // is written before the probe shows the next epoch.
+                                    let written = !(paused && checkpoints.is_some())
+                                        || ask(&tx, |a| Event::Composer(Box::new(st.clone()), a));
+                                    if !written {
+                                        cap = None;
+                                        state = None;
+                                        return;
+                                    }
+                                    if let (Some(c), Some(k), true) =
+                                        (cap.as_mut(), st.next_epoch(), progressed)
+                                    {
                                         c.downgrade(&k);
                                     }
+                                    if failed.is_some() || !paused {
+                                        break failed.map(|f| Failure::Remote {
+                                            process: f.process,
+                                            line: f.line,
+                                            message: f.message,
+                                        });
+                                    }
                                 }
-                                failed.map(|f| Failure::Remote {
-                                    process: f.process,
-                                    line: f.line,
-                                    message: f.message,
-                                })
+                                Err(e) => break Some(Failure::Compose(e)),
                             }
-                            Err(e) => Some(Failure::Compose(e)),
                         };
                         if let Some(f) = failed {
                             send(&tx, Event::Failed(f));
@@ -156,10 +169,12 @@ where
             .probe_with(&probe);
     });
     if site_worker {
+        let restored = site.is_some();
         let site = site
             .map_or_else(|| SiteState::new(&sh.cfg, sh.place.process, &sh.place.process_of), Ok);
         match site {
-            Ok(site) => {
+            Ok(mut site) => {
+                site.set_run(plan.run);
                 let mut s = Site {
                     worker,
                     sh,
@@ -169,7 +184,7 @@ where
                     site,
                     outcome: Outcome { resumed_at: start, ..Outcome::default() },
                 };
-                s.run(start);
+                s.run(start, restored);
             }
             Err(e) => send(tx, Event::Failed(Failure::Checkpoint(e.to_string()))),
         }
@@ -226,7 +241,9 @@ where
     /// valid for them, send what changed, advance. `false`: the checkpoint was not written.
     fn boundary(&mut self, a: u64, b: u64) -> bool {
         self.wait_composed_before(a);
-        if self.sh.checkpoints {
+        // A checkpoint when the range holds a multiple of the period.
+        let due = self.sh.checkpoints.is_some_and(|e| (b - 1) / e * e >= a);
+        if due {
             self.site.seal_at(a, false);
             let state = Box::new(self.site.clone());
             if !ask(self.tx, |ack| Event::Site(state, ack)) {
@@ -241,9 +258,14 @@ where
         true
     }
 
-    /// Resume at epoch `k`: re-send what the composer needs from `k` on.
-    fn resume_at(&mut self, k: u64) {
+    /// Resume at epoch `k`: re-send what the composer needs from `k` on (a site without a
+    /// checkpoint only waits at `k`: its rows are read again from the start, every send at a
+    /// timestamp no earlier than `k`).
+    fn resume_at(&mut self, k: u64, restored: bool) {
         self.input.advance_to(k);
+        if !restored {
+            return;
+        }
         self.site.mark_all();
         let next = self.site.next_epoch();
         if self.site.finished() || next.is_some_and(|b| k < b) {
@@ -258,13 +280,13 @@ where
         }
     }
 
-    fn run<I>(&mut self, start: Option<u64>)
+    fn run<I>(&mut self, start: Option<u64>, restored: bool)
     where
         S: FnOnce() -> I + Send + 'static,
         I: Iterator<Item = Result<Row, E>>,
     {
         if let Some(k) = start {
-            self.resume_at(k);
+            self.resume_at(k, restored);
         }
         let source = self.sh.source.lock().ok().and_then(|mut s| s.take());
         let (row_tx, rows) = mpsc::sync_channel::<Result<Row, E>>(4096);
@@ -278,14 +300,14 @@ where
                 }
             });
         }
-        let failure = self.read(&rows, start.is_some());
+        let failure = self.read(&rows, restored);
         drop(rows);
         let process = u32::try_from(self.sh.place.process).unwrap_or(u32::MAX);
         match failure {
             None => {
                 // The input ended: the final snapshots hold from the clock's next epoch on.
                 let at = *self.input.time();
-                if self.sh.checkpoints && self.site.next_epoch().is_some() {
+                if self.sh.checkpoints.is_some() && self.site.next_epoch().is_some() {
                     self.wait_composed_before(at);
                     self.site.seal_at(at, true);
                     let state = Box::new(self.site.clone());
@@ -422,6 +444,15 @@ where
             Err(source) => Some((0, Failure::Network { line: 0, source })),
         }
     }
+}
+
+/// An identifier for a new run (its checkpoints carry it): the wall clock and the process id.
+fn new_run_id() -> u64 {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let text = format!("{nanos}-{}", std::process::id());
+    streamcert_certificate::fnv1a64(text.as_bytes())
 }
 
 /// A site's failure as text for process 0.

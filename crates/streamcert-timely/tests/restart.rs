@@ -51,14 +51,14 @@ enum Seen {
     Composer(Box<ComposerState>),
 }
 
-fn go(cfg: &NetworkConfig, data: Vec<Row>, resume: Option<Resume>) -> Vec<Seen> {
+fn go(cfg: &NetworkConfig, data: Vec<Row>, resume: Option<Resume>, every: u64) -> Vec<Seen> {
     let mut seen = Vec::new();
     let place = Placement::local(cfg.subsystems.len(), 1);
     run(
         cfg.clone(),
         &place,
         resume,
-        true,
+        Some(every),
         move || data.into_iter().map(Ok::<Row, BadRow>),
         |o| {
             seen.push(match o {
@@ -83,28 +83,42 @@ fn epochs(seen: &[Seen]) -> Vec<EpochReport> {
 fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
     let cfg = network(3);
     let data = rows(3, 900, 21);
-    let whole = go(&cfg, data.clone(), None);
-    let want = epochs(&whole);
-    assert!(want.len() >= 30, "{} epochs", want.len());
-    let mut resumed = 0;
-    // A crash after any event: the newest checkpoints written by then.
-    for cut in (5..whole.len()).step_by(4) {
-        let site = whole[..cut].iter().rev().find_map(|s| match s {
-            Seen::Site(s) => Some((**s).clone()),
-            _ => None,
-        });
-        let composer = whole[..cut].iter().rev().find_map(|s| match s {
-            Seen::Composer(c) => Some((**c).clone()),
-            _ => None,
-        });
-        let Some(composer) = composer else { continue };
-        let from = composer.next_epoch().expect("started");
-        let site = site.map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
-        let again =
-            epochs(&go(&cfg, data.clone(), Some(Resume { site, composer: Some(composer) })));
-        let tail: Vec<EpochReport> = want.iter().filter(|r| r.epoch >= from).cloned().collect();
-        assert_eq!(again, tail, "crash after event {cut}, resumed at epoch {from}");
-        resumed += 1;
+    let mut want: Option<Vec<EpochReport>> = None;
+    for every in [1, 3] {
+        let whole = go(&cfg, data.clone(), None, every);
+        let reports = epochs(&whole);
+        assert!(reports.len() >= 30, "{} epochs", reports.len());
+        // The period changes what is written, never the reports.
+        assert_eq!(want.get_or_insert_with(|| reports.clone()), &reports);
+        let mut resumed = 0;
+        // A crash after any event: the newest checkpoints written by then; and an older
+        // composer's beside the newest site's (the site then reads its input again).
+        for cut in (5..whole.len()).step_by(4) {
+            let newest = |before: usize| {
+                let site = whole[..before].iter().rev().find_map(|s| match s {
+                    Seen::Site(s) => Some((**s).clone()),
+                    _ => None,
+                });
+                let composer = whole[..before].iter().rev().find_map(|s| match s {
+                    Seen::Composer(c) => Some((**c).clone()),
+                    _ => None,
+                });
+                (site, composer)
+            };
+            let (site, composer) = newest(cut);
+            let older = newest(cut / 2).1;
+            for composer in [composer, older] {
+                let Some(composer) = composer else { continue };
+                let from = composer.next_epoch().expect("started");
+                let site = site.clone().map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
+                let resume = Resume { site, composer: Some(composer) };
+                let again = epochs(&go(&cfg, data.clone(), Some(resume), every));
+                let tail: Vec<EpochReport> =
+                    reports.iter().filter(|r| r.epoch >= from).cloned().collect();
+                assert_eq!(again, tail, "period {every}: crash after event {cut}, epoch {from}");
+                resumed += 1;
+            }
+        }
+        assert!(resumed >= 25, "{resumed} restarts");
     }
-    assert!(resumed >= 20, "{resumed} restarts");
 }

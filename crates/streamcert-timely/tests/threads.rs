@@ -84,7 +84,7 @@ fn timely(
         cfg.clone(),
         &Placement::local(cfg.subsystems.len(), workers),
         None,
-        false,
+        None,
         move || rows.into_iter().map(Ok::<Row, BadRow>),
         collect(&mut out),
     );
@@ -130,7 +130,7 @@ fn a_bad_row_and_a_time_jump_stop_the_run() {
         cfg.clone(),
         &Placement::local(3, 2),
         None,
-        false,
+        None,
         move || head.into_iter().map(Ok).chain(std::iter::once(Err(BadRow))),
         collect(&mut out),
     );
@@ -143,7 +143,7 @@ fn a_bad_row_and_a_time_jump_stop_the_run() {
         cfg,
         &Placement::local(3, 1),
         None,
-        false,
+        None,
         move || jump.into_iter().map(Ok::<Row, BadRow>),
         collect(&mut out),
     );
@@ -189,7 +189,7 @@ fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
         cfg,
         &Placement::local(3, 2),
         None,
-        false,
+        None,
         move || data.into_iter().map(Ok::<Row, BadRow>),
         collect(&mut out),
     );
@@ -209,7 +209,7 @@ fn an_unknown_subsystem_and_a_bad_certifier_are_refused() {
         bad,
         &Placement::local(2, 1),
         None,
-        false,
+        None,
         std::iter::empty::<Result<Row, BadRow>>,
         |_| Ok(()),
     );

@@ -39,6 +39,8 @@ pub struct Cluster {
     /// A site whose input is silent this long (wall clock, seconds) advances its clock (its
     /// subsystems turn stale instead of holding every epoch back).
     pub silence: Option<f64>,
+    /// With `--checkpoint`: checkpoint every this many epochs (default 1).
+    pub checkpoint_epochs: Option<u64>,
 }
 
 impl Cluster {
@@ -227,8 +229,8 @@ pub fn run_timely<W: Write>(
     }
     if opts.checkpoint_every.is_some() {
         return Err(bad(
-            "--checkpoint-every is for one-process runs: over timely, every process checkpoints \
-             at every epoch boundary it crosses"
+            "--checkpoint-every counts rows of a one-process run: over timely, every process \
+             checkpoints at epoch boundaries (every epoch boundary, or --checkpoint-epochs N)"
                 .into(),
         ));
     }
@@ -272,7 +274,7 @@ pub fn run_timely<W: Write>(
             cfg.network.clone(),
             &place,
             resume.take(),
-            checkpoint.is_some(),
+            checkpoint.as_ref().map(|_| cluster.checkpoint_epochs.unwrap_or(1).max(1)),
             source,
             |o| {
                 match o {

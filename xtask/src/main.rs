@@ -11,6 +11,11 @@
 //!   the true rate over their regions on scalar nonlinear loops (NONLINEAR.md).
 //! * `network`: the live network certificate of up to 10⁴ subsystems against the true
 //!   network rate (NETWORK.md).
+//! * `sites`: the network service across timely processes: bytes that cross per epoch against
+//!   the raw-sample path, and throughput against one-process `push_batch` (NETWORK.md,
+//!   BENCHMARKS.md).
+//! * `soak`: three `streamcert` processes under faults (two kills and restarts, a clock step,
+//!   a burst of malformed rows) against the one-process run (NETWORK.md).
 //! * `reliability`: bad inputs through the binary (RELIABILITY.md).
 //!
 //! The command line is clap's: `cargo xtask --help`, `cargo xtask reproduce --help`. Every
@@ -29,6 +34,8 @@ mod real;
 mod reliability;
 mod report;
 mod sensitivity;
+mod sites;
+mod soak;
 mod validity;
 
 use std::path::PathBuf;
@@ -109,6 +116,50 @@ enum Command {
         threads: usize,
         /// Output folder.
         #[arg(long, default_value = "target/network")]
+        out: PathBuf,
+    },
+    /// The network service across timely processes (threads here, TCP on localhost): bytes
+    /// across process boundaries per epoch against the raw-sample path, and samples per
+    /// second against one-process `push_batch` (NETWORK.md, BENCHMARKS.md).
+    Sites {
+        /// Subsystems of the bytes study.
+        #[arg(long, default_value_t = 10_000)]
+        subsystems: usize,
+        /// Processes of the bytes study.
+        #[arg(long, default_value_t = 4)]
+        processes: usize,
+        /// Sampling rate [Hz].
+        #[arg(long, default_value_t = 1000.0)]
+        rate: f64,
+        /// Seconds of data.
+        #[arg(long, default_value_t = 3.0)]
+        seconds: f64,
+        /// Subsystems of the throughput study (2 processes against push_batch).
+        #[arg(long, default_value_t = 100)]
+        throughput_subsystems: usize,
+        /// Seconds of data of the throughput study.
+        #[arg(long, default_value_t = 30.0)]
+        throughput_seconds: f64,
+        /// A `streamcert` binary of commit c302992 (the raw-sample path): also compare the two
+        /// binaries on the throughput study's samples written as CSV.
+        #[arg(long)]
+        old_binary: Option<PathBuf>,
+        /// Output folder.
+        #[arg(long, default_value = "target/sites")]
+        out: PathBuf,
+    },
+    /// Three `streamcert network` processes on localhost under faults (SIGKILL and restart of
+    /// two processes, a clock step at one site, malformed rows at another) against the
+    /// one-process run over the same rows; peak memory per process (NETWORK.md).
+    Soak {
+        /// Subsystems (placed round-robin on the 3 processes).
+        #[arg(long, default_value_t = 1000)]
+        subsystems: usize,
+        /// Steps of 10 ms per subsystem.
+        #[arg(long, default_value_t = 10_000)]
+        steps: usize,
+        /// Output folder.
+        #[arg(long, default_value = "target/soak")]
         out: PathBuf,
     },
     /// Every bad input through the streamcert binary: exit code and message per case
@@ -244,6 +295,26 @@ fn main() -> Result<()> {
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)
         }
+        Command::Sites {
+            subsystems,
+            processes,
+            rate,
+            seconds,
+            throughput_subsystems,
+            throughput_seconds,
+            old_binary,
+            out,
+        } => sites::run(
+            subsystems,
+            processes,
+            rate,
+            seconds,
+            throughput_subsystems,
+            throughput_seconds,
+            old_binary.as_deref(),
+            &out,
+        ),
+        Command::Soak { subsystems, steps, out } => soak::run(subsystems, steps, &out),
         Command::Reliability { out } => reliability::run_all(&out),
     }
 }

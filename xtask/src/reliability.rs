@@ -11,7 +11,7 @@ use anyhow::{Context, Result, bail};
 use crate::common::{markdown, write};
 
 /// The binary, built in release mode by this command.
-fn binary() -> Result<PathBuf> {
+pub(crate) fn binary() -> Result<PathBuf> {
     let status = Command::new(std::env::var("CARGO").unwrap_or_else(|_| "cargo".into()))
         .args(["build", "--release", "-q", "-p", "streamcert-cli"])
         .status()

@@ -323,3 +323,50 @@ fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
     let got = std::fs::read(&out).expect("process 0's output");
     assert_eq!(text(&got), text(&s.want), "the run with a crash and a restart");
 }
+
+/// A site whose live input falls silent does not hold the network back: with `--silence`, its
+/// clock advances with the wall clock, its subsystem turns stale under `stale_after`, and the
+/// other sites' epochs are composed and written (not certified, naming the stale subsystem).
+#[test]
+fn a_silent_site_turns_stale_instead_of_holding_the_run() {
+    let config = CONFIG.replace("estimate = true", "gamma = 0.3");
+    let s = setup("silent", &config, 1000);
+    let hosts = hostfile("silent");
+    let out = tmp("sites-silent-out.csv");
+    let _ = std::fs::remove_file(&out);
+    let p0 = process(
+        &s.cfg,
+        &hosts,
+        0,
+        &["--input", path(&s.files[0]), "--output", path(&out), "--flush-each-row"],
+        Stdio::null(),
+    );
+    let p1 = process(&s.cfg, &hosts, 1, &["--input", path(&s.files[1])], Stdio::null());
+    let mut p2 = process(&s.cfg, &hosts, 2, &["--input", "-", "--silence", "0.2"], Stdio::piped());
+    let head: String = s.site2.lines().take(200).map(|l| format!("{l}\n")).collect();
+    let mut pipe = p2.stdin.take().expect("stdin");
+    pipe.write_all(head.as_bytes()).expect("feed");
+    // Its rows end at t = 2 s; the epochs go on to the others' end (t = 10 s).
+    let start = Instant::now();
+    let rows = || text(&std::fs::read(&out).unwrap_or_default()).lines().count();
+    while rows() < 20 {
+        assert!(start.elapsed() < Duration::from_secs(60), "{} rows after 60 s", rows());
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    drop(pipe);
+    for (i, c) in [p0, p1, p2].into_iter().enumerate() {
+        let o = wait(c, 60, &format!("process {i}"));
+        assert!(o.status.success(), "process {i}: {}", text(&o.stderr));
+    }
+    let got = text(&std::fs::read(&out).expect("output"));
+    let stale: Vec<&str> = got.lines().filter(|l| l.contains("C: stale")).collect();
+    assert!(stale.len() >= 8, "{got}");
+    for line in &stale {
+        // Not certified while C is stale: `t,epoch,rate,certified,...`.
+        assert_eq!(line.split(',').nth(3), Some("0"), "{line}");
+    }
+    // Before C fell silent the rows are the one-process run's.
+    let want = text(&s.want);
+    let early: Vec<&str> = want.lines().take(5).collect();
+    assert_eq!(got.lines().take(5).collect::<Vec<_>>(), early);
+}

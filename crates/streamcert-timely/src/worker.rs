@@ -195,6 +195,13 @@ where
     }
 }
 
+/// What the input gives next.
+enum Next<E> {
+    Row(Option<Result<Row, E>>),
+    /// Nothing for a while (a live input read on a reader thread).
+    Quiet,
+}
+
 /// The site: this process's subsystems, fed from its own input.
 struct Site<'a, S, E> {
     worker: &'a mut timely::worker::Worker,
@@ -289,19 +296,41 @@ where
             self.resume_at(k, restored);
         }
         let source = self.sh.source.lock().ok().and_then(|mut s| s.take());
-        let (row_tx, rows) = mpsc::sync_channel::<Result<Row, E>>(4096);
-        if let Some(source) = source {
-            std::thread::spawn(move || {
-                for item in source() {
-                    let stop = item.is_err();
-                    if row_tx.send(item).is_err() || stop {
-                        break;
+        let failure = match source {
+            // Without a silence rule the rows are read on the worker itself (fastest); with
+            // one, on a reader thread, so that a quiet input leaves the worker free to step
+            // and to advance its clock.
+            Some(source) if self.sh.place.silence.is_none() => {
+                let mut rows = source();
+                self.read(|| Next::Row(rows.next()), restored)
+            }
+            Some(source) => {
+                let (row_tx, rows) = mpsc::sync_channel::<Result<Row, E>>(4096);
+                std::thread::spawn(move || {
+                    for item in source() {
+                        let stop = item.is_err();
+                        if row_tx.send(item).is_err() || stop {
+                            break;
+                        }
                     }
-                }
-            });
-        }
-        let failure = self.read(&rows, restored);
-        drop(rows);
+                });
+                self.read(
+                    || match rows.try_recv() {
+                        Ok(item) => Next::Row(Some(item)),
+                        Err(TryRecvError::Disconnected) => Next::Row(None),
+                        Err(TryRecvError::Empty) => {
+                            match rows.recv_timeout(Duration::from_millis(1)) {
+                                Ok(item) => Next::Row(Some(item)),
+                                Err(RecvTimeoutError::Disconnected) => Next::Row(None),
+                                Err(RecvTimeoutError::Timeout) => Next::Quiet,
+                            }
+                        }
+                    },
+                    restored,
+                )
+            }
+            None => None,
+        };
         let process = u32::try_from(self.sh.place.process).unwrap_or(u32::MAX);
         match failure {
             None => {
@@ -334,7 +363,7 @@ where
     /// Read and certify until the input ends or fails; the failure and its line.
     fn read(
         &mut self,
-        rows: &mpsc::Receiver<Result<Row, E>>,
+        mut next: impl FnMut() -> Next<E>,
         resumed: bool,
     ) -> Option<(u64, Failure<E>)> {
         let cfg = &self.sh.cfg;
@@ -343,19 +372,17 @@ where
         let mut count = 0u64;
         let mut quiet_since = Instant::now();
         loop {
-            let item = match rows.try_recv() {
-                Ok(item) => item,
-                Err(TryRecvError::Disconnected) => return None,
-                Err(TryRecvError::Empty) => {
+            let item = match next() {
+                Next::Row(Some(item)) => item,
+                Next::Row(None) => return None,
+                Next::Quiet => {
+                    // A quiet input: keep the dataflow moving, and advance a silent site's
+                    // clock.
                     self.worker.step();
                     if let Some(f) = self.silence(quiet_since) {
                         return Some(f);
                     }
-                    match rows.recv_timeout(Duration::from_millis(1)) {
-                        Ok(item) => item,
-                        Err(RecvTimeoutError::Timeout) => continue,
-                        Err(RecvTimeoutError::Disconnected) => return None,
-                    }
+                    continue;
                 }
             };
             quiet_since = Instant::now();

@@ -1,0 +1,457 @@
+//! `cargo xtask sites`: the network service across sites (NETWORK.md, "Across sites";
+//! BENCHMARKS.md). `N` scalar loops `ẏ_i = a_i y_i + u_i + w_i` (explored by
+//! `u_i = −2 y_i + PRBS(±1)`, Gaussian process noise) sampled at `rate` Hz, placed round-robin
+//! on `P` timely processes (threads of this process, talking over localhost TCP exactly as
+//! separate machines do), each process generating and certifying only its own subsystems'
+//! rows; worker 0 composes every 1 s epoch.
+//!
+//! * **Bytes.** What crossed process boundaries (the bincode size of every message a process
+//!   other than 0 sent to the composer, as timely serialises it), per epoch, against what the
+//!   raw-sample path of commit c302992 sent for the same rows: process 0 read every row and
+//!   shipped each sample of a subsystem owned by another process as `Sample { row, line,
+//!   index, t, values }` (its bincode size, measured here on a struct of the same fields).
+//! * **Throughput.** Samples per second over 2 processes against the one-process
+//!   `NetworkCertifier::push_batch` over 2 threads on the same samples (the ceiling).
+
+use std::fmt::Write as _;
+use std::path::Path;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result, anyhow};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use serde::Serialize;
+use streamcert_certificate::CertifierConfig;
+use streamcert_network::{NetworkCertifier, NetworkConfig, SampleBatch, SubsystemSpec};
+use streamcert_regression::{InputIntegral, RegressionConfig};
+use streamcert_timely::{Output, Placement, Row};
+
+use crate::common::{markdown, seed, write};
+
+const SIGMA: f64 = 0.05;
+const EPOCH: f64 = 1.0;
+
+/// The raw-sample message of the path this replaces (commit c302992), field for field.
+#[derive(Serialize)]
+struct OldSample {
+    row: u64,
+    line: u64,
+    index: u32,
+    t: f64,
+    values: Vec<f64>,
+}
+
+fn network(n: usize) -> NetworkConfig {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed(0, 9300));
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(1, 1, 150, 5, 1e-4)
+    };
+    let specs = (0..n)
+        .map(|i| {
+            let beta: f64 = rng.random_range(1.0..3.0);
+            let c = CertifierConfig::new(reg, vec![-beta], 0.3, 0.05, 1);
+            SubsystemSpec::new(&format!("s{i}"), c)
+        })
+        .collect();
+    let edges = (0..n)
+        .flat_map(|i| [((i + 1) % n, i, 0.05), ((i + 7) % n, i, 0.05)])
+        .filter(|&(a, b, _)| a != b)
+        .collect();
+    let mut cfg = NetworkConfig::new(specs, edges, EPOCH).split_risk(0.05);
+    cfg.margin = 0.1;
+    cfg
+}
+
+/// The rows of subsystems `ids` (one sample per row, in time order), `steps` steps of `dt`.
+struct Rows {
+    ids: Vec<usize>,
+    y: Vec<f64>,
+    d: Vec<f64>,
+    a: Vec<f64>,
+    rng: ChaCha8Rng,
+    step: usize,
+    k: usize,
+    steps: usize,
+    dt: f64,
+}
+
+impl Rows {
+    fn new(ids: Vec<usize>, steps: usize, dt: f64, stream: u64) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed(0, 9400 + stream));
+        let a = ids.iter().map(|_| rng.random_range(-0.5..0.5)).collect();
+        Self {
+            y: vec![0.0; ids.len()],
+            d: vec![1.0; ids.len()],
+            a,
+            ids,
+            rng,
+            step: 0,
+            k: 0,
+            steps,
+            dt,
+        }
+    }
+}
+
+impl Iterator for Rows {
+    type Item = Result<Row, std::io::Error>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.step >= self.steps || self.ids.is_empty() {
+            return None;
+        }
+        let (k, dt) = (self.k, self.dt);
+        if self.step % 50 == 0 && self.rng.random::<bool>() {
+            self.d[k] = -self.d[k];
+        }
+        let u = -2.0 * self.y[k] + self.d[k];
+        let t = self.step as f64 * dt;
+        let row = Row { line: 0, t, samples: vec![(self.ids[k], vec![self.y[k], u])] };
+        let w: f64 = self.rng.sample(StandardNormal);
+        self.y[k] += dt * (self.a[k] * self.y[k] + u) + SIGMA * dt.sqrt() * w;
+        self.k += 1;
+        if self.k == self.ids.len() {
+            self.k = 0;
+            self.step += 1;
+        }
+        Some(Ok(row))
+    }
+}
+
+/// What a run over `p` processes measured.
+struct Measured {
+    seconds: f64,
+    epochs: u64,
+    samples: u64,
+    bytes: u64,
+    messages: u64,
+}
+
+/// `n` subsystems round-robin over `p` processes (threads here, TCP on localhost).
+fn over_processes(n: usize, p: usize, steps: usize, dt: f64, out: &Path) -> Result<Measured> {
+    let cfg = network(n);
+    let ports: Vec<u16> = (0..p)
+        .map(|_| {
+            let l = std::net::TcpListener::bind("127.0.0.1:0")?;
+            Ok(l.local_addr()?.port())
+        })
+        .collect::<Result<_>>()?;
+    let hosts = out.join(format!("hosts-{p}.txt"));
+    let text: String = ports.iter().map(|port| format!("127.0.0.1:{port}\n")).collect();
+    std::fs::write(&hosts, text)?;
+    let process_of: Vec<usize> = (0..n).map(|i| i % p).collect();
+    let start = Instant::now();
+    let handles: Vec<_> = (0..p)
+        .map(|process| {
+            let place = Placement {
+                process_of: process_of.clone(),
+                processes: p,
+                process,
+                workers: 1,
+                hosts: Some(hosts.clone()),
+                silence: None,
+            };
+            let cfg = cfg.clone();
+            let ids: Vec<usize> = (0..n).filter(|i| i % p == process).collect();
+            std::thread::spawn(move || {
+                let mut epochs = 0u64;
+                let source = move || Rows::new(ids, steps, dt, process as u64);
+                let outcome = streamcert_timely::run(cfg, &place, None, None, source, |o| {
+                    if let Output::Epoch(_) = o {
+                        epochs += 1;
+                    }
+                    Ok(())
+                });
+                outcome.map(|o| (o, epochs)).map_err(|e| anyhow!("process {process}: {e}"))
+            })
+        })
+        .collect();
+    let mut m = Measured { seconds: 0.0, epochs: 0, samples: 0, bytes: 0, messages: 0 };
+    for h in handles {
+        let (o, epochs) = h.join().map_err(|_| anyhow!("a process thread panicked"))??;
+        m.epochs += epochs;
+        m.samples += o.rows;
+        m.bytes += o.bytes_sent;
+        if o.bytes_sent > 0 {
+            m.messages += o.messages;
+        }
+    }
+    m.seconds = start.elapsed().as_secs_f64();
+    Ok(m)
+}
+
+/// The same rows through one `NetworkCertifier::push_batch` over 2 threads.
+fn push_batch(n: usize, steps: usize, dt: f64) -> Result<(f64, u64)> {
+    let cfg = network(n);
+    let mut net = NetworkCertifier::new(cfg)?;
+    // The rows of the two-process run, merged in time order (process 0's, then 1's, per step).
+    let mut sites: Vec<Rows> = (0..2)
+        .map(|p| Rows::new((0..n).filter(|i| i % 2 == p).collect(), steps, dt, p as u64))
+        .collect();
+    let mut batch = SampleBatch::new();
+    let mut epochs = 0u64;
+    let start = Instant::now();
+    for chunk in 0..steps.div_ceil(100) {
+        batch.clear();
+        for _ in chunk * 100..((chunk + 1) * 100).min(steps) {
+            for site in &mut sites {
+                for _ in 0..site.ids.len() {
+                    if let Some(Ok(r)) = site.next() {
+                        let (i, v) = &r.samples[0];
+                        batch.push(*i, r.t, &v[..1], &v[1..]);
+                    }
+                }
+            }
+        }
+        net.push_batch(&batch, 2, |_| epochs += 1)?;
+    }
+    Ok((start.elapsed().as_secs_f64(), epochs))
+}
+
+/// The same study through binaries: the `streamcert` of commit c302992 (`old`: process 0
+/// reads the wide file and ships the samples) against this commit's (each process reads its
+/// own columns), 2 processes each, and this commit's one-process run; seconds of wall clock.
+fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Result<[f64; 3]> {
+    use std::io::Write as _;
+    let new = crate::reliability::binary()?;
+    let mut cfg =
+        String::from("[network]\nepoch = 1.0\nmargin = 0.1\n\n[columns]\ntime = \"t\"\n\n");
+    for i in 0..n {
+        writeln!(
+            cfg,
+            "[[subsystem]]\nname = \"s{i}\"\noutputs = [\"y{i}\"]\ninputs = [\"u{i}\"]\n\
+             gain = [[-2.0]]\nPLACE{i}\n"
+        )?;
+    }
+    cfg.push_str(
+        "[certificate]\nconservatism = 0.3\nmargin = 0.05\nconsecutive = 1\n\n[regression]\n\
+         window = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\n\
+         [ambiguity]\nenabled = false\n",
+    );
+    let mut old_cfg = cfg.clone();
+    let mut new_cfg = cfg;
+    for i in (0..n).rev() {
+        old_cfg = old_cfg.replace(&format!("PLACE{i}\n"), "");
+        new_cfg = new_cfg.replace(&format!("PLACE{i}\n"), &format!("process = {}\n", i % 2));
+    }
+    std::fs::write(out.join("old.toml"), old_cfg)?;
+    std::fs::write(out.join("new.toml"), new_cfg)?;
+    // The wide file, and each site's columns.
+    let mut sites: Vec<Rows> = (0..2)
+        .map(|p| Rows::new((0..n).filter(|i| i % 2 == p).collect(), steps, dt, p as u64))
+        .collect();
+    let mut wide = std::io::BufWriter::new(std::fs::File::create(out.join("wide.csv"))?);
+    let mut files: Vec<_> = (0..2)
+        .map(|p| {
+            Ok(std::io::BufWriter::new(std::fs::File::create(out.join(format!("site-{p}.csv")))?))
+        })
+        .collect::<Result<_>>()?;
+    let header = |ids: &mut dyn Iterator<Item = usize>| {
+        let mut h = String::from("t");
+        for i in ids {
+            let _ = write!(h, ",y{i},u{i}");
+        }
+        h
+    };
+    writeln!(wide, "{}", header(&mut (0..n)))?;
+    for (p, f) in files.iter_mut().enumerate() {
+        writeln!(f, "{}", header(&mut (0..n).filter(|i| i % 2 == p)))?;
+    }
+    let mut values = vec![(0.0, 0.0); n];
+    for step in 0..steps {
+        for (p, site) in sites.iter_mut().enumerate() {
+            let mut line = format!("{}", step as f64 * dt);
+            for _ in 0..site.ids.len() {
+                if let Some(Ok(r)) = site.next() {
+                    let (i, v) = &r.samples[0];
+                    values[*i] = (v[0], v[1]);
+                    let _ = write!(line, ",{},{}", v[0], v[1]);
+                }
+            }
+            writeln!(files[p], "{line}")?;
+        }
+        let mut line = format!("{}", step as f64 * dt);
+        for v in &values {
+            let _ = write!(line, ",{},{}", v.0, v.1);
+        }
+        writeln!(wide, "{line}")?;
+    }
+    wide.flush()?;
+    for f in &mut files {
+        f.flush()?;
+    }
+    let hosts = out.join("cli-hosts.txt");
+    let two = |bin: &Path, cfg: &str, inputs: [Option<PathBuf>; 2]| -> Result<f64> {
+        let ports: Vec<u16> = (0..2)
+            .map(|_| Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port()))
+            .collect::<Result<_>>()?;
+        std::fs::write(
+            &hosts,
+            ports.iter().map(|p| format!("127.0.0.1:{p}\n")).collect::<String>(),
+        )?;
+        let start = Instant::now();
+        let children: Vec<_> = (0..2)
+            .map(|p| {
+                let mut c = std::process::Command::new(bin);
+                c.args(["network", "--config"]).arg(out.join(cfg));
+                c.args(["--processes", "2", "--process", &p.to_string(), "--hostfile"]).arg(&hosts);
+                if let Some(input) = &inputs[p] {
+                    c.arg("--input").arg(input);
+                }
+                if p == 0 {
+                    c.arg("--output").arg(out.join(format!("{cfg}.out.csv")));
+                }
+                c.stdin(std::process::Stdio::null())
+                    .stdout(std::process::Stdio::null())
+                    .stderr(std::process::Stdio::null())
+                    .spawn()
+            })
+            .collect::<std::io::Result<_>>()?;
+        for mut c in children {
+            let status = c.wait()?;
+            anyhow::ensure!(status.success(), "{} {cfg}: {status}", bin.display());
+        }
+        Ok(start.elapsed().as_secs_f64())
+    };
+    let old_s = two(old, "old.toml", [Some(out.join("wide.csv")), None])?;
+    let new_s =
+        two(&new, "new.toml", [Some(out.join("site-0.csv")), Some(out.join("site-1.csv"))])?;
+    let start = Instant::now();
+    let status = std::process::Command::new(&new)
+        .args(["network", "--config"])
+        .arg(out.join("new.toml"))
+        .arg("--input")
+        .arg(out.join("wide.csv"))
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    anyhow::ensure!(status.success(), "one process: {status}");
+    let one_s = start.elapsed().as_secs_f64();
+    let a = std::fs::read(out.join("old.toml.out.csv"))?;
+    let b = std::fs::read(out.join("new.toml.out.csv"))?;
+    anyhow::ensure!(a == b, "the two binaries wrote different epoch rows");
+    Ok([old_s, new_s, one_s])
+}
+
+/// Run both studies and write `SITES.md` into `out`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn run(
+    subsystems: usize,
+    processes: usize,
+    rate: f64,
+    seconds: f64,
+    throughput_subsystems: usize,
+    throughput_seconds: f64,
+    old_binary: Option<&Path>,
+    out: &Path,
+) -> Result<()> {
+    std::fs::create_dir_all(out)?;
+    let dt = 1.0 / rate;
+    let steps = (seconds * rate).round() as usize;
+    eprintln!("bytes: {subsystems} subsystems over {processes} processes, {steps} steps…");
+    let m = over_processes(subsystems, processes, steps, dt, out).context("bytes study")?;
+    // The old path: every sample of a subsystem on another process crossed as one message.
+    let crossing = (0..subsystems).filter(|i| i % processes != 0).count() as u64 * steps as u64;
+    let one = OldSample { row: 1, line: 1, index: 1, t: 0.0, values: vec![0.0, 0.0] };
+    let old_bytes = crossing * bincode::serialized_size(&one)?;
+    let epochs = m.epochs.max(1);
+    let mut md = String::new();
+    writeln!(
+        md,
+        "Produced by `cargo xtask sites --subsystems {subsystems} --processes {processes} \
+         --rate {rate} --seconds {seconds} --throughput-subsystems {throughput_subsystems}`.\n"
+    )?;
+    writeln!(md, "### Bytes across process boundaries\n")?;
+    writeln!(
+        md,
+        "{subsystems} scalar subsystems sampled at {rate} Hz for {seconds} s ({} samples), \
+         placed round-robin on {processes} timely processes (threads of one process, TCP on \
+         localhost), epochs of {EPOCH} s, calibrated local certificates; {} epochs composed, \
+         {:.1} s wall.\n",
+        m.samples, m.epochs, m.seconds
+    )?;
+    let per = |b: u64| format!("{:.0}", b as f64 / epochs as f64);
+    md.push_str(&markdown(
+        &["path", "messages per epoch", "bytes per epoch", "ratio to raw samples"],
+        &[
+            vec![
+                "raw samples (commit c302992: process 0 reads and ships every sample)".into(),
+                per(crossing),
+                per(old_bytes),
+                "1".into(),
+            ],
+            vec![
+                "sites (this commit: only snapshots and marks cross)".into(),
+                per(m.messages),
+                per(m.bytes),
+                format!("1/{:.0}", old_bytes as f64 / m.bytes.max(1) as f64),
+            ],
+        ],
+    ));
+    eprintln!("throughput: {throughput_subsystems} subsystems, 2 processes vs push_batch…");
+    let tsteps = (throughput_seconds * rate).round() as usize;
+    let two = over_processes(throughput_subsystems, 2, tsteps, dt, out).context("throughput")?;
+    let (batch_s, _) = push_batch(throughput_subsystems, tsteps, dt)?;
+    let samples = (throughput_subsystems * tsteps) as f64;
+    writeln!(md, "\n### Throughput\n")?;
+    writeln!(
+        md,
+        "{throughput_subsystems} subsystems at {rate} Hz for {throughput_seconds} s \
+         ({samples:.0} samples) on this machine (2 cores), in one program (timely processes as \
+         threads, TCP on localhost; rows generated in memory).\n"
+    )?;
+    md.push_str(&markdown(
+        &["path", "seconds", "samples per second", "ratio to push_batch"],
+        &[
+            vec![
+                "one process, `push_batch` over 2 threads (ceiling)".into(),
+                format!("{batch_s:.2}"),
+                format!("{:.3e}", samples / batch_s),
+                "1".into(),
+            ],
+            vec![
+                "2 timely processes, each its own rows".into(),
+                format!("{:.2}", two.seconds),
+                format!("{:.3e}", samples / two.seconds),
+                format!("{:.2}", batch_s / two.seconds),
+            ],
+        ],
+    ));
+    if let Some(old) = old_binary {
+        eprintln!("throughput through the binaries (the old one: {})…", old.display());
+        let [old_s, new_s, one_s] = cli_throughput(old, throughput_subsystems, tsteps, dt, out)?;
+        writeln!(
+            md,
+            "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
+             processes on localhost; the two wrote the same epoch rows):\n"
+        )?;
+        md.push_str(&markdown(
+            &["path", "seconds", "samples per second", "ratio to c302992"],
+            &[
+                vec![
+                    "c302992: process 0 reads the wide file and ships the samples".into(),
+                    format!("{old_s:.2}"),
+                    format!("{:.3e}", samples / old_s),
+                    "1".into(),
+                ],
+                vec![
+                    "this commit: each process reads its own columns".into(),
+                    format!("{new_s:.2}"),
+                    format!("{:.3e}", samples / new_s),
+                    format!("{:.2}", old_s / new_s),
+                ],
+                vec![
+                    "this commit, one process (no timely)".into(),
+                    format!("{one_s:.2}"),
+                    format!("{:.3e}", samples / one_s),
+                    format!("{:.2}", old_s / one_s),
+                ],
+            ],
+        ));
+    }
+    write(&out.join("SITES.md"), &md)?;
+    println!("{md}");
+    Ok(())
+}

@@ -361,7 +361,9 @@ pub(crate) fn run(
     writeln!(
         md,
         "Produced by `cargo xtask sites --subsystems {subsystems} --processes {processes} \
-         --rate {rate} --seconds {seconds} --throughput-subsystems {throughput_subsystems}`.\n"
+         --rate {rate} --seconds {seconds} --throughput-subsystems {throughput_subsystems} \
+         --throughput-seconds {throughput_seconds}{}`.\n",
+        if old_binary.is_some() { " --old-binary <c302992's streamcert>" } else { "" }
     )?;
     writeln!(md, "### Bytes across process boundaries\n")?;
     writeln!(

@@ -90,21 +90,25 @@ impl Rng {
 /// Three coupled scalar loops (`ẏ_i = a_i y_i + u_i + 0.2 y_j + w`, `u_i = k_i y_i + PRBS`),
 /// Euler steps of 10 ms; the long rows of each site (C's at a 5 ms offset, carrying `y_a`
 /// when `carry`) and all of them merged in time order.
-fn data(steps: usize, carry: bool) -> ([String; 3], String) {
+/// With `jump > 0`, C's clock steps `jump` steps ahead halfway (its later rows are stamped
+/// that much later).
+fn data(steps: usize, carry: bool, jump: usize) -> ([String; 3], String) {
     let mut rng = Rng(0x5eed_0003);
     let (a, k) = ([0.4, 0.3, 0.2], [-2.0, -2.5, -3.0]);
     let (mut y, mut d) = ([0.0f64; 3], [1.0f64; 3]);
     let mut sites = [String::new(), String::new(), String::new()];
-    let mut merged = String::new();
+    // (half-steps of 5 ms, row): the merged file is every row in time order.
+    let mut merged: Vec<(usize, String)> = Vec::new();
     for step in 0..steps {
         let t = step as f64 * 0.01;
+        let c_step = if step >= steps / 2 { step + jump } else { step };
         for i in 0..3 {
             if step % 20 == 0 && rng.next() > 0.0 {
                 d[i] = -d[i];
             }
         }
         let u: Vec<f64> = (0..3).map(|i| k[i] * y[i] + d[i]).collect();
-        let tc = t + 0.005;
+        let tc = c_step as f64 * 0.01 + 0.005;
         let rows = [
             format!("{t},A,{},{}\n", y[0], u[0]),
             format!("{t},B,{},{}\n", y[1], u[1]),
@@ -114,9 +118,11 @@ fn data(steps: usize, carry: bool) -> ([String; 3], String) {
                 format!("{tc},C,{},{}\n", y[2], u[2])
             },
         ];
-        for (site, row) in sites.iter_mut().zip(&rows) {
+        for ((site, row), key) in
+            sites.iter_mut().zip(&rows).zip([2 * step, 2 * step, 2 * c_step + 1])
+        {
             site.push_str(row);
-            merged.push_str(row);
+            merged.push((key, row.clone()));
         }
         let next: Vec<f64> = (0..3)
             .map(|i| {
@@ -126,7 +132,8 @@ fn data(steps: usize, carry: bool) -> ([String; 3], String) {
             .collect();
         y.copy_from_slice(&next);
     }
-    (sites, merged)
+    merged.sort_by_key(|(key, _)| *key);
+    (sites, merged.into_iter().map(|(_, row)| row).collect())
 }
 
 fn hostfile(tag: &str) -> PathBuf {
@@ -176,8 +183,8 @@ struct Setup {
     site2: String,
 }
 
-fn setup(tag: &str, config: &str, steps: usize) -> Setup {
-    let (sites, merged) = data(steps, config.contains("estimate = true"));
+fn setup(tag: &str, config: &str, steps: usize, jump: usize) -> Setup {
+    let (sites, merged) = data(steps, config.contains("estimate = true"), jump);
     let cfg = tmp(&format!("sites-{tag}.toml"));
     std::fs::write(&cfg, config).expect("write");
     let merged_path = tmp(&format!("sites-{tag}-merged.csv"));
@@ -212,15 +219,22 @@ fn path(p: &Path) -> &str {
 
 #[test]
 fn three_sites_write_the_one_process_rows() {
-    for (tag, config) in [
-        ("given", CONFIG.replace("estimate = true", "gamma = 0.3")),
-        ("estimated", CONFIG.to_string()),
-    ] {
-        let s = setup(tag, &config, 3000);
+    let given = CONFIG.replace("estimate = true", "gamma = 0.3");
+    // The third run: C's clock steps 5 s ahead halfway (a site whose clock is off): the epochs
+    // up to its time are composed, the other sites' subsystems stale there, as in one process.
+    for (tag, config, jump) in
+        [("given", given.clone(), 0), ("estimated", CONFIG.to_string(), 0), ("jump", given, 500)]
+    {
+        let s = setup(tag, &config, 3000, jump);
         let rows = text(&s.want).lines().count();
         assert!(rows >= 55, "{tag}: {rows} epoch rows");
         if tag == "estimated" {
             assert!(text(&s.want).lines().next().is_some_and(|h| h.contains("gamma_A_C")));
+        }
+        if tag == "jump" {
+            let want = text(&s.want);
+            assert!(want.lines().any(|l| l.contains("A: stale")), "{want}");
+            assert!(want.lines().any(|l| l.contains("C: stale")), "{want}");
         }
         let hosts = hostfile(tag);
         let out = tmp(&format!("sites-{tag}-out.csv"));
@@ -257,7 +271,7 @@ fn three_sites_write_the_one_process_rows() {
 
 #[test]
 fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
-    let s = setup("fault", CONFIG, 3000);
+    let s = setup("fault", CONFIG, 3000, 0);
     let hosts = hostfile("fault");
     let out = tmp("sites-fault-out.csv");
     let ck: Vec<PathBuf> = (0..3).map(|i| tmp(&format!("sites-fault-{i}.ckpt"))).collect();
@@ -297,7 +311,9 @@ fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
     // While it is down no epoch is composed (held back).
     std::thread::sleep(Duration::from_millis(1500));
     let during = text(&std::fs::read(&out).expect("out")).lines().count();
-    assert!(before < s.want.len() && during <= text(&s.want).lines().count() / 2 + 5);
+    // Process 2 had read 40 % of its rows: no epoch after them was composed.
+    let total = text(&s.want).lines().count();
+    assert!(before <= during && during <= total * 2 / 5 + 2, "{during} of {total} rows");
     // A damaged checkpoint, then process 1's, are refused (exit 5); the others wait.
     let damaged = tmp("sites-fault-damaged.ckpt");
     let mut bytes = std::fs::read(&ck[2]).expect("checkpoint");
@@ -330,7 +346,7 @@ fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
 #[test]
 fn a_silent_site_turns_stale_instead_of_holding_the_run() {
     let config = CONFIG.replace("estimate = true", "gamma = 0.3");
-    let s = setup("silent", &config, 1000);
+    let s = setup("silent", &config, 1000, 0);
     let hosts = hostfile("silent");
     let out = tmp("sites-silent-out.csv");
     let _ = std::fs::remove_file(&out);

@@ -96,9 +96,11 @@ enum Command {
     },
 }
 
-/// Run `network` on timely-dataflow with timely's process configuration: the subsystems are
-/// sharded over the workers of every process; process 0 reads the input and writes the output
-/// (the same rows as a one-process run). Every process is started with the same configuration.
+/// Run `network` on timely-dataflow with timely's process configuration: every process reads
+/// its own `--input` (the subsystems whose `[[subsystem]] process` is its index) and sends
+/// process 0 their epoch snapshots; process 0 composes and writes the output (the rows of a
+/// one-process run over the sites' rows merged in time order). Every process is started with
+/// the same configuration.
 #[derive(clap::Args)]
 struct ClusterArgs {
     /// Worker threads per process (timely's -w).

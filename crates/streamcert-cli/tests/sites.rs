@@ -305,6 +305,15 @@ fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
     }
     std::thread::sleep(Duration::from_millis(300));
     let before = text(&std::fs::read(&out).expect("out")).lines().count();
+    // Processes 0 and 1 have their whole files, yet wait for process 2 (epoch 24 of its rows):
+    // their newest checkpoints (every 4 epochs) are at most one period past it.
+    for c in &ck[..2] {
+        let sealed = text(&std::fs::read(c).expect("checkpoint"));
+        let payload = sealed.split_once('\n').expect("header").1;
+        let v: serde_json::Value = serde_json::from_str(payload).expect("json");
+        let from = v["site"]["valid_from"].as_u64().expect("valid_from");
+        assert!(from <= 24 + 4, "{}: a site ran ahead to epoch {from}", c.display());
+    }
     p2.kill().expect("SIGKILL");
     let _ = p2.wait();
     drop(pipe);

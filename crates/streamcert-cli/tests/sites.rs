@@ -395,3 +395,51 @@ fn a_silent_site_turns_stale_instead_of_holding_the_run() {
     let early: Vec<&str> = want.lines().take(5).collect();
     assert_eq!(got.lines().take(5).collect::<Vec<_>>(), early);
 }
+
+/// A malformed row at one site stops the run where the one-process run over the merged rows
+/// stops: the same epoch rows, exit 3 on that site and on process 0 (naming the site and its
+/// line); the other site reads to its end.
+#[test]
+fn a_malformed_row_at_one_site_stops_where_one_process_stops() {
+    let config = CONFIG.replace("estimate = true", "gamma = 0.3");
+    let s = setup("malformed", &config, 2000, 0);
+    // Site 1's row 1203 (t = 12.03 s) is malformed, in its file and in the merged one. (At a
+    // time exactly on an epoch boundary the one-process run would also compose that epoch when
+    // another site's row at the same time comes first in the merged file: README.)
+    let mut site1: Vec<String> =
+        std::fs::read_to_string(&s.files[1]).expect("site 1").lines().map(str::to_string).collect();
+    let bad = site1[1203].clone();
+    let broken = bad.replacen(",B,", ",B,oops", 1);
+    site1[1203].clone_from(&broken);
+    std::fs::write(&s.files[1], site1.join("\n") + "\n").expect("write");
+    let merged_path = tmp("sites-malformed-merged.csv");
+    let merged = std::fs::read_to_string(&merged_path).expect("merged").replacen(&bad, &broken, 1);
+    std::fs::write(&merged_path, merged).expect("write");
+    let one = run(&["network", "--config", path(&s.cfg), "--input", path(&merged_path)], b"");
+    assert_eq!(one.status.code(), Some(3), "{}", text(&one.stderr));
+    let hosts = hostfile("malformed");
+    let out = tmp("sites-malformed-out.csv");
+    let _ = std::fs::remove_file(&out);
+    let children: Vec<Child> = (0..3)
+        .map(|i| {
+            let mut extra = vec!["--input", path(&s.files[i])];
+            if i == 0 {
+                extra.extend(["--output", path(&out)]);
+            }
+            process(&s.cfg, &hosts, i, &extra, Stdio::null())
+        })
+        .collect();
+    let outs: Vec<_> = children
+        .into_iter()
+        .enumerate()
+        .map(|(i, c)| wait(c, 120, &format!("process {i}")))
+        .collect();
+    assert_eq!(outs[1].status.code(), Some(3), "{}", text(&outs[1].stderr));
+    assert!(text(&outs[1].stderr).contains(":1204:"), "{}", text(&outs[1].stderr));
+    assert_eq!(outs[0].status.code(), Some(3), "{}", text(&outs[0].stderr));
+    let zero = text(&outs[0].stderr);
+    assert!(zero.contains("process 1: ") && zero.contains(":1204: field 3"), "{zero}");
+    assert_eq!(outs[2].status.code(), Some(0), "{}", text(&outs[2].stderr));
+    let got = std::fs::read(&out).expect("process 0's output");
+    assert_eq!(text(&got), text(&one.stdout));
+}

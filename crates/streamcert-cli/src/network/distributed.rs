@@ -359,10 +359,19 @@ fn map_error(
         TimelyError::Subsystem { line, index, name, message } => {
             row(line, format!("subsystem {index} (`{name}`): {message}"))
         }
+        // Another site stopped; its own error names its file and line.
+        TimelyError::Remote { process, line: 0, message } => {
+            CliError::Input { file: format!("process {process}"), message }
+        }
+        TimelyError::Remote { process, line, message } => CliError::Row(RowError {
+            file: format!("process {process}'s input"),
+            line,
+            column: None,
+            message,
+        }),
         TimelyError::Checkpoint(m) => CliError::Checkpoint { path: "--resume".into(), message: m },
         TimelyError::Output(m) => CliError::io(m, std::io::Error::other("the run stopped")),
-        e @ (TimelyError::Remote { .. }
-        | TimelyError::Config(_)
+        e @ (TimelyError::Config(_)
         | TimelyError::Worker(_)
         | TimelyError::PeerLost(_)
         | TimelyError::PeerRefused(_)) => bad(e.to_string()),

@@ -55,6 +55,7 @@
 
 mod compose;
 mod handshake;
+mod ingest;
 mod site;
 mod wire;
 mod worker;

@@ -1,23 +1,20 @@
-//! One timely worker: the start's handshake, the composing operator (worker 0), and the site
-//! (the first worker of every process), which reads this process's rows on a reader thread.
+//! One timely worker: the start's handshake, the dataflow with its composing operator (worker
+//! 0), and the site (the first worker of every process, `ingest.rs`).
 
 use std::collections::BTreeMap;
-use std::sync::mpsc::{self, RecvTimeoutError, TryRecvError};
-use std::time::{Duration, Instant};
-
-use streamcert_network::NetworkError;
 use timely::container::CapacityContainerBuilder;
 use timely::dataflow::channels::pact::Exchange;
 use timely::dataflow::operators::generic::operator::Operator;
 use timely::dataflow::operators::{Input, Probe};
 use timely::dataflow::{InputHandle, ProbeHandle};
 
+use crate::ingest::Site;
 use crate::wire::Msg;
 use crate::{
     ComposerState, Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, handshake, send,
 };
 
-type MsgInput = InputHandle<u64, CapacityContainerBuilder<Vec<Msg>>>;
+pub(crate) type MsgInput = InputHandle<u64, CapacityContainerBuilder<Vec<Msg>>>;
 
 /// One worker of the run.
 pub(crate) fn main<E, S, I>(worker: &mut timely::worker::Worker, sh: &Shared<S>, tx: &Tx<E>)
@@ -195,286 +192,8 @@ where
     }
 }
 
-/// What the input gives next.
-enum Next<E> {
-    Row(Option<Result<Row, E>>),
-    /// Nothing for a while (a live input read on a reader thread).
-    Quiet,
-}
-
-/// The site: this process's subsystems, fed from its own input.
-struct Site<'a, S, E> {
-    worker: &'a mut timely::worker::Worker,
-    sh: &'a Shared<S>,
-    tx: &'a Tx<E>,
-    input: &'a mut MsgInput,
-    probe: &'a ProbeHandle<u64>,
-    site: SiteState,
-    outcome: Outcome,
-}
-
-impl<S, E> Site<'_, S, E>
-where
-    E: std::error::Error + Send + 'static,
-{
-    /// Send one message to the composer, counting what crosses a process boundary.
-    fn give(&mut self, m: Msg) {
-        if self.sh.place.process != 0 {
-            self.outcome.bytes_sent += bincode::serialized_size(&m).unwrap_or(0);
-        }
-        self.outcome.messages += 1;
-        self.input.send(m);
-    }
-
-    fn give_changed(&mut self) {
-        let mut out = Vec::new();
-        self.site.drain_changed(|index, snapshot| out.push(Msg::Snap { index, snapshot }));
-        for m in out {
-            self.give(m);
-        }
-    }
-
-    /// Wait until worker 0 has composed every epoch before `a`.
-    fn wait_composed_before(&mut self, a: u64) {
-        if a == 0 {
-            return;
-        }
-        while self.probe.less_equal(&(a - 1)) {
-            self.worker.step();
-        }
-    }
-
-    /// The row (or clock tick) at hand crossed the boundaries `a..b`: checkpoint the state
-    /// valid for them, send what changed, advance. `false`: the checkpoint was not written.
-    fn boundary(&mut self, a: u64, b: u64) -> bool {
-        self.wait_composed_before(a);
-        // A checkpoint when the range holds a multiple of the period.
-        let due = self.sh.checkpoints.is_some_and(|e| (b - 1) / e * e >= a);
-        if due {
-            self.site.seal_at(a, false);
-            let state = Box::new(self.site.clone());
-            if !ask(self.tx, |ack| Event::Site(state, ack)) {
-                return false;
-            }
-        }
-        self.give_changed();
-        self.give(Msg::Reached { end: b });
-        if *self.input.time() < b {
-            self.input.advance_to(b);
-        }
-        true
-    }
-
-    /// Resume at epoch `k`: re-send what the composer needs from `k` on (a site without a
-    /// checkpoint only waits at `k`: its rows are read again from the start, every send at a
-    /// timestamp no earlier than `k`).
-    fn resume_at(&mut self, k: u64, restored: bool) {
-        self.input.advance_to(k);
-        if !restored {
-            return;
-        }
-        self.site.mark_all();
-        let next = self.site.next_epoch();
-        if self.site.finished() || next.is_some_and(|b| k < b) {
-            self.give_changed();
-            self.site.mark_all();
-            // Nothing changed since: only the marks stay pending.
-            self.site.drain_changed(|_, _| {});
-        }
-        if let Some(b) = next.filter(|&b| b > k) {
-            self.give(Msg::Reached { end: b });
-            self.input.advance_to(b);
-        }
-    }
-
-    fn run<I>(&mut self, start: Option<u64>, restored: bool)
-    where
-        S: FnOnce() -> I + Send + 'static,
-        I: Iterator<Item = Result<Row, E>>,
-    {
-        if let Some(k) = start {
-            self.resume_at(k, restored);
-        }
-        let source = self.sh.source.lock().ok().and_then(|mut s| s.take());
-        let failure = match source {
-            // Without a silence rule the rows are read on the worker itself (fastest); with
-            // one, on a reader thread, so that a quiet input leaves the worker free to step
-            // and to advance its clock.
-            Some(source) if self.sh.place.silence.is_none() => {
-                let mut rows = source();
-                self.read(|| Next::Row(rows.next()), restored)
-            }
-            Some(source) => {
-                let (row_tx, rows) = mpsc::sync_channel::<Result<Row, E>>(4096);
-                std::thread::spawn(move || {
-                    for item in source() {
-                        let stop = item.is_err();
-                        if row_tx.send(item).is_err() || stop {
-                            break;
-                        }
-                    }
-                });
-                self.read(
-                    || match rows.try_recv() {
-                        Ok(item) => Next::Row(Some(item)),
-                        Err(TryRecvError::Disconnected) => Next::Row(None),
-                        Err(TryRecvError::Empty) => {
-                            match rows.recv_timeout(Duration::from_millis(1)) {
-                                Ok(item) => Next::Row(Some(item)),
-                                Err(RecvTimeoutError::Disconnected) => Next::Row(None),
-                                Err(RecvTimeoutError::Timeout) => Next::Quiet,
-                            }
-                        }
-                    },
-                    restored,
-                )
-            }
-            None => None,
-        };
-        let process = u32::try_from(self.sh.place.process).unwrap_or(u32::MAX);
-        match failure {
-            None => {
-                // The input ended: the final snapshots hold from the clock's next epoch on.
-                let at = *self.input.time();
-                if self.sh.checkpoints.is_some() && self.site.next_epoch().is_some() {
-                    self.wait_composed_before(at);
-                    self.site.seal_at(at, true);
-                    let state = Box::new(self.site.clone());
-                    if !ask(self.tx, |ack| Event::Site(state, ack)) {
-                        let why = "the checkpoint was not written".to_string();
-                        self.give(Msg::Failed { process, line: 0, message: why });
-                    }
-                }
-                self.give_changed();
-            }
-            Some((line, f)) => {
-                let message = describe(&f, &self.sh.cfg);
-                self.give(Msg::Failed { process, line, message });
-                send(self.tx, Event::Failed(f));
-            }
-        }
-        let (rows, last_time) = (self.site.rows(), self.site.last_time());
-        self.give(Msg::Rows { process, rows, last_time });
-        self.outcome.rows = rows;
-        self.outcome.last_time = last_time;
-        send(self.tx, Event::Done(self.outcome));
-    }
-
-    /// Read and certify until the input ends or fails; the failure and its line.
-    fn read(
-        &mut self,
-        mut next: impl FnMut() -> Next<E>,
-        resumed: bool,
-    ) -> Option<(u64, Failure<E>)> {
-        let cfg = &self.sh.cfg;
-        let n = cfg.subsystems.len();
-        let mut replaying = resumed;
-        let mut count = 0u64;
-        let mut quiet_since = Instant::now();
-        loop {
-            let item = match next() {
-                Next::Row(Some(item)) => item,
-                Next::Row(None) => return None,
-                Next::Quiet => {
-                    // A quiet input: keep the dataflow moving, and advance a silent site's
-                    // clock.
-                    self.worker.step();
-                    if let Some(f) = self.silence(quiet_since) {
-                        return Some(f);
-                    }
-                    continue;
-                }
-            };
-            quiet_since = Instant::now();
-            count += 1;
-            let r = match item {
-                Ok(r) => r,
-                Err(source) => return Some((0, Failure::Source { row: count, source })),
-            };
-            if replaying {
-                if r.samples.iter().all(|(i, _)| self.site.held(*i, r.t)) {
-                    continue;
-                }
-                replaying = false;
-            }
-            // A sample of a subsystem the network does not have, or another process reads,
-            // stops the site where the one-process run stops: after the epochs the row's
-            // earlier samples made due.
-            let bad = r.samples.iter().position(|&(i, _)| i >= n || !self.site.owns(i));
-            let refuse = |i: usize| {
-                if i >= n {
-                    let source = NetworkError::UnknownSubsystem { index: i, len: n };
-                    (r.line, Failure::Network { line: r.line, source })
-                } else {
-                    let owner = self.sh.place.process_of[i];
-                    (r.line, Failure::NotOwned { line: r.line, index: i, owner })
-                }
-            };
-            if bad == Some(0) {
-                return Some(refuse(r.samples[0].0));
-            }
-            let first = self.site.next_epoch().is_none();
-            match self.site.due(cfg, r.t) {
-                Ok(due) if first => {
-                    if let Some(f) = self.site.next_epoch() {
-                        self.give(Msg::Start { first: f });
-                        if *self.input.time() < f {
-                            self.input.advance_to(f);
-                        }
-                    }
-                    let _ = due;
-                }
-                Ok(due) if due.is_empty() => {}
-                Ok(due) => {
-                    if !self.boundary(due.start, due.end) {
-                        let f = Failure::Output("the checkpoint was not written".into());
-                        return Some((r.line, f));
-                    }
-                }
-                Err(source) => return Some((r.line, Failure::Network { line: r.line, source })),
-            }
-            for (i, values) in &r.samples[..bad.unwrap_or(r.samples.len())] {
-                if let Err(e) = self.site.push(cfg, *i, r.t, values) {
-                    let f = Failure::Subsystem { line: r.line, index: *i, message: e.to_string() };
-                    return Some((r.line, f));
-                }
-            }
-            if let Some(b) = bad {
-                return Some(refuse(r.samples[b].0));
-            }
-            self.site.count(r.t);
-            if count % 1024 == 0 {
-                self.worker.step();
-            }
-        }
-    }
-
-    /// A live input silent for [`Placement::silence`]: advance the clock by the wall-clock
-    /// time since its last row.
-    fn silence(&mut self, quiet_since: Instant) -> Option<(u64, Failure<E>)> {
-        let d = self.sh.place.silence?;
-        let last = self.site.last_time()?;
-        let quiet = quiet_since.elapsed();
-        if quiet < d {
-            return None;
-        }
-        let t = last + quiet.as_secs_f64();
-        match self.site.due(&self.sh.cfg, t) {
-            Ok(due) if due.is_empty() => None,
-            Ok(due) => {
-                if self.boundary(due.start, due.end) {
-                    None
-                } else {
-                    Some((0, Failure::Output("the checkpoint was not written".into())))
-                }
-            }
-            Err(source) => Some((0, Failure::Network { line: 0, source })),
-        }
-    }
-}
-
 /// An identifier for a new run (its checkpoints carry it): the wall clock and the process id.
-fn new_run_id() -> u64 {
+pub(crate) fn new_run_id() -> u64 {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
@@ -483,7 +202,7 @@ fn new_run_id() -> u64 {
 }
 
 /// A site's failure as text for process 0.
-fn describe<E: std::error::Error>(
+pub(crate) fn describe<E: std::error::Error>(
     f: &Failure<E>,
     cfg: &streamcert_network::NetworkConfig,
 ) -> String {

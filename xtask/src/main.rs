@@ -121,33 +121,7 @@ enum Command {
     /// The network service across timely processes (threads here, TCP on localhost): bytes
     /// across process boundaries per epoch against the raw-sample path, and samples per
     /// second against one-process `push_batch` (NETWORK.md, BENCHMARKS.md).
-    Sites {
-        /// Subsystems of the bytes study.
-        #[arg(long, default_value_t = 10_000)]
-        subsystems: usize,
-        /// Processes of the bytes study.
-        #[arg(long, default_value_t = 4)]
-        processes: usize,
-        /// Sampling rate [Hz].
-        #[arg(long, default_value_t = 1000.0)]
-        rate: f64,
-        /// Seconds of data.
-        #[arg(long, default_value_t = 3.0)]
-        seconds: f64,
-        /// Subsystems of the throughput study (2 processes against push_batch).
-        #[arg(long, default_value_t = 100)]
-        throughput_subsystems: usize,
-        /// Seconds of data of the throughput study.
-        #[arg(long, default_value_t = 30.0)]
-        throughput_seconds: f64,
-        /// A `streamcert` binary of commit c302992 (the raw-sample path): also compare the two
-        /// binaries on the throughput study's samples written as CSV.
-        #[arg(long)]
-        old_binary: Option<PathBuf>,
-        /// Output folder.
-        #[arg(long, default_value = "target/sites")]
-        out: PathBuf,
-    },
+    Sites(sites::Options),
     /// Three `streamcert network` processes on localhost under faults (SIGKILL and restart of
     /// two processes, a clock step at one site, malformed rows at another) against the
     /// one-process run over the same rows; peak memory per process (NETWORK.md).
@@ -295,25 +269,7 @@ fn main() -> Result<()> {
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)
         }
-        Command::Sites {
-            subsystems,
-            processes,
-            rate,
-            seconds,
-            throughput_subsystems,
-            throughput_seconds,
-            old_binary,
-            out,
-        } => sites::run(
-            subsystems,
-            processes,
-            rate,
-            seconds,
-            throughput_subsystems,
-            throughput_seconds,
-            old_binary.as_deref(),
-            &out,
-        ),
+        Command::Sites(options) => sites::run(&options),
         Command::Soak { subsystems, steps, out } => soak::run(subsystems, steps, &out),
         Command::Reliability { out } => reliability::run_all(&out),
     }

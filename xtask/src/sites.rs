@@ -335,18 +335,50 @@ fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Re
     Ok([old_s, new_s, one_s])
 }
 
-/// Run both studies and write `SITES.md` into `out`.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn run(
+/// The command line of `cargo xtask sites`.
+#[derive(clap::Args)]
+pub(crate) struct Options {
+    /// Subsystems of the bytes study.
+    #[arg(long, default_value_t = 10_000)]
     subsystems: usize,
+    /// Processes of the bytes study.
+    #[arg(long, default_value_t = 4)]
     processes: usize,
+    /// Sampling rate [Hz].
+    #[arg(long, default_value_t = 1000.0)]
     rate: f64,
+    /// Seconds of data.
+    #[arg(long, default_value_t = 3.0)]
     seconds: f64,
+    /// Subsystems of the throughput study (2 processes against push_batch).
+    #[arg(long, default_value_t = 100)]
     throughput_subsystems: usize,
+    /// Seconds of data of the throughput study.
+    #[arg(long, default_value_t = 30.0)]
     throughput_seconds: f64,
-    old_binary: Option<&Path>,
-    out: &Path,
-) -> Result<()> {
+    /// A `streamcert` binary of commit c302992 (the raw-sample path): also compare the two
+    /// binaries on the throughput study's samples written as CSV.
+    #[arg(long)]
+    old_binary: Option<PathBuf>,
+    /// Output folder.
+    #[arg(long, default_value = "target/sites")]
+    out: PathBuf,
+}
+
+/// Run both studies and write `SITES.md` into `out`.
+pub(crate) fn run(o: &Options) -> Result<()> {
+    let Options {
+        subsystems,
+        processes,
+        rate,
+        seconds,
+        throughput_subsystems,
+        throughput_seconds,
+        ref old_binary,
+        ref out,
+    } = *o;
+    let out = out.as_path();
+    let old_binary = old_binary.as_deref();
     std::fs::create_dir_all(out)?;
     let dt = 1.0 / rate;
     let steps = (seconds * rate).round() as usize;

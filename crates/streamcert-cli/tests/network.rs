@@ -5,7 +5,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use common::{compose, run, text, tmp};
+use common::{compose, run, text, tmp, wait_bounded};
 
 /// `streamcert network` on Experiment 2's data with bidirectional coupling: each epoch's local
 /// certificates are the `certify` runs' values at the last row before the epoch, and the
@@ -257,22 +257,6 @@ fn network_estimates_the_couplings_of_bidirectional_g5() {
         assert_eq!(v["rate"].as_f64().map(f64::to_bits), Some(rate.to_bits()), "t = {t}");
     }
     assert!(bounded >= 100 && composed >= 30, "{bounded} bounds, {composed} rates");
-}
-
-/// Wait for `child` at most `secs` seconds; kill it and fail after that.
-fn wait_bounded(mut child: std::process::Child, secs: u64, what: &str) -> std::process::Output {
-    let start = std::time::Instant::now();
-    loop {
-        match child.try_wait().expect("try_wait") {
-            Some(_) => return child.wait_with_output().expect("output"),
-            None if start.elapsed().as_secs() >= secs => {
-                let _ = child.kill();
-                let out = child.wait_with_output().expect("output");
-                panic!("{what} did not finish in {secs} s: {}", text(&out.stderr));
-            }
-            None => std::thread::sleep(std::time::Duration::from_millis(20)),
-        }
-    }
 }
 
 /// Two free ports on localhost (bound, read and released; a race with another program

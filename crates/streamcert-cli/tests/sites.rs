@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{bin, run, text, tmp};
+use common::{bin, run, text, tmp, wait_bounded};
 
 const CONFIG: &str = r#"
 [network]
@@ -160,22 +160,6 @@ fn process(cfg: &Path, hosts: &Path, index: usize, extra: &[&str], stdin: Stdio)
     c.spawn().expect("spawn")
 }
 
-/// Wait for `child` at most `secs` seconds (killed and reported after).
-fn wait(mut child: Child, secs: u64, what: &str) -> std::process::Output {
-    let start = Instant::now();
-    loop {
-        match child.try_wait().expect("try_wait") {
-            Some(_) => return child.wait_with_output().expect("output"),
-            None if start.elapsed().as_secs() >= secs => {
-                let _ = child.kill();
-                let out = child.wait_with_output().expect("output");
-                panic!("{what} did not finish in {secs} s: {}", text(&out.stderr));
-            }
-            None => std::thread::sleep(Duration::from_millis(20)),
-        }
-    }
-}
-
 struct Setup {
     cfg: PathBuf,
     files: Vec<PathBuf>,
@@ -249,7 +233,7 @@ fn three_sites_write_the_one_process_rows() {
             })
             .collect();
         for (i, c) in children.into_iter().enumerate() {
-            let o = wait(c, 120, &format!("{tag}: process {i}"));
+            let o = wait_bounded(c, 120, &format!("{tag}: process {i}"));
             assert!(o.status.success(), "{tag}: process {i}: {}", text(&o.stderr));
             if i > 0 {
                 // Only snapshots crossed: far fewer bytes than the site's raw rows.
@@ -333,14 +317,14 @@ fn a_killed_process_resumes_from_its_checkpoint_and_nothing_differs() {
     std::fs::copy(&ck[1], &foreign).expect("copy");
     for (what, bad) in [("damaged", &damaged), ("foreign", &foreign)] {
         let args = ["--resume", path(bad)];
-        let refused = wait(site(2, path(&s.files[2]), &args, Stdio::null()), 60, what);
+        let refused = wait_bounded(site(2, path(&s.files[2]), &args, Stdio::null()), 60, what);
         assert_eq!(refused.status.code(), Some(5), "{what}: {}", text(&refused.stderr));
     }
     // Restarted from its own checkpoint, reading its whole file.
     let p2 = site(2, path(&s.files[2]), &["--resume", path(&ck[2])], Stdio::null());
-    let o2 = wait(p2, 120, "restarted process 2");
-    let o0 = wait(p0, 120, "process 0");
-    let o1 = wait(p1, 120, "process 1");
+    let o2 = wait_bounded(p2, 120, "restarted process 2");
+    let o0 = wait_bounded(p0, 120, "process 0");
+    let o1 = wait_bounded(p1, 120, "process 1");
     for (i, o) in [(0, &o0), (1, &o1), (2, &o2)] {
         assert!(o.status.success(), "process {i}: {}", text(&o.stderr));
     }
@@ -380,7 +364,7 @@ fn a_silent_site_turns_stale_instead_of_holding_the_run() {
     }
     drop(pipe);
     for (i, c) in [p0, p1, p2].into_iter().enumerate() {
-        let o = wait(c, 60, &format!("process {i}"));
+        let o = wait_bounded(c, 60, &format!("process {i}"));
         assert!(o.status.success(), "process {i}: {}", text(&o.stderr));
     }
     let got = text(&std::fs::read(&out).expect("output"));
@@ -432,7 +416,7 @@ fn a_malformed_row_at_one_site_stops_where_one_process_stops() {
     let outs: Vec<_> = children
         .into_iter()
         .enumerate()
-        .map(|(i, c)| wait(c, 120, &format!("process {i}")))
+        .map(|(i, c)| wait_bounded(c, 120, &format!("process {i}")))
         .collect();
     assert_eq!(outs[1].status.code(), Some(3), "{}", text(&outs[1].stderr));
     assert!(text(&outs[1].stderr).contains(":1204:"), "{}", text(&outs[1].stderr));

@@ -73,3 +73,23 @@ pub(crate) fn simulate(seed: &str) -> Vec<u8> {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     out.stdout
 }
+
+/// Wait for `child` at most `secs` seconds; kill it and fail after that.
+pub(crate) fn wait_bounded(
+    mut child: std::process::Child,
+    secs: u64,
+    what: &str,
+) -> std::process::Output {
+    let start = std::time::Instant::now();
+    loop {
+        match child.try_wait().expect("try_wait") {
+            Some(_) => return child.wait_with_output().expect("output"),
+            None if start.elapsed().as_secs() >= secs => {
+                let _ = child.kill();
+                let out = child.wait_with_output().expect("output");
+                panic!("{what} did not finish in {secs} s: {}", text(&out.stderr));
+            }
+            None => std::thread::sleep(std::time::Duration::from_millis(20)),
+        }
+    }
+}

@@ -24,6 +24,8 @@ pub(crate) struct Hello {
     pub(crate) resumed: bool,
     /// The first epoch its checkpointed site holds (`None`: it had written none).
     pub(crate) valid_from: Option<u64>,
+    /// Whether it was started again from its checkpoint (not rejoining from memory).
+    pub(crate) restarted: bool,
 }
 
 /// Broadcast `mine` (the process's first worker has one) and collect every process's.
@@ -67,6 +69,8 @@ pub(crate) struct Plan {
     /// Per process: whether it resumes its checkpointed site (else it reads its input
     /// again from the start: its checkpoint holds epochs after the composer's).
     pub(crate) use_site: Vec<bool>,
+    /// The processes started again from their checkpoints (they had been down).
+    pub(crate) restarted: Vec<usize>,
 }
 
 /// The plan every process computes from the same hellos, or the processes refused.
@@ -109,7 +113,12 @@ pub(crate) fn decide(hellos: &[Hello], processes: usize) -> Result<Plan, Refusal
         }
     }
     if refused.is_empty() {
-        Ok(Plan { start: zero.composer_next, run: zero.run, use_site })
+        let restarted = hellos
+            .iter()
+            .filter(|h| h.restarted && zero.composer_next.is_some())
+            .map(|h| h.process as usize)
+            .collect();
+        Ok(Plan { start: zero.composer_next, run: zero.run, use_site, restarted })
     } else {
         Err(Refusal { refused })
     }
@@ -120,7 +129,15 @@ mod tests {
     use super::*;
 
     fn hello(process: u32, resumed: bool, valid_from: Option<u64>) -> Hello {
-        Hello { process, fingerprint: 7, run: 42, composer_next: None, resumed, valid_from }
+        Hello {
+            process,
+            fingerprint: 7,
+            run: 42,
+            composer_next: None,
+            resumed,
+            valid_from,
+            restarted: resumed && process == 1,
+        }
     }
 
     #[test]
@@ -138,6 +155,7 @@ mod tests {
             let plan = decide(&[zero.clone(), hello(1, true, valid_from)], 2).ok().expect("ok");
             assert_eq!(plan.start, Some(11));
             assert_eq!(plan.use_site, vec![true, used], "{valid_from:?}");
+            assert_eq!(plan.restarted, vec![1], "the process started again is named");
         }
         // Refused, naming the process: a fresh process beside a resumed composer, a resumed
         // one beside a new run, another run's checkpoint, another configuration, a missing one.

@@ -141,6 +141,9 @@ pub struct Resume {
     pub site: Option<SiteState>,
     /// Process 0: the composer, as checkpointed.
     pub composer: Option<ComposerState>,
+    /// `true`: this process stayed up and rejoins after a lost peer; `false`: it was started
+    /// again (after a crash) from its checkpoint.
+    pub rejoin: bool,
 }
 
 /// What the run hands the caller, on the calling thread, in order.
@@ -152,6 +155,14 @@ pub enum Output<'a> {
     Site(&'a SiteState),
     /// Process 0: write the composer's checkpoint (checkpoints on), after the epochs before.
     Composer(&'a ComposerState),
+    /// Every process agreed to start: at this epoch (`None`: a new run), with these
+    /// processes started again from their checkpoints (the ones that had been down).
+    Started {
+        /// The epoch the run resumes at.
+        resumed_at: Option<u64>,
+        /// The processes that were started again (not rejoining from memory).
+        restarted: &'a [usize],
+    },
 }
 
 /// What a run read.
@@ -256,6 +267,7 @@ pub enum TimelyError<E: std::error::Error + 'static> {
 
 /// What workers tell the calling thread.
 pub(crate) enum Event<E> {
+    Started(Option<u64>, Vec<usize>),
     Epoch(Box<EpochReport>),
     Site(Box<SiteState>, mpsc::SyncSender<bool>),
     Composer(Box<ComposerState>, mpsc::SyncSender<bool>),
@@ -388,6 +400,9 @@ where
     };
     for event in rx {
         match event {
+            Event::Started(resumed_at, restarted) => {
+                out(Output::Started { resumed_at, restarted: &restarted }, &mut failure);
+            }
             Event::Epoch(r) => {
                 out(Output::Epoch(&r), &mut failure);
             }

@@ -38,6 +38,7 @@ where
         composer_next: composer_resumed.and_then(ComposerState::next_epoch),
         resumed: resume.is_some(),
         valid_from: site_resumed.map(SiteState::valid_from),
+        restarted: resume.as_ref().is_some_and(|r| !r.rejoin),
     });
     let hellos = handshake::exchange(worker, hello);
     let plan = match handshake::decide(&hellos, sh.place.processes.max(1)) {
@@ -63,6 +64,9 @@ where
         }
     };
     let start = plan.start;
+    if site_worker {
+        send(tx, Event::Started(start, plan.restarted.clone()));
+    }
     let (composer, site) = match resume {
         Some(r) => (r.composer, r.site),
         None => (None, None),

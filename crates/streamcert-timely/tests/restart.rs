@@ -65,6 +65,7 @@ fn go(cfg: &NetworkConfig, data: Vec<Row>, resume: Option<Resume>, every: u64) -
                 Output::Epoch(r) => Seen::Epoch(Box::new(r.clone())),
                 Output::Site(s) => Seen::Site(Box::new(s.clone())),
                 Output::Composer(c) => Seen::Composer(Box::new(c.clone())),
+                Output::Started { .. } => return Ok(()),
             });
             Ok(())
         },
@@ -111,7 +112,7 @@ fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
                 let Some(composer) = composer else { continue };
                 let from = composer.next_epoch().expect("started");
                 let site = site.clone().map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
-                let resume = Resume { site, composer: Some(composer) };
+                let resume = Resume { site, composer: Some(composer), rejoin: false };
                 let again = epochs(&go(&cfg, data.clone(), Some(resume), every));
                 let tail: Vec<EpochReport> =
                     reports.iter().filter(|r| r.epoch >= from).cloned().collect();

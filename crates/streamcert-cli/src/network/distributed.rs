@@ -239,7 +239,7 @@ pub fn run_timely<W: Write>(
         Some(path) => {
             let file = load(path, cfg, &place)?;
             let summary = file.summary.clone().unwrap_or_default();
-            (Some(Resume { site: file.site, composer: file.composer }), summary)
+            (Some(Resume { site: file.site, composer: file.composer, rejoin: false }), summary)
         }
         None => (None, NetSummary::default()),
     };
@@ -278,6 +278,24 @@ pub fn run_timely<W: Write>(
             source,
             |o| {
                 match o {
+                    Output::Started { resumed_at: Some(k), restarted } => {
+                        let who: Vec<String> = restarted.iter().map(|p| p.to_string()).collect();
+                        eprintln!(
+                            "process {}: every process is back; the run resumes at epoch {k}{}",
+                            place.process,
+                            if who.is_empty() {
+                                String::new()
+                            } else {
+                                format!(
+                                    " (process {} started again from its checkpoint; no epoch \
+                                     was composed while it was down)",
+                                    who.join(", ")
+                                )
+                            }
+                        );
+                        return Ok(());
+                    }
+                    Output::Started { .. } => return Ok(()),
                     Output::Epoch(r) => {
                         if written.is_some_and(|w| r.epoch <= w) {
                             return Ok(());
@@ -330,7 +348,7 @@ pub fn run_timely<W: Write>(
                 );
                 resume = if path.exists() {
                     let file = load(path, cfg, &place)?;
-                    Some(Resume { site: file.site, composer: file.composer })
+                    Some(Resume { site: file.site, composer: file.composer, rejoin: true })
                 } else {
                     None
                 };

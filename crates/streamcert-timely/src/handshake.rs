@@ -46,7 +46,7 @@ pub(crate) fn exchange(worker: &mut timely::worker::Worker, mine: Option<Hello>)
     }
     drop(input);
     while !probe.done() {
-        worker.step();
+        worker.step_or_park(Some(std::time::Duration::from_millis(10)));
     }
     let mut all = got.borrow().clone();
     all.sort_by_key(|h| h.process);

@@ -57,7 +57,7 @@ where
             return;
         }
         while self.probe.less_equal(&(a - 1)) {
-            self.worker.step();
+            self.worker.step_or_park(Some(Duration::from_millis(1)));
         }
     }
 

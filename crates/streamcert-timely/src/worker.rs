@@ -191,8 +191,9 @@ where
         }
     }
     drop(input);
+    // The rest of the run: park between events instead of spinning.
     while !probe.done() {
-        worker.step();
+        worker.step_or_park(Some(std::time::Duration::from_millis(10)));
     }
 }
 

@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 use streamcert_network::NetworkError;
 use timely::dataflow::ProbeHandle;
 
+use crate::site::Pending;
 use crate::wire::Msg;
 use crate::worker::{MsgInput, describe};
 use crate::{Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, send};
@@ -28,7 +29,13 @@ pub(crate) struct Site<'a, S, E> {
     pub(crate) probe: &'a ProbeHandle<u64>,
     pub(crate) site: SiteState,
     pub(crate) outcome: Outcome,
+    /// Samples read since the last boundary, certified together (over the process's worker
+    /// threads) before the next boundary, the end, or when there are `FLUSH` of them.
+    pub(crate) pending: Vec<Pending>,
 }
+
+/// Samples held before they are certified together.
+const FLUSH: usize = 4096;
 
 impl<S, E> Site<'_, S, E>
 where
@@ -61,9 +68,25 @@ where
         }
     }
 
-    /// The row (or clock tick) at hand crossed the boundaries `a..b`: checkpoint the state
-    /// valid for them, send what changed, advance. `false`: the checkpoint was not written.
-    fn boundary(&mut self, a: u64, b: u64) -> bool {
+    /// Certify the samples held; the first one rejected, as the site's failure.
+    fn flush(&mut self) -> Option<(u64, Failure<E>)> {
+        let threads = self.sh.place.workers.max(1);
+        let mut pending = std::mem::take(&mut self.pending);
+        let result = self.site.push_pending(&self.sh.cfg, &mut pending, threads);
+        self.pending = pending;
+        result.err().map(|r| {
+            let index = self.site.subsystem_at(r.pos);
+            let message = r.error.to_string();
+            (r.line, Failure::Subsystem { line: r.line, index, message })
+        })
+    }
+
+    /// The row (or clock tick) at hand crossed the boundaries `a..b`: certify the samples
+    /// before it, checkpoint the state valid for them, send what changed, advance.
+    fn boundary(&mut self, a: u64, b: u64, line: u64) -> Option<(u64, Failure<E>)> {
+        if let Some(f) = self.flush() {
+            return Some(f);
+        }
         self.wait_composed_before(a);
         // A checkpoint when the range holds a multiple of the period.
         let due = self.sh.checkpoints.is_some_and(|e| (b - 1) / e * e >= a);
@@ -71,7 +94,7 @@ where
             self.site.seal_at(a, false);
             let state = Box::new(self.site.clone());
             if !ask(self.tx, |ack| Event::Site(state, ack)) {
-                return false;
+                return Some((line, Failure::Output("the checkpoint was not written".into())));
             }
         }
         self.give_changed();
@@ -79,7 +102,7 @@ where
         if *self.input.time() < b {
             self.input.advance_to(b);
         }
-        true
+        None
     }
 
     /// Resume at epoch `k`: re-send what the composer needs from `k` on (a site without a
@@ -177,8 +200,14 @@ where
         send(self.tx, Event::Done(self.outcome));
     }
 
-    /// Read and certify until the input ends or fails; the failure and its line.
-    fn read(
+    /// Read and certify until the input ends or fails; the failure and its line (a sample
+    /// held and rejected precedes the failure that ended the reading).
+    fn read(&mut self, next: impl FnMut() -> Next<E>, resumed: bool) -> Option<(u64, Failure<E>)> {
+        let stopped = self.read_rows(next, resumed);
+        self.flush().or(stopped)
+    }
+
+    fn read_rows(
         &mut self,
         mut next: impl FnMut() -> Next<E>,
         resumed: bool,
@@ -243,23 +272,28 @@ where
                 }
                 Ok(due) if due.is_empty() => {}
                 Ok(due) => {
-                    if !self.boundary(due.start, due.end) {
-                        let f = Failure::Output("the checkpoint was not written".into());
-                        return Some((r.line, f));
+                    if let Some(f) = self.boundary(due.start, due.end, r.line) {
+                        return Some(f);
                     }
                 }
                 Err(source) => return Some((r.line, Failure::Network { line: r.line, source })),
             }
-            for (i, values) in &r.samples[..bad.unwrap_or(r.samples.len())] {
-                if let Err(e) = self.site.push(cfg, *i, r.t, values) {
-                    let f = Failure::Subsystem { line: r.line, index: *i, message: e.to_string() };
-                    return Some((r.line, f));
+            let refused = bad.map(|b| refuse(r.samples[b].0));
+            let (line, t) = (r.line, r.t);
+            for (i, values) in r.samples.into_iter().take(bad.unwrap_or(usize::MAX)) {
+                if let Some(pos) = self.site.position(i) {
+                    self.pending.push(Pending { pos, seq: count, line, t, values });
                 }
             }
-            if let Some(b) = bad {
-                return Some(refuse(r.samples[b].0));
+            if refused.is_some() {
+                return refused;
             }
-            self.site.count(r.t);
+            self.site.count(t);
+            if self.pending.len() >= FLUSH {
+                if let Some(f) = self.flush() {
+                    return Some(f);
+                }
+            }
             if count % 1024 == 0 {
                 self.worker.step();
             }
@@ -278,13 +312,7 @@ where
         let t = last + quiet.as_secs_f64();
         match self.site.due(&self.sh.cfg, t) {
             Ok(due) if due.is_empty() => None,
-            Ok(due) => {
-                if self.boundary(due.start, due.end) {
-                    None
-                } else {
-                    Some((0, Failure::Output("the checkpoint was not written".into())))
-                }
-            }
+            Ok(due) => self.boundary(due.start, due.end, 0),
             Err(source) => Some((0, Failure::Network { line: 0, source })),
         }
     }

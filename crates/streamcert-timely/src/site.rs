@@ -6,6 +6,24 @@ use streamcert_network::{Composer, LocalSnapshot, NetworkConfig, NetworkError};
 
 use crate::wire::WireSnapshot;
 
+/// A sample waiting to be certified: its subsystem's position in the site, its row's order
+/// and line, its time and values.
+pub(crate) struct Pending {
+    pub(crate) pos: u32,
+    pub(crate) seq: u64,
+    pub(crate) line: u64,
+    pub(crate) t: f64,
+    pub(crate) values: Vec<f64>,
+}
+
+/// A sample its certifier rejected.
+pub(crate) struct Rejected {
+    pub(crate) seq: u64,
+    pub(crate) line: u64,
+    pub(crate) pos: u32,
+    pub(crate) error: CertifyError,
+}
+
 /// What one process (a *site*) holds: the certifiers of the subsystems it owns, their newest
 /// snapshots, and its epoch clock. Serde-serialisable: it is the site's checkpoint, written at
 /// an epoch boundary (before the row that crossed it is certified).
@@ -218,32 +236,125 @@ impl SiteState {
         self.finished = finished;
     }
 
-    /// Certify one sample of owned subsystem `i`.
-    pub(crate) fn push(
+    /// Certify the samples `pending` collected since the last call, over `threads` scoped
+    /// threads, each owning a contiguous range of this site's subsystems (every subsystem's
+    /// samples in their order, so the result is that of pushing them one by one); empties
+    /// `pending`. The first failure in row order is returned.
+    pub(crate) fn push_pending(
         &mut self,
         cfg: &NetworkConfig,
-        i: usize,
-        t: f64,
-        values: &[f64],
-    ) -> Result<(), CertifyError> {
-        let Some(&s) = self.slot.get(i) else { return Ok(()) };
-        let k = s as usize;
-        let (Some(c), Some(slot)) = (self.certifiers.get_mut(k), self.snapshots.get_mut(k)) else {
+        pending: &mut Vec<Pending>,
+        threads: usize,
+    ) -> Result<(), Rejected> {
+        if pending.is_empty() {
             return Ok(());
-        };
-        let p = c.config().regression.outputs.min(values.len());
-        let (y, u) = values.split_at(p);
-        let ev = c.push(t, y, u)?;
-        let v = *ev.verdict(cfg.certificate);
-        match slot {
-            Some(snap) => snap.update(t, v, c),
-            None => *slot = Some(LocalSnapshot::new(t, v, c)),
         }
-        if !self.changed[k] {
-            self.changed[k] = true;
-            self.touched.push(s);
+        pending.sort_by_key(|p| (p.pos, p.seq));
+        let parts = threads.clamp(1, 64).min(pending.len().div_ceil(64)).max(1);
+        // Cut `pending` into `parts` runs at subsystem boundaries.
+        let mut cuts = vec![0];
+        for k in 1..parts {
+            let mut at = pending.len() * k / parts;
+            while at > 0 && at < pending.len() && pending[at].pos == pending[at - 1].pos {
+                at += 1;
+            }
+            if at > *cuts.last().unwrap_or(&0) && at < pending.len() {
+                cuts.push(at);
+            }
         }
-        Ok(())
+        cuts.push(pending.len());
+        let kind = cfg.certificate;
+        let mut results: Vec<(Vec<u32>, Option<Rejected>)> = Vec::with_capacity(cuts.len());
+        {
+            let (mut certs, mut snaps) = (&mut self.certifiers[..], &mut self.snapshots[..]);
+            let mut offset = 0usize;
+            let mut jobs = Vec::with_capacity(cuts.len());
+            for w in cuts.windows(2) {
+                let part = &pending[w[0]..w[1]];
+                let last = part.last().map_or(offset, |p| p.pos as usize + 1);
+                let (c, rest_c) = std::mem::take(&mut certs).split_at_mut(last - offset);
+                let (sn, rest_s) = std::mem::take(&mut snaps).split_at_mut(last - offset);
+                jobs.push((part, offset, c, sn));
+                (certs, snaps, offset) = (rest_c, rest_s, last);
+            }
+            let run = |(part, offset, c, sn): (
+                &[Pending],
+                usize,
+                &mut [Certifier],
+                &mut [Option<LocalSnapshot>],
+            )| {
+                let mut pushed = Vec::new();
+                let mut failed: Option<Rejected> = None;
+                for p in part {
+                    let k = p.pos as usize - offset;
+                    if failed.as_ref().is_some_and(|f| f.pos == p.pos) {
+                        continue;
+                    }
+                    let cert = &mut c[k];
+                    let m = cert.config().regression.outputs.min(p.values.len());
+                    let (y, u) = p.values.split_at(m);
+                    match cert.push(p.t, y, u) {
+                        Ok(ev) => {
+                            let v = *ev.verdict(kind);
+                            match &mut sn[k] {
+                                Some(snap) => snap.update(p.t, v, cert),
+                                None => sn[k] = Some(LocalSnapshot::new(p.t, v, cert)),
+                            }
+                            if pushed.last() != Some(&p.pos) {
+                                pushed.push(p.pos);
+                            }
+                        }
+                        Err(e) => {
+                            let r = Rejected { seq: p.seq, line: p.line, pos: p.pos, error: e };
+                            if failed.as_ref().is_none_or(|f| r.seq < f.seq) {
+                                failed = Some(r);
+                            }
+                        }
+                    }
+                }
+                (pushed, failed)
+            };
+            if jobs.len() == 1 {
+                results.extend(jobs.into_iter().map(run));
+            } else {
+                std::thread::scope(|scope| {
+                    let handles: Vec<_> =
+                        jobs.into_iter().map(|job| scope.spawn(move || run(job))).collect();
+                    for h in handles {
+                        if let Ok(r) = h.join() {
+                            results.push(r);
+                        }
+                    }
+                });
+            }
+        }
+        pending.clear();
+        let mut first: Option<Rejected> = None;
+        for (pushed, failed) in results {
+            for pos in pushed {
+                let k = pos as usize;
+                if !self.changed[k] {
+                    self.changed[k] = true;
+                    self.touched.push(pos);
+                }
+            }
+            if let Some(f) = failed {
+                if first.as_ref().is_none_or(|g| f.seq < g.seq) {
+                    first = Some(f);
+                }
+            }
+        }
+        first.map_or(Ok(()), Err)
+    }
+
+    /// The subsystem at position `pos` of this site.
+    pub(crate) fn subsystem_at(&self, pos: u32) -> usize {
+        self.owned.get(pos as usize).copied().unwrap_or(usize::MAX)
+    }
+
+    /// The position of owned subsystem `i` (`None`: another process's).
+    pub(crate) fn position(&self, i: usize) -> Option<u32> {
+        self.slot.get(i).copied().filter(|&s| s != u32::MAX)
     }
 
     /// One row certified at `t`.

@@ -184,6 +184,7 @@ where
                     probe: &probe,
                     site,
                     outcome: Outcome { resumed_at: start, ..Outcome::default() },
+                    pending: Vec::new(),
                 };
                 s.run(start, restored);
             }

@@ -214,7 +214,7 @@ fn push_batch(n: usize, steps: usize, dt: f64) -> Result<(f64, u64)> {
 /// The same study through binaries: the `streamcert` of commit c302992 (`old`: process 0
 /// reads the wide file and ships the samples) against this commit's (each process reads its
 /// own columns), 2 processes each, and this commit's one-process run; seconds of wall clock.
-fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Result<[f64; 3]> {
+fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Result<[f64; 4]> {
     use std::io::Write as _;
     let new = crate::reliability::binary()?;
     let mut cfg =
@@ -329,10 +329,24 @@ fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Re
         .status()?;
     anyhow::ensure!(status.success(), "one process: {status}");
     let one_s = start.elapsed().as_secs_f64();
+    let start = Instant::now();
+    let status = std::process::Command::new(&new)
+        .args(["network", "--config"])
+        .arg(out.join("new.toml"))
+        .arg("--input")
+        .arg(out.join("wide.csv"))
+        .args(["--workers", "2", "--output"])
+        .arg(out.join("workers.out.csv"))
+        .stdout(std::process::Stdio::null())
+        .status()?;
+    anyhow::ensure!(status.success(), "one process on 2 workers: {status}");
+    let workers_s = start.elapsed().as_secs_f64();
     let a = std::fs::read(out.join("old.toml.out.csv"))?;
     let b = std::fs::read(out.join("new.toml.out.csv"))?;
     anyhow::ensure!(a == b, "the two binaries wrote different epoch rows");
-    Ok([old_s, new_s, one_s])
+    let c = std::fs::read(out.join("workers.out.csv"))?;
+    anyhow::ensure!(a == c, "2 workers wrote other epoch rows");
+    Ok([old_s, new_s, one_s, workers_s])
 }
 
 /// The command line of `cargo xtask sites`.
@@ -455,11 +469,12 @@ pub(crate) fn run(o: &Options) -> Result<()> {
     ));
     if let Some(old) = old_binary {
         eprintln!("throughput through the binaries (the old one: {})…", old.display());
-        let [old_s, new_s, one_s] = cli_throughput(old, throughput_subsystems, tsteps, dt, out)?;
+        let [old_s, new_s, one_s, workers_s] =
+            cli_throughput(old, throughput_subsystems, tsteps, dt, out)?;
         writeln!(
             md,
             "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
-             processes on localhost; the two wrote the same epoch rows):\n"
+             processes on localhost, or one; every run wrote the same epoch rows):\n"
         )?;
         md.push_str(&markdown(
             &["path", "seconds", "samples per second", "ratio to c302992"],
@@ -481,6 +496,12 @@ pub(crate) fn run(o: &Options) -> Result<()> {
                     format!("{one_s:.2}"),
                     format!("{:.3e}", samples / one_s),
                     format!("{:.2}", old_s / one_s),
+                ],
+                vec![
+                    "this commit, one process on 2 timely workers (`--workers 2`)".into(),
+                    format!("{workers_s:.2}"),
+                    format!("{:.3e}", samples / workers_s),
+                    format!("{:.2}", old_s / workers_s),
                 ],
             ],
         ));

@@ -88,8 +88,9 @@ pub struct Placement {
     pub processes: usize,
     /// This process (timely's `-p`).
     pub process: usize,
-    /// Worker threads per process (timely's `-w`); the first reads and certifies the site,
-    /// worker 0 also composes, the others only route.
+    /// Worker threads per process (timely's `-w`); the first reads the site's rows, and the
+    /// samples between two epoch boundaries are certified over this many threads (each a
+    /// contiguous range of the site's subsystems); worker 0 also composes.
     pub workers: usize,
     /// One `host:port` per process, in process order (timely's `-h`).
     pub hosts: Option<PathBuf>,

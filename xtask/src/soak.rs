@@ -258,7 +258,8 @@ pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
     md.push_str(&markdown(&["process", "starts", "exit code", "peak memory [MiB]"], &proc_rows));
     writeln!(
         md,
-        "\nEpoch rows: reference {}, soak {}; rows that differ: {differ}. The reference \
+        "\nOutput lines (the header and the epoch rows): reference {}, soak {}; lines that \
+         differ: {differ}. The reference \
          stopped with `{}`; process 0 with `{}`.",
         w.len(),
         g.len(),

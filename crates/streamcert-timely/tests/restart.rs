@@ -92,8 +92,7 @@ fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
         // The period changes what is written, never the reports.
         assert_eq!(want.get_or_insert_with(|| reports.clone()), &reports);
         let mut resumed = 0;
-        // A crash after any event: the newest checkpoints written by then; and an older
-        // composer's beside the newest site's (the site then reads its input again).
+        // A crash after any event: the checkpoints written by then.
         for cut in (5..whole.len()).step_by(4) {
             let newest = |before: usize| {
                 let site = whole[..before].iter().rev().find_map(|s| match s {
@@ -107,11 +106,16 @@ fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
                 (site, composer)
             };
             let (site, composer) = newest(cut);
-            let older = newest(cut / 2).1;
-            for composer in [composer, older] {
+            let (older_site, older) = newest(cut / 2);
+            // The newest of both; an older composer's beside the newest site's; an older
+            // site's beside the newest composer's (the site replays from its checkpoint and
+            // its sends up to the composer's epoch land at that epoch).
+            for (site, composer) in
+                [(site.clone(), composer.clone()), (site, older), (older_site, composer)]
+            {
                 let Some(composer) = composer else { continue };
                 let from = composer.next_epoch().expect("started");
-                let site = site.clone().map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
+                let site = site.map(|s| s.verify(&cfg, 0, &[0, 0, 0]).expect("valid"));
                 let resume = Resume { site, composer: Some(composer), rejoin: false };
                 let again = epochs(&go(&cfg, data.clone(), Some(resume), every));
                 let tail: Vec<EpochReport> =

@@ -115,11 +115,10 @@ where
         }
         self.site.mark_all();
         let next = self.site.next_epoch();
+        // Its snapshots hold at `k`: send them there. (Otherwise they stay marked and go out
+        // at the next boundary.)
         if self.site.finished() || next.is_some_and(|b| k < b) {
             self.give_changed();
-            self.site.mark_all();
-            // Nothing changed since: only the marks stay pending.
-            self.site.drain_changed(|_, _| {});
         }
         if let Some(b) = next.filter(|&b| b > k) {
             self.give(Msg::Reached { end: b });

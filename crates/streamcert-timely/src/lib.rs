@@ -360,13 +360,27 @@ where
     if place.process >= processes {
         return Err(TimelyError::Config(format!("process {} of {processes}", place.process)));
     }
-    if let Some(r) = &resume {
-        if place.process != 0 && r.composer.is_some() {
+    // A resumed state is checked here, whatever the caller did: a state that does not fit
+    // this run is refused before any connection.
+    let resume = match resume {
+        Some(r) if place.process != 0 && r.composer.is_some() => {
             return Err(TimelyError::Checkpoint(
                 "only process 0 resumes a composer: this is process 0's checkpoint".into(),
             ));
         }
-    }
+        Some(Resume { site, composer, rejoin }) => Some(Resume {
+            site: site
+                .map(|s| s.verify(&cfg, place.process, &place.process_of))
+                .transpose()
+                .map_err(TimelyError::Checkpoint)?,
+            composer: composer
+                .map(|c| c.verify(&cfg, processes))
+                .transpose()
+                .map_err(TimelyError::Checkpoint)?,
+            rejoin,
+        }),
+        None => None,
+    };
     let config =
         timely::Config::from_args(place.args().into_iter()).map_err(TimelyError::Config)?;
     let fingerprint = place.fingerprint(&cfg).map_err(TimelyError::Config)?;

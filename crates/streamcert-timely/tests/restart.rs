@@ -127,3 +127,37 @@ fn a_restart_from_the_checkpoints_of_any_moment_continues_the_run() {
         assert!(resumed >= 25, "{resumed} restarts");
     }
 }
+
+/// A resumed state that does not fit the run (another network's site) is refused before any
+/// worker starts, as a checkpoint error.
+#[test]
+fn a_site_state_of_another_network_is_refused() {
+    let small = network(2);
+    let whole = go(&small, rows(2, 300, 5), None, 1);
+    let site = whole.iter().rev().find_map(|s| match s {
+        Seen::Site(s) => Some((**s).clone()),
+        _ => None,
+    });
+    let composer = whole.iter().rev().find_map(|s| match s {
+        Seen::Composer(c) => Some((**c).clone()),
+        _ => None,
+    });
+    let cfg = network(3);
+    let place = Placement::local(3, 1);
+    let resume = Resume { site, composer, rejoin: false };
+    let data = rows(3, 100, 5);
+    let result = run(
+        cfg,
+        &place,
+        Some(resume),
+        Some(1),
+        move || data.into_iter().map(Ok::<Row, BadRow>),
+        |_| Ok(()),
+    );
+    match result {
+        Err(streamcert_timely::TimelyError::Checkpoint(m)) => {
+            assert!(m.contains("subsystems") || m.contains("network"), "{m}")
+        }
+        other => panic!("expected a checkpoint refusal, got {:?}", other.map(|_| ())),
+    }
+}

@@ -30,6 +30,8 @@ use streamcert_timely::{Output, Placement, Row};
 
 use crate::common::{markdown, seed, write};
 
+mod cli;
+
 const SIGMA: f64 = 0.05;
 const EPOCH: f64 = 1.0;
 
@@ -66,8 +68,8 @@ fn network(n: usize) -> NetworkConfig {
 }
 
 /// The rows of subsystems `ids` (one sample per row, in time order), `steps` steps of `dt`.
-struct Rows {
-    ids: Vec<usize>,
+pub(super) struct Rows {
+    pub(super) ids: Vec<usize>,
     y: Vec<f64>,
     d: Vec<f64>,
     a: Vec<f64>,
@@ -79,7 +81,7 @@ struct Rows {
 }
 
 impl Rows {
-    fn new(ids: Vec<usize>, steps: usize, dt: f64, stream: u64) -> Self {
+    pub(super) fn new(ids: Vec<usize>, steps: usize, dt: f64, stream: u64) -> Self {
         let mut rng = ChaCha8Rng::seed_from_u64(seed(0, 9400 + stream));
         let a = ids.iter().map(|_| rng.random_range(-0.5..0.5)).collect();
         Self {
@@ -211,142 +213,15 @@ fn push_batch(n: usize, steps: usize, dt: f64) -> Result<(f64, u64)> {
     Ok((start.elapsed().as_secs_f64(), epochs))
 }
 
-/// The same study through binaries: the `streamcert` of commit c302992 (`old`: process 0
-/// reads the wide file and ships the samples) against this commit's (each process reads its
-/// own columns), 2 processes each, and this commit's one-process run; seconds of wall clock.
-fn cli_throughput(old: &Path, n: usize, steps: usize, dt: f64, out: &Path) -> Result<[f64; 4]> {
-    use std::io::Write as _;
-    let new = crate::reliability::binary()?;
-    let mut cfg =
-        String::from("[network]\nepoch = 1.0\nmargin = 0.1\n\n[columns]\ntime = \"t\"\n\n");
-    for i in 0..n {
-        writeln!(
-            cfg,
-            "[[subsystem]]\nname = \"s{i}\"\noutputs = [\"y{i}\"]\ninputs = [\"u{i}\"]\n\
-             gain = [[-2.0]]\nPLACE{i}\n"
-        )?;
-    }
-    cfg.push_str(
-        "[certificate]\nconservatism = 0.3\nmargin = 0.05\nconsecutive = 1\n\n[regression]\n\
-         window = 150\nhorizon = 5\nridge = 1e-4\ninput_integral = \"zero_order_hold\"\n\n\
-         [ambiguity]\nenabled = false\n",
-    );
-    let mut old_cfg = cfg.clone();
-    let mut new_cfg = cfg;
-    for i in (0..n).rev() {
-        old_cfg = old_cfg.replace(&format!("PLACE{i}\n"), "");
-        new_cfg = new_cfg.replace(&format!("PLACE{i}\n"), &format!("process = {}\n", i % 2));
-    }
-    std::fs::write(out.join("old.toml"), old_cfg)?;
-    std::fs::write(out.join("new.toml"), new_cfg)?;
-    // The wide file, and each site's columns.
-    let mut sites: Vec<Rows> = (0..2)
-        .map(|p| Rows::new((0..n).filter(|i| i % 2 == p).collect(), steps, dt, p as u64))
-        .collect();
-    let mut wide = std::io::BufWriter::new(std::fs::File::create(out.join("wide.csv"))?);
-    let mut files: Vec<_> = (0..2)
-        .map(|p| {
-            Ok(std::io::BufWriter::new(std::fs::File::create(out.join(format!("site-{p}.csv")))?))
-        })
-        .collect::<Result<_>>()?;
-    let header = |ids: &mut dyn Iterator<Item = usize>| {
-        let mut h = String::from("t");
-        for i in ids {
-            let _ = write!(h, ",y{i},u{i}");
-        }
-        h
-    };
-    writeln!(wide, "{}", header(&mut (0..n)))?;
-    for (p, f) in files.iter_mut().enumerate() {
-        writeln!(f, "{}", header(&mut (0..n).filter(|i| i % 2 == p)))?;
-    }
-    let mut values = vec![(0.0, 0.0); n];
-    for step in 0..steps {
-        for (p, site) in sites.iter_mut().enumerate() {
-            let mut line = format!("{}", step as f64 * dt);
-            for _ in 0..site.ids.len() {
-                if let Some(Ok(r)) = site.next() {
-                    let (i, v) = &r.samples[0];
-                    values[*i] = (v[0], v[1]);
-                    let _ = write!(line, ",{},{}", v[0], v[1]);
-                }
-            }
-            writeln!(files[p], "{line}")?;
-        }
-        let mut line = format!("{}", step as f64 * dt);
-        for v in &values {
-            let _ = write!(line, ",{},{}", v.0, v.1);
-        }
-        writeln!(wide, "{line}")?;
-    }
-    wide.flush()?;
-    for f in &mut files {
-        f.flush()?;
-    }
-    let hosts = out.join("cli-hosts.txt");
-    let two = |bin: &Path, cfg: &str, inputs: [Option<PathBuf>; 2]| -> Result<f64> {
-        let ports: Vec<u16> = (0..2)
-            .map(|_| Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port()))
-            .collect::<Result<_>>()?;
-        std::fs::write(
-            &hosts,
-            ports.iter().map(|p| format!("127.0.0.1:{p}\n")).collect::<String>(),
-        )?;
-        let start = Instant::now();
-        let children: Vec<_> = (0..2)
-            .map(|p| {
-                let mut c = std::process::Command::new(bin);
-                c.args(["network", "--config"]).arg(out.join(cfg));
-                c.args(["--processes", "2", "--process", &p.to_string(), "--hostfile"]).arg(&hosts);
-                if let Some(input) = &inputs[p] {
-                    c.arg("--input").arg(input);
-                }
-                if p == 0 {
-                    c.arg("--output").arg(out.join(format!("{cfg}.out.csv")));
-                }
-                c.stdin(std::process::Stdio::null())
-                    .stdout(std::process::Stdio::null())
-                    .stderr(std::process::Stdio::null())
-                    .spawn()
-            })
-            .collect::<std::io::Result<_>>()?;
-        for mut c in children {
-            let status = c.wait()?;
-            anyhow::ensure!(status.success(), "{} {cfg}: {status}", bin.display());
-        }
-        Ok(start.elapsed().as_secs_f64())
-    };
-    let old_s = two(old, "old.toml", [Some(out.join("wide.csv")), None])?;
-    let new_s =
-        two(&new, "new.toml", [Some(out.join("site-0.csv")), Some(out.join("site-1.csv"))])?;
-    let start = Instant::now();
-    let status = std::process::Command::new(&new)
-        .args(["network", "--config"])
-        .arg(out.join("new.toml"))
-        .arg("--input")
-        .arg(out.join("wide.csv"))
-        .stdout(std::process::Stdio::null())
-        .status()?;
-    anyhow::ensure!(status.success(), "one process: {status}");
-    let one_s = start.elapsed().as_secs_f64();
-    let start = Instant::now();
-    let status = std::process::Command::new(&new)
-        .args(["network", "--config"])
-        .arg(out.join("new.toml"))
-        .arg("--input")
-        .arg(out.join("wide.csv"))
-        .args(["--workers", "2", "--output"])
-        .arg(out.join("workers.out.csv"))
-        .stdout(std::process::Stdio::null())
-        .status()?;
-    anyhow::ensure!(status.success(), "one process on 2 workers: {status}");
-    let workers_s = start.elapsed().as_secs_f64();
-    let a = std::fs::read(out.join("old.toml.out.csv"))?;
-    let b = std::fs::read(out.join("new.toml.out.csv"))?;
-    anyhow::ensure!(a == b, "the two binaries wrote different epoch rows");
-    let c = std::fs::read(out.join("workers.out.csv"))?;
-    anyhow::ensure!(a == c, "2 workers wrote other epoch rows");
-    Ok([old_s, new_s, one_s, workers_s])
+/// A table row: the path, its seconds, samples per second, and the ratio of the baseline's
+/// seconds to its own (`None`: it is the baseline).
+fn timing(path: &str, secs: f64, samples: f64, baseline: Option<f64>) -> Vec<String> {
+    vec![
+        path.into(),
+        format!("{secs:.2}"),
+        format!("{:.3e}", samples / secs),
+        baseline.map_or_else(|| "1".into(), |b| format!("{:.2}", b / secs)),
+    ]
 }
 
 /// The command line of `cargo xtask sites`.
@@ -453,24 +328,14 @@ pub(crate) fn run(o: &Options) -> Result<()> {
     md.push_str(&markdown(
         &["path", "seconds", "samples per second", "ratio to push_batch"],
         &[
-            vec![
-                "one process, `push_batch` over 2 threads (ceiling)".into(),
-                format!("{batch_s:.2}"),
-                format!("{:.3e}", samples / batch_s),
-                "1".into(),
-            ],
-            vec![
-                "2 timely processes, each its own rows".into(),
-                format!("{:.2}", two.seconds),
-                format!("{:.3e}", samples / two.seconds),
-                format!("{:.2}", batch_s / two.seconds),
-            ],
+            timing("one process, `push_batch` over 2 threads (ceiling)", batch_s, samples, None),
+            timing("2 timely processes, each its own rows", two.seconds, samples, Some(batch_s)),
         ],
     ));
     if let Some(old) = old_binary {
         eprintln!("throughput through the binaries (the old one: {})…", old.display());
         let [old_s, new_s, one_s, workers_s] =
-            cli_throughput(old, throughput_subsystems, tsteps, dt, out)?;
+            cli::throughput(old, throughput_subsystems, tsteps, dt, out)?;
         writeln!(
             md,
             "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
@@ -479,30 +344,25 @@ pub(crate) fn run(o: &Options) -> Result<()> {
         md.push_str(&markdown(
             &["path", "seconds", "samples per second", "ratio to c302992"],
             &[
-                vec![
-                    "c302992: process 0 reads the wide file and ships the samples".into(),
-                    format!("{old_s:.2}"),
-                    format!("{:.3e}", samples / old_s),
-                    "1".into(),
-                ],
-                vec![
-                    "this commit: each process reads its own columns".into(),
-                    format!("{new_s:.2}"),
-                    format!("{:.3e}", samples / new_s),
-                    format!("{:.2}", old_s / new_s),
-                ],
-                vec![
-                    "this commit, one process (no timely)".into(),
-                    format!("{one_s:.2}"),
-                    format!("{:.3e}", samples / one_s),
-                    format!("{:.2}", old_s / one_s),
-                ],
-                vec![
-                    "this commit, one process on 2 timely workers (`--workers 2`)".into(),
-                    format!("{workers_s:.2}"),
-                    format!("{:.3e}", samples / workers_s),
-                    format!("{:.2}", old_s / workers_s),
-                ],
+                timing(
+                    "c302992: process 0 reads the wide file and ships the samples",
+                    old_s,
+                    samples,
+                    None,
+                ),
+                timing(
+                    "this commit: each process reads its own columns",
+                    new_s,
+                    samples,
+                    Some(old_s),
+                ),
+                timing("this commit, one process (no timely)", one_s, samples, Some(old_s)),
+                timing(
+                    "this commit, one process on 2 timely workers (`--workers 2`)",
+                    workers_s,
+                    samples,
+                    Some(old_s),
+                ),
             ],
         ));
     }

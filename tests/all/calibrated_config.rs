@@ -91,6 +91,22 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         let CertifyError::InvalidConfig { field, .. } = err else { panic!("{err}") };
         assert_eq!(field, "calibration.batch_blocks");
     }
+    // The change guard's risk per comparison lies in (0, 1).
+    for (risk, valid) in [(0.0, false), (1.0, false), (f64::NAN, false), (1e-9, true), (0.5, true)]
+    {
+        let cfg = CertifierConfig {
+            calibration: Some(Calibration { change_risk: Some(risk), ..Calibration::new(0.01) }),
+            ..calibrated(1, vec![-0.54], 150, 1)
+        };
+        match Certifier::new(cfg) {
+            Ok(_) => assert!(valid, "{risk} accepted"),
+            Err(CertifyError::InvalidConfig { field, reason }) => {
+                assert!(!valid && field == "calibration.change_risk", "{risk}: {field} {reason}");
+                assert!(reason.contains("(0, 1)"), "{reason}");
+            }
+            Err(e) => panic!("{risk}: {e}"),
+        }
+    }
 }
 
 /// The automatic batches (`auto_batch`, default 8): on the windows with more than `2d`

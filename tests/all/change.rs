@@ -155,6 +155,48 @@ fn a_plant_change_closes_the_gate_within_about_one_window_span() {
     );
 }
 
+/// `Calibration::change_risk` only closes: a larger risk per held-look comparison (the
+/// default `δ`) leaves at every sample a calibrated certificate at most the one at a smaller
+/// risk (`δ / 14`, the split tests'), and a gate open only where the smaller risk's is, on
+/// runs through a drop from rate 3 to 0 at `dt = 0.01`; and it closes sooner in some run.
+#[test]
+fn a_larger_change_risk_only_closes_and_closes_sooner() {
+    let k = -1.5;
+    let s = LinearScenario {
+        dt: 0.01,
+        steps: 3000,
+        dither_hold: 0.2,
+        switch: Some(PlantSwitch { at: 20.0, a: vec![-k], ramp: 0.0 }),
+        ..scalar(-(3.0 + k), -2.0, Process::Gaussian { sigma: 0.1 }, 1.0)
+    };
+    let small = Calibration { change_risk: Some(0.01 / 14.0), ..Calibration::new(0.01) };
+    assert_eq!(Calibration::new(0.01).change_risk(), 0.01);
+    let (mut sooner, mut compared) = (0, 0);
+    for seed in 0..6 {
+        let traj = run_scenario(&s, 61_000 + seed);
+        let mut big = Certifier::new(config(k, 150, Calibration::new(0.01), 10)).expect("valid");
+        let mut little = Certifier::new(config(k, 150, small, 10)).expect("valid");
+        let (mut closed_big, mut closed_little) = (None, None);
+        for i in 0..traj.len() {
+            let t = traj.t[i];
+            let a = big.push(t, traj.output(i), traj.input(i)).expect("valid").calibrated;
+            let b = little.push(t, traj.output(i), traj.input(i)).expect("valid").calibrated;
+            assert!(!a.open || b.open, "seed {seed}, t = {t}: open only at the larger risk");
+            if let Some(v) = a.value {
+                let w = b.value.expect("a certificate at the smaller risk too");
+                assert!(v <= w, "seed {seed}, t = {t}: {v} > {w}");
+                compared += 1;
+            }
+            if t >= 20.0 {
+                closed_big = closed_big.or((!a.open).then_some(t));
+                closed_little = closed_little.or((!b.open).then_some(t));
+            }
+        }
+        sooner += usize::from(closed_big < closed_little);
+    }
+    assert!(compared > 10_000 && sooner >= 1, "compared {compared}, closed sooner in {sooner}");
+}
+
 /// A change to a plant that still contracts (3 → 1) costs power, not validity: the gate
 /// certifies the new plant again in most runs. And an unchanged plant (rate 3 throughout) is
 /// closed by the change guard at a small share of samples (its false closings).

@@ -385,7 +385,7 @@ impl CalibratedState {
                 let blocks: Vec<usize> = lengths.iter().map(|&w| w / reg.horizon).collect();
                 let w = lengths.len();
                 let pairs = (w * (w + 1) / 2 + w).max(1);
-                ChangeGuard::new(&blocks, cal.delta / pairs as f64)
+                ChangeGuard::new(&blocks, cal.delta / pairs as f64, cal.change_risk())
             }),
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],

@@ -99,6 +99,8 @@ delta = 0.01            # the risk of a false deployment over the whole run
                          # slope that varies over the explored region) does not stand
 # plant_change = true    # a window's look stands only while a fresh estimate on the newest
                          # data is not significantly below it (the plant changed)
+# change_risk = 0.01     # risk of each such comparison (default: delta); a false one closes
+                         # the gate for an eighth of the shortest window, larger closes sooner
 
 [nonlinear]
 # The calibrated certificate above assumes one Jacobian over its window. For a nonlinear
@@ -205,6 +207,8 @@ struct CalibrationSection {
     nonlinearity: Option<bool>,
     #[serde(default)]
     plant_change: Option<bool>,
+    #[serde(default)]
+    change_risk: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -230,6 +234,7 @@ impl Default for CalibrationSection {
             hidden_dynamics: None,
             nonlinearity: None,
             plant_change: None,
+            change_risk: None,
         }
     }
 }
@@ -249,6 +254,7 @@ impl CalibrationSection {
             hidden_dynamics: self.hidden_dynamics.unwrap_or(d.hidden_dynamics),
             nonlinearity: self.nonlinearity.unwrap_or(d.nonlinearity),
             plant_change: self.plant_change.unwrap_or(d.plant_change),
+            change_risk: self.change_risk.or(d.change_risk),
             ..d
         }
     }

@@ -84,14 +84,24 @@ pub struct Calibration {
     /// nonlinear loop, the nonlinear certificate (`[nonlinear]`) is the one that can open.
     #[serde(default = "default_true")]
     pub nonlinearity: bool,
-    /// The change guard (default on): a window's look stands only while a fresh estimate of
-    /// the shortest window on the newest columns, taken every eighth of that window's blocks,
-    /// is not significantly below it (one-sided, risk `δ / W` per comparison;
-    /// `NotCertified::PlantChanged`). Off, after a plant change the longer windows keep
+    /// The change guard (default on): a window's look stands only while the fresh estimates
+    /// of it and of every shorter window on their newest columns, taken every eighth of the
+    /// shortest window's blocks, are not significantly below it, and no window's older blocks
+    /// are significantly above its newer ones (the split test) (one-sided, risk [`change_risk`](Self::change_risk) per
+    /// comparison; `NotCertified::PlantChanged`). Off, after a plant change the longer windows keep
     /// certifying the plant that was until a newer look bounds the rate below the margin (a
     /// median of several shortest-window spans). See the guard's module (`guard::change`).
     #[serde(default = "default_true")]
     pub plant_change: bool,
+    /// The change guard's risk per comparison of a standing look with a fresh estimate
+    /// (`None`, the default: `δ`; `(0, 1)`). A false rejection closes that look until the
+    /// next comparison, an eighth of the shortest window later, so it costs a few samples of
+    /// power and no validity; a larger risk closes sooner after a change (VALIDITY.md's
+    /// plant-change table). The split test, whose rejection is kept as a change point and
+    /// closes the longer windows until they have filled past it, keeps its own smaller risk,
+    /// `δ / (W (W + 1) / 2 + W)` for `W` windows (see the guard's module, `guard::change`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub change_risk: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -136,6 +146,7 @@ impl Calibration {
             hidden_dynamics: true,
             nonlinearity: true,
             plant_change: true,
+            change_risk: None,
         }
     }
 
@@ -145,6 +156,13 @@ impl Calibration {
     #[must_use]
     pub fn unguarded(self) -> Self {
         Self { hidden_dynamics: false, nonlinearity: false, plant_change: false, ..self }
+    }
+
+    /// The change guard's risk per held-look comparison: [`change_risk`](Self::change_risk),
+    /// or `δ` when it is not set.
+    #[must_use]
+    pub fn change_risk(&self) -> f64 {
+        self.change_risk.unwrap_or(self.delta)
     }
 
     /// The extra regressors per output of the model guards' larger fits for `p` outputs: `p`
@@ -242,6 +260,11 @@ impl Calibration {
                     self.batch_blocks
                 ),
             );
+        }
+        if let Some(r) = self.change_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return bad("calibration.change_risk", format!("must lie in (0, 1), got {r}"));
+            }
         }
         if !(self.auto_batch == 0 || (2..=64).contains(&self.auto_batch)) {
             return bad(

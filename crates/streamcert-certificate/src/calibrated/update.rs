@@ -80,11 +80,8 @@ impl CalibratedState {
             // The change guard's fresh estimates, every eighth of each window and at each
             // window's look (so that no look stands unchecked against the newest data). Each
             // window's split test takes the shorter window's latest fresh estimate.
-            let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| Fresh {
-                t,
-                beta_hat,
-                sd: variance.max(0.0).sqrt(),
-                nu,
+            let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| {
+                Fresh::new(t, beta_hat, variance.max(0.0).sqrt(), nu)
             };
             for v in 0..self.latest.len() {
                 let due = block_done

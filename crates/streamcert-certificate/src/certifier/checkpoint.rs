@@ -27,7 +27,7 @@ use crate::CertifyError;
 /// The first word of a checkpoint file.
 pub const CHECKPOINT_MAGIC: &str = "streamcert-checkpoint";
 /// The checkpoint format version this build writes and reads.
-pub const CHECKPOINT_VERSION: u32 = 3;
+pub const CHECKPOINT_VERSION: u32 = 4;
 
 /// FNV-1a, 64 bits: `h ← (h ⊕ b) · 0x100000001b3` from `0xcbf29ce484222325`.
 #[must_use]

@@ -25,10 +25,17 @@
 //! windows until they have filled past it, at most the longest window's span; the shorter
 //! windows' looks after it still stand. The second compares each window's
 //! latest look with the fresh estimates of itself and of every shorter window: it catches a
-//! look taken before the change. `α = δ / (W (W + 1) / 2 + W)` per comparison (`W` windows).
-//! Where the plant is unchanged, each difference has mean zero and variance at most the sum
-//! of the two variances (disjoint parts: about equal; overlapping estimates have a positive
-//! covariance), so a comparison closes falsely with probability at most about `α`. One-sided,
+//! look taken before the change. Risks: `α = δ / (W (W + 1) / 2 + W)` per split test (`W`
+//! windows; a false rejection is kept as a change point), and
+//! [`Calibration::change_risk`](crate::Calibration::change_risk) per held-look comparison
+//! (default `δ`: a false rejection closes that look until the next comparison only, an
+//! eighth of the shortest window, so its price is a few samples of power; at `δ / 14`, the
+//! split tests' risk, the gate at `dt = 0.01` stayed open more than 1.5 spans after a drop
+//! in 5.5 to 7 % of VALIDITY.md's runs, at `δ` in 2 to 3.5 %, with the same power). Both
+//! quantiles are taken at the integer part of `ν` (larger: fewer closings). Where the plant
+//! is unchanged, each difference has mean zero and variance at most the sum of the two
+//! variances (disjoint parts: about equal; overlapping estimates have a positive
+//! covariance), so a comparison closes falsely with probability at most about its risk. One-sided,
 //! because a rate that rose leaves the older certificate on the safe side. Where a test
 //! rejects, the look does not stand (`NotCertified::PlantChanged`, with both numbers); the
 //! next looks, on post-change data, decide again.
@@ -69,6 +76,21 @@ pub(crate) struct Fresh {
     pub sd: f64,
     /// Degrees of freedom `ν_f`.
     pub nu: f64,
+    /// `t_{⌊ν_f⌋}(1 − α_held)`, the quantile of the held-look comparisons, and
+    /// `t_{⌊ν_f⌋}(1 − α)`, the split test's, both set by [`ChangeGuard::set`]. At the integer
+    /// part of `ν_f` (a larger quantile: fewer closings, never a less valid verdict), so that
+    /// a window's next estimate, whose `ν` rarely crosses an integer, reuses them instead of
+    /// evaluating the incomplete beta function at every estimate.
+    pub quantile: f64,
+    /// See [`quantile`](Self::quantile).
+    pub split_quantile: f64,
+}
+
+impl Fresh {
+    /// An estimate `β̂`, `s`, `ν` at time `t`, its quantiles not yet set.
+    pub(crate) fn new(t: f64, beta_hat: f64, sd: f64, nu: f64) -> Self {
+        Self { t, beta_hat, sd, nu, quantile: f64::NAN, split_quantile: f64::NAN }
+    }
 }
 
 /// Fresh estimates per shortest window: every `⌈B_1 / SPACING⌉` blocks.
@@ -77,8 +99,10 @@ const SPACING: usize = 8;
 /// The guard's state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct ChangeGuard {
-    /// Risk `α` per comparison.
+    /// Risk `α` of each split test.
     alpha: f64,
+    /// Risk `α_held` of each comparison of a held look with a fresh estimate.
+    held: f64,
     /// Blocks between fresh estimates of each window, `⌈B_1 / 8⌉`.
     spacing: Vec<usize>,
     /// Blocks until each window's next fresh estimate (0: at the next block boundary).
@@ -97,10 +121,11 @@ pub(crate) struct ChangeGuard {
 
 impl ChangeGuard {
     /// The guard for windows of `blocks` blocks each (shortest first), at risk `alpha` per
-    /// comparison.
-    pub(crate) fn new(blocks: &[usize], alpha: f64) -> Self {
+    /// split test and `held` per comparison of a held look with a fresh estimate.
+    pub(crate) fn new(blocks: &[usize], alpha: f64, held: f64) -> Self {
         Self {
             alpha,
+            held,
             // Every window at the shortest window's pace: the split tests of the short
             // windows see a change first, and a split of window v compares with window
             // v − 1's estimate at the same block.
@@ -141,11 +166,22 @@ impl ChangeGuard {
         }
     }
 
-    /// Replace window `v`'s fresh estimate (kept only when every number is finite).
+    /// Replace window `v`'s fresh estimate (kept only when every number is finite), with its
+    /// quantiles (those of the estimate it replaces when `⌊ν⌋` is the same).
     pub(crate) fn set(&mut self, v: usize, fresh: Option<Fresh>) {
-        self.fresh[v] = fresh.filter(|f| {
-            f.t.is_finite() && f.beta_hat.is_finite() && f.sd.is_finite() && f.nu.is_finite()
-        });
+        let previous = self.fresh[v];
+        self.fresh[v] = fresh
+            .filter(|f| f.t.is_finite() && f.beta_hat.is_finite() && f.sd.is_finite())
+            .filter(|f| f.nu.is_finite())
+            .map(|f| match previous.filter(|p| p.nu.floor() == f.nu.floor()) {
+                Some(p) => Fresh { quantile: p.quantile, split_quantile: p.split_quantile, ..f },
+                None => Fresh {
+                    quantile: t_quantile(f.nu.floor(), self.held),
+                    split_quantile: t_quantile(f.nu.floor(), self.alpha),
+                    ..f
+                },
+            })
+            .filter(|f| f.quantile.is_finite() && f.split_quantile.is_finite());
     }
 
     /// Replace window `v`'s split test (`v >= 1`) with the estimate `older` of its blocks
@@ -155,7 +191,7 @@ impl ChangeGuard {
         let newer = v.checked_sub(1).and_then(|u| self.fresh[u]);
         self.split[v] = older.zip(newer).and_then(|(old, new)| {
             let spread = (new.sd * new.sd + old.sd * old.sd).sqrt();
-            let upper = new.beta_hat + t_quantile(new.nu, self.alpha) * spread;
+            let upper = new.beta_hat + new.split_quantile * spread;
             // A test without a finite bound (too few degrees of freedom) is not run.
             upper.is_finite().then_some((old.beta_hat, upper, boundary))
         });
@@ -194,7 +230,7 @@ impl ChangeGuard {
         }
         for f in self.fresh.iter().take(w + 1).flatten() {
             let spread = (f.sd * f.sd + look.sd * look.sd).sqrt();
-            let upper = f.beta_hat + t_quantile(f.nu, self.alpha) * spread;
+            let upper = f.beta_hat + f.quantile * spread;
             if upper < look.beta_hat {
                 return Err(NotCertified::PlantChanged {
                     window: look.window,
@@ -209,6 +245,7 @@ impl ChangeGuard {
     /// Whether a deserialised guard matches a fresh one of the same configuration.
     pub(crate) fn matches(&self, fresh: &Self) -> bool {
         self.alpha == fresh.alpha
+            && self.held == fresh.held
             && self.spacing == fresh.spacing
             && self.until.len() == fresh.until.len()
             && self.until.iter().zip(&self.spacing).all(|(u, s)| u < s)
@@ -221,7 +258,12 @@ impl ChangeGuard {
                 .chain(&self.changed)
                 .all(|s| s.0.is_finite() && s.1.is_finite())
             && self.fresh.iter().flatten().all(|f| {
-                f.t.is_finite() && f.beta_hat.is_finite() && f.sd >= 0.0 && f.nu.is_finite()
+                f.t.is_finite()
+                    && f.beta_hat.is_finite()
+                    && f.sd >= 0.0
+                    && f.nu.is_finite()
+                    && f.quantile.to_bits() == t_quantile(f.nu.floor(), self.held).to_bits()
+                    && f.split_quantile.to_bits() == t_quantile(f.nu.floor(), self.alpha).to_bits()
             })
     }
 }

@@ -120,6 +120,11 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
         .replace("# nonlinearity = true ", "nonlinearity = false ");
     let c = parse(&off, "x").unwrap().certifier.calibration.unwrap();
     assert!(!c.plant_change && !c.nonlinearity && c.hidden_dynamics);
+    // The change guard's risk: δ unless stated.
+    assert_eq!((cal.change_risk, cal.change_risk()), (None, cal.delta));
+    let risk = DEFAULT_CONFIG.replace("# change_risk = 0.01 ", "change_risk = 0.002 ");
+    let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.change_risk(), 0.002);
     let paper = DEFAULT_CONFIG.replace("enabled = true\ndelta", "enabled = false\ndelta");
     assert_eq!(parse(&paper, "x").unwrap().certifier.calibration, None);
 }

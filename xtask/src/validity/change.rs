@@ -109,14 +109,6 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
             let open: Vec<&Run> = results.iter().filter(|r| r.open_at_switch).collect();
             let late = results.iter().filter(|r| r.last_open.is_some_and(|l| l > 1.5 * span));
             let late = late.count();
-            if std::env::var("DBG_LATE").is_ok() {
-                for r in results.iter().filter(|r| r.last_open.is_some_and(|l| l > 1.5 * span)) {
-                    eprintln!(
-                        "dt {dt} after {after}: delay {:.2} last_open {:?} open_at_switch {}",
-                        r.delay, r.last_open, r.open_at_switch
-                    );
-                }
-            }
             let mut delays: Vec<f64> = open.iter().map(|r| r.delay).collect();
             let (after_samples, changed): (usize, usize) =
                 results.iter().fold((0, 0), |(a, c), r| (a + r.after, c + r.changed));

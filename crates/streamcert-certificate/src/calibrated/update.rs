@@ -83,28 +83,41 @@ impl CalibratedState {
             let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| {
                 Fresh::new(t, beta_hat, variance.max(0.0).sqrt(), nu)
             };
+            let block = self.windows.seen() / self.horizon as u64;
+            let mut taken = 0u32;
             for v in 0..self.latest.len() {
                 let due = block_done
                     && self.windows.is_full(v)
-                    && self.change.as_mut().is_some_and(|c| c.due(v) | (looking >> v & 1 == 1));
+                    && self
+                        .change
+                        .as_ref()
+                        .is_some_and(|c| c.due(v, block) | (looking >> v & 1 == 1));
                 if due {
                     let newest = self.rate(v, 0).map(fresh);
                     // The split's two parts at the same block: the older part of window v
-                    // and window v − 1's estimate now.
+                    // and window v − 1's estimate now (taken above when it was due too).
                     let (older, newer) = if v == 0 {
                         (None, None)
                     } else {
                         let skip = self.windows.window(v - 1) / self.horizon;
-                        (self.rate(v, skip).map(fresh), self.rate(v - 1, 0).map(fresh))
+                        let newer = if taken >> (v - 1) & 1 == 1 {
+                            None
+                        } else {
+                            Some(self.rate(v - 1, 0).map(fresh))
+                        };
+                        (self.rate(v, skip).map(fresh), newer)
                     };
                     if let Some(c) = &mut self.change {
                         c.set(v, newest);
                         if v > 0 {
-                            c.set(v - 1, newer);
+                            if let Some(newer) = newer {
+                                c.set(v - 1, newer);
+                            }
                             let newer = self.windows.window(v - 1) as u64;
                             c.set_split(v, older, self.seen.saturating_sub(newer));
                         }
                     }
+                    taken |= 1 << v;
                     looked = true;
                 }
             }

@@ -3,10 +3,13 @@
 //!
 //! A window's look is held until its next look, up to half its span later, and the longest
 //! windows hold up to `200 h` columns of the past: after a plant change they keep certifying
-//! the plant that was, or an average of the two. Every `⌈B_1 / 8⌉` blocks of `h` columns
-//! (`B_1` the shortest window's blocks: every window at the shortest window's pace), and at
-//! each window's look, the guard takes a *fresh* estimate of each window `v` on its newest
-//! columns (`β̂_v` and its standard deviation `s_v`, the calibrated
+//! the plant that was, or an average of the two. The guard takes a *fresh* estimate of each
+//! window `v` on its newest columns at the end of every `P_v`-th block of `h` columns
+//! (counted from the state's start, so at the same blocks for windows at the same pace) and
+//! at each window's look: `P_0 = P_1 = ⌈B_0 / 8⌉` (`B_0` the shortest window's blocks) and
+//! `P_v = 2^(v−1) P_0` for the longer windows, which double in length (each window from the
+//! second on is refreshed about fifteen times per its own span, and window `v − 1` is due
+//! at every block window `v` is). The fresh estimates (`β̂_v` and its standard deviation `s_v`, the calibrated
 //! look's formulas; no risk of `δ` is spent, it certifies nothing), and two tests decide:
 //!
 //! ```text
@@ -43,20 +46,26 @@
 //! **Closing delay.** A drop of the rate by `Δ` is seen once a newer part, a mixture of the
 //! old and the new plant weighted by its share `f` of post-change columns, falls
 //! `t √(s² + s_o²)` below the older part: `f ≈ t s √2 / Δ` of the shorter window's span,
-//! plus at most an eighth of the shortest window's span to the next comparison. A slow drift is a sequence of small
-//! changes: the guard closes once the rate has drifted by about `t √(s² + s_o²)` between a
-//! window's two parts, so a slow enough drift keeps the gate open on looks at most that far
-//! above the newest rate (VALIDITY.md measures the jumps; a drift is not measured yet).
+//! plus the time to the next comparison. A slow drift is a sequence of small changes: the
+//! guard closes once the rate has drifted by about `t √(s² + s_o²)` between a window's two
+//! parts, so a slow enough drift keeps the gate open on looks at most that far above the
+//! newest rate (VALIDITY.md measures steps and two drifts: the certificate mostly falls
+//! below the margin with the rate before the crossing).
 //!
 //! Closing never costs validity; its price is power (a false comparison closes a standing
 //! look until the next comparison, and a change to a still contracting plant closes the
 //! longer windows' looks until the shorter windows certify the new plant). A fresh estimate
-//! of window `v` costs `O(B_v (k d + p²) + k³)`, three times (its newest and older part, and
-//! window `v − 1`'s newest), every `⌈B_1 / 8⌉` blocks: `O(8 (Σ_v B_v / B_1) h⁻¹ (k d + p²))`
-//! per sample amortised (about 8 · 15 block passes per block for the default four windows),
-//! no allocation. This is the largest part of the default step's cost (BENCHMARKS.md); a
-//! split statistic kept up to date per block instead of recomputed is the open way to
-//! cheaper.
+//! of window `v` costs `O(B_v (k d + p²) + k³)`, twice per due block (its newest columns
+//! and its older part; window `v − 1`'s newest is the one taken at the same block), so about
+//! `3 B_0 / P_0 ≈ 24` block passes per block per window, `O(W (k d + p²))` per sample
+//! amortised, no allocation (for the default four windows 75 block passes per block; 165
+//! with every window at the shortest window's pace, 217 before the phases were aligned).
+//! This is still the largest part of the default step's cost (BENCHMARKS.md); a split
+//! statistic kept up to date per block instead of recomputed is the open way to cheaper.
+//! Pace and closing delay, measured (`cargo xtask validity --only-change 200`, dt = 0.01,
+//! drops from rate 3 to −0.2, 0, 0.04): open later than 1.5 spans in 2.0 / 3.0 / 2.5 % of
+//! runs with every window at the shortest window's pace, 2.0 / 3.5 / 3.0 % with the pace
+//! above, 2.0 / 6.5 / 4.5 % with every window at an eighth of itself.
 //!
 //! [`Calibration::plant_change`]: crate::Calibration::plant_change
 
@@ -76,11 +85,13 @@ pub(crate) struct Fresh {
     pub sd: f64,
     /// Degrees of freedom `ν_f`.
     pub nu: f64,
-    /// `t_{⌊ν_f⌋}(1 − α_held)`, the quantile of the held-look comparisons, and
-    /// `t_{⌊ν_f⌋}(1 − α)`, the split test's, both set by [`ChangeGuard::set`]. At the integer
-    /// part of `ν_f` (a larger quantile: fewer closings, never a less valid verdict), so that
-    /// a window's next estimate, whose `ν` rarely crosses an integer, reuses them instead of
-    /// evaluating the incomplete beta function at every estimate.
+    /// `t_{⌈ν_f⌉}(1 − α_held)`, the quantile of the held-look comparisons, and
+    /// `t_{⌈ν_f⌉}(1 − α)`, the split test's, both set by [`ChangeGuard::set`]. At the integer
+    /// above `ν_f` (a quantile at most the exact one: a closing never less often, a false
+    /// one slightly more often than the stated risk, by under 1 % of the quantile at the
+    /// default windows' `ν >= 25`), so that a window's next estimate, whose `ν` rarely
+    /// crosses an integer, reuses them instead of evaluating the incomplete beta function at
+    /// every estimate.
     pub quantile: f64,
     /// See [`quantile`](Self::quantile).
     pub split_quantile: f64,
@@ -93,7 +104,7 @@ impl Fresh {
     }
 }
 
-/// Fresh estimates per shortest window: every `⌈B_1 / SPACING⌉` blocks.
+/// Fresh estimates per shortest window: every `⌈B_0 / SPACING⌉` blocks.
 const SPACING: usize = 8;
 
 /// The guard's state.
@@ -103,10 +114,8 @@ pub(crate) struct ChangeGuard {
     alpha: f64,
     /// Risk `α_held` of each comparison of a held look with a fresh estimate.
     held: f64,
-    /// Blocks between fresh estimates of each window, `⌈B_1 / 8⌉`.
+    /// Blocks between fresh estimates of each window, `P_v` (module docs).
     spacing: Vec<usize>,
-    /// Blocks until each window's next fresh estimate (0: at the next block boundary).
-    until: Vec<usize>,
     /// Each window's latest fresh estimate (`None`: none yet, or its fit not ready).
     fresh: Vec<Option<Fresh>>,
     /// Each window's latest split test (`v >= 1`): its older part's `β̂`, the newer part's
@@ -132,14 +141,12 @@ impl ChangeGuard {
             // A window longer than 64 shortest-window eighths is refreshed every 64th of
             // itself instead (bounding each window's cost per block; the default four windows
             // are all at the shortest window's pace).
-            spacing: blocks
-                .iter()
-                .map(|b| {
-                    let pace = blocks.first().map_or(1, |b0| b0.div_ceil(SPACING).max(1));
-                    pace.max(b.div_ceil(64))
-                })
-                .collect(),
-            until: vec![0; blocks.len()],
+            // Windows 0 and 1 at the shortest window's pace, window v >= 2 at 2^(v−1) times
+            // it (see the module docs).
+            spacing: {
+                let pace = blocks.first().map_or(1, |b0| b0.div_ceil(SPACING).max(1));
+                (0..blocks.len()).map(|v| pace << v.saturating_sub(1).min(16)).collect()
+            },
             fresh: vec![None; blocks.len()],
             split: vec![None; blocks.len()],
             changed: None,
@@ -148,22 +155,17 @@ impl ChangeGuard {
 
     /// Forget the fresh estimates.
     pub(crate) fn reset(&mut self) {
-        self.until.fill(0);
         self.fresh.fill(None);
         self.split.fill(None);
         self.changed = None;
     }
 
-    /// At a block boundary of a full window `v`: whether its fresh estimate is due (counts
-    /// the blocks down).
-    pub(crate) fn due(&mut self, v: usize) -> bool {
-        if self.until[v] == 0 {
-            self.until[v] = self.spacing[v] - 1;
-            true
-        } else {
-            self.until[v] -= 1;
-            false
-        }
+    /// Whether window `v`'s fresh estimate is due at the end of block `block` (counted from
+    /// the state's start): every `spacing[v]` blocks, at the same blocks for every window at
+    /// the same pace, so that a split test finds the shorter window's estimate of the same
+    /// block already taken.
+    pub(crate) fn due(&self, v: usize, block: u64) -> bool {
+        block % self.spacing[v] as u64 == 0
     }
 
     /// Replace window `v`'s fresh estimate (kept only when every number is finite), with its
@@ -173,11 +175,11 @@ impl ChangeGuard {
         self.fresh[v] = fresh
             .filter(|f| f.t.is_finite() && f.beta_hat.is_finite() && f.sd.is_finite())
             .filter(|f| f.nu.is_finite())
-            .map(|f| match previous.filter(|p| p.nu.floor() == f.nu.floor()) {
+            .map(|f| match previous.filter(|p| p.nu.ceil() == f.nu.ceil()) {
                 Some(p) => Fresh { quantile: p.quantile, split_quantile: p.split_quantile, ..f },
                 None => Fresh {
-                    quantile: t_quantile(f.nu.floor(), self.held),
-                    split_quantile: t_quantile(f.nu.floor(), self.alpha),
+                    quantile: t_quantile(f.nu.ceil(), self.held),
+                    split_quantile: t_quantile(f.nu.ceil(), self.alpha),
                     ..f
                 },
             })
@@ -247,8 +249,6 @@ impl ChangeGuard {
         self.alpha == fresh.alpha
             && self.held == fresh.held
             && self.spacing == fresh.spacing
-            && self.until.len() == fresh.until.len()
-            && self.until.iter().zip(&self.spacing).all(|(u, s)| u < s)
             && self.fresh.len() == fresh.fresh.len()
             && self.split.len() == fresh.split.len()
             && self
@@ -262,8 +262,8 @@ impl ChangeGuard {
                     && f.beta_hat.is_finite()
                     && f.sd >= 0.0
                     && f.nu.is_finite()
-                    && f.quantile.to_bits() == t_quantile(f.nu.floor(), self.held).to_bits()
-                    && f.split_quantile.to_bits() == t_quantile(f.nu.floor(), self.alpha).to_bits()
+                    && f.quantile.to_bits() == t_quantile(f.nu.ceil(), self.held).to_bits()
+                    && f.split_quantile.to_bits() == t_quantile(f.nu.ceil(), self.alpha).to_bits()
             })
     }
 }

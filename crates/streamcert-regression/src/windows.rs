@@ -272,9 +272,18 @@ impl InstrumentedWindows {
     pub(crate) fn span_sums(&self, span: (usize, usize), out: &mut [f64]) {
         let stride = self.layout().stride();
         let (older, newer) = self.span_blocks(span);
+        // One output, J = 1: a fixed-size accumulator the compiler keeps in registers (in
+        // memory, every block would wait for the previous block's store to be read back).
+        // Strides 10 and 21: one input through the origin and with the intercept; 36 and 55:
+        // the model guards' larger fits (one or two more regressors) with the intercept.
         if stride == 10 {
-            // p = m = 1, J = 1: a fixed-size accumulator the compiler keeps in registers.
             sum_runs::<10>(older, newer, &mut out[..10]);
+        } else if stride == 21 {
+            sum_runs::<21>(older, newer, &mut out[..21]);
+        } else if stride == 36 {
+            sum_runs::<36>(older, newer, &mut out[..36]);
+        } else if stride == 55 {
+            sum_runs::<55>(older, newer, &mut out[..55]);
         } else {
             let out = &mut out[..stride];
             out.fill(0.0);

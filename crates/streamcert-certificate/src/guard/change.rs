@@ -89,9 +89,8 @@ pub(crate) struct Fresh {
     /// `t_{⌈ν_f⌉}(1 − α)`, the split test's, both set by [`ChangeGuard::set`]. At the integer
     /// above `ν_f` (a quantile at most the exact one: a closing never less often, a false
     /// one slightly more often than the stated risk, by under 1 % of the quantile at the
-    /// default windows' `ν >= 25`), so that a window's next estimate, whose `ν` rarely
-    /// crosses an integer, reuses them instead of evaluating the incomplete beta function at
-    /// every estimate.
+    /// default windows' `ν >= 25`), so that they come from the guard's cache by `⌈ν⌉`
+    /// instead of an incomplete beta function at every estimate.
     pub quantile: f64,
     /// See [`quantile`](Self::quantile).
     pub split_quantile: f64,
@@ -106,6 +105,9 @@ impl Fresh {
 
 /// Fresh estimates per shortest window: every `⌈B_0 / SPACING⌉` blocks.
 const SPACING: usize = 8;
+
+/// Slots of the quantile cache.
+const CACHE: usize = 64;
 
 /// The guard's state.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -126,6 +128,10 @@ pub(crate) struct ChangeGuard {
     /// rejected, with its older `β̂` and newer upper bound (sticky until a reset: a look whose
     /// data start before it may hold the old plant).
     changed: Option<(f64, f64, u64)>,
+    /// Quantiles by `⌈ν⌉`, direct-mapped: slot `⌈ν⌉ mod 64` holds `(⌈ν⌉, t_held, t_split)`
+    /// (`(0, 0, 0)`: empty). A window's `ν` moves over a few integers, which then cost no
+    /// incomplete beta function.
+    cache: Vec<(u32, f64, f64)>,
 }
 
 impl ChangeGuard {
@@ -150,6 +156,7 @@ impl ChangeGuard {
             fresh: vec![None; blocks.len()],
             split: vec![None; blocks.len()],
             changed: None,
+            cache: vec![(0, 0.0, 0.0); CACHE],
         }
     }
 
@@ -171,19 +178,25 @@ impl ChangeGuard {
     /// Replace window `v`'s fresh estimate (kept only when every number is finite), with its
     /// quantiles (those of the estimate it replaces when `⌊ν⌋` is the same).
     pub(crate) fn set(&mut self, v: usize, fresh: Option<Fresh>) {
-        let previous = self.fresh[v];
         self.fresh[v] = fresh
             .filter(|f| f.t.is_finite() && f.beta_hat.is_finite() && f.sd.is_finite())
-            .filter(|f| f.nu.is_finite())
-            .map(|f| match previous.filter(|p| p.nu.ceil() == f.nu.ceil()) {
-                Some(p) => Fresh { quantile: p.quantile, split_quantile: p.split_quantile, ..f },
-                None => Fresh {
-                    quantile: t_quantile(f.nu.ceil(), self.held),
-                    split_quantile: t_quantile(f.nu.ceil(), self.alpha),
-                    ..f
-                },
+            .filter(|f| f.nu.is_finite() && f.nu > 0.0 && f.nu < f64::from(u32::MAX))
+            .map(|f| {
+                let (quantile, split_quantile) = self.quantiles(f.nu.ceil() as u32);
+                Fresh { quantile, split_quantile, ..f }
             })
             .filter(|f| f.quantile.is_finite() && f.split_quantile.is_finite());
+    }
+
+    /// `(t_ν(1 − α_held), t_ν(1 − α))` at `ν = key >= 1`, from the cache when its slot holds
+    /// them.
+    fn quantiles(&mut self, key: u32) -> (f64, f64) {
+        let slot = &mut self.cache[key as usize % CACHE];
+        if slot.0 != key {
+            let nu = f64::from(key);
+            *slot = (key, t_quantile(nu, self.held), t_quantile(nu, self.alpha));
+        }
+        (slot.1, slot.2)
     }
 
     /// Replace window `v`'s split test (`v >= 1`) with the estimate `older` of its blocks
@@ -248,6 +261,14 @@ impl ChangeGuard {
     pub(crate) fn matches(&self, fresh: &Self) -> bool {
         self.alpha == fresh.alpha
             && self.held == fresh.held
+            && self.cache.len() == CACHE
+            && self.cache.iter().enumerate().all(|(i, &(key, held, split))| {
+                let nu = f64::from(key);
+                (key == 0 && held == 0.0 && split == 0.0)
+                    || (key as usize % CACHE == i
+                        && held.to_bits() == t_quantile(nu, self.held).to_bits()
+                        && split.to_bits() == t_quantile(nu, self.alpha).to_bits())
+            })
             && self.spacing == fresh.spacing
             && self.fresh.len() == fresh.fresh.len()
             && self.split.len() == fresh.split.len()

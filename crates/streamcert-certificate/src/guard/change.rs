@@ -288,3 +288,48 @@ impl ChangeGuard {
             })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Oracle: every estimate's quantiles equal the Student-t quantiles at `⌈ν⌉`, whether
+    /// they come from the cache or not, through `ν` whose `⌈ν⌉` share a slot (4 and 68, 5 and
+    /// 69) and repeat; and a guard whose cache was filled still `matches` a new one.
+    #[test]
+    fn cached_quantiles_equal_the_quantiles_at_the_integer_above_nu() {
+        let (alpha, held) = (0.01 / 14.0, 0.01);
+        let mut guard = ChangeGuard::new(&[30, 60, 120, 240], alpha, held);
+        let fresh = ChangeGuard::new(&[30, 60, 120, 240], alpha, held);
+        for (i, nu) in
+            [3.2, 67.1, 3.9, 4.0, 68.0, 68.5, 4.5, 200.0, 0.3, 67.1].into_iter().enumerate()
+        {
+            guard.set(i % 4, Some(Fresh::new(1.0, 0.5, 0.2, nu)));
+            let f = guard.fresh[i % 4].expect("a finite estimate");
+            assert_eq!(f.quantile.to_bits(), t_quantile(nu.ceil(), held).to_bits(), "{nu}");
+            assert_eq!(f.split_quantile.to_bits(), t_quantile(nu.ceil(), alpha).to_bits(), "{nu}");
+        }
+        assert!(guard.matches(&fresh));
+        // A cache slot that does not hold its key's quantile is refused.
+        guard.cache[5] = (69, 1.0, 1.0);
+        assert!(!guard.matches(&fresh));
+        // No estimate at ν <= 0.
+        guard.set(0, Some(Fresh::new(1.0, 0.5, 0.2, 0.0)));
+        assert!(guard.fresh[0].is_none());
+    }
+
+    /// The pace: windows 0 and 1 every `⌈B_0 / 8⌉` blocks, window `v >= 2` every `2^(v−1)`
+    /// times that, so window `v − 1` is due at every block window `v` is (its split test
+    /// reuses that estimate).
+    #[test]
+    fn a_window_is_due_only_where_the_shorter_one_is() {
+        let guard = ChangeGuard::new(&[30, 60, 120, 240, 480], 0.001, 0.01);
+        assert_eq!(guard.spacing, vec![4, 4, 8, 16, 32]);
+        for block in 0..2000u64 {
+            for v in 1..5 {
+                assert!(!guard.due(v, block) || guard.due(v - 1, block), "{v} {block}");
+            }
+        }
+        assert_eq!((0..2000u64).filter(|&b| guard.due(3, b)).count(), 125);
+    }
+}

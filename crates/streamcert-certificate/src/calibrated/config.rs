@@ -85,11 +85,12 @@ pub struct Calibration {
     #[serde(default = "default_true")]
     pub nonlinearity: bool,
     /// The change guard (default on): a window's look stands only while the fresh estimates
-    /// of it and of every shorter window on their newest columns, taken every eighth of the
-    /// shortest window's blocks, are not significantly below it, and no window's older blocks
-    /// are significantly above its newer ones (the split test) (one-sided, risk [`change_risk`](Self::change_risk) per
-    /// comparison; `NotCertified::PlantChanged`). Off, after a plant change the longer windows keep
-    /// certifying the plant that was until a newer look bounds the rate below the margin (a
+    /// of it and of every shorter window on their newest columns are not significantly below
+    /// it (one-sided, risk [`change_risk`](Self::change_risk) per comparison) and no window's
+    /// older blocks are significantly above its newer ones (the split test, at a smaller
+    /// risk); `NotCertified::PlantChanged`. The estimates are taken every eighth of the
+    /// shortest window's blocks (the third and longer windows at slower paces) and at every
+    /// look. Off, after a plant change the longer windows keep certifying the plant that was until a newer look bounds the rate below the margin (a
     /// median of several shortest-window spans). See the guard's module (`guard::change`).
     #[serde(default = "default_true")]
     pub plant_change: bool,

@@ -77,9 +77,9 @@ impl CalibratedState {
                 }
                 self.until_look[w] -= 1;
             }
-            // The change guard's fresh estimates, every eighth of each window and at each
+            // The change guard's fresh estimates, at the blocks its pace makes due and at each
             // window's look (so that no look stands unchecked against the newest data). Each
-            // window's split test takes the shorter window's latest fresh estimate.
+            // window's split test takes the shorter window's estimate of the same block.
             let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| {
                 Fresh::new(t, beta_hat, variance.max(0.0).sqrt(), nu)
             };

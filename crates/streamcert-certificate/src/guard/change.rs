@@ -9,8 +9,9 @@
 //! at each window's look: `P_0 = P_1 = ⌈B_0 / 8⌉` (`B_0` the shortest window's blocks) and
 //! `P_v = 2^(v−1) P_0` for the longer windows, which double in length (each window from the
 //! second on is refreshed about fifteen times per its own span, and window `v − 1` is due
-//! at every block window `v` is). The fresh estimates (`β̂_v` and its standard deviation `s_v`, the calibrated
-//! look's formulas; no risk of `δ` is spent, it certifies nothing), and two tests decide:
+//! at every block window `v` is). A fresh estimate (`β̂_v` and its standard deviation
+//! `s_v`, by the calibrated look's formulas) spends no risk of `δ` and certifies nothing;
+//! two tests decide:
 //!
 //! ```text
 //! split test of window v >= 1:  β̂_{v−1} + t_{ν_{v−1}}(1 − α) · √(s_{v−1}² + s_o²)  >=  β̂_o
@@ -35,7 +36,8 @@
 //! eighth of the shortest window, so its price is a few samples of power; at `δ / 14`, the
 //! split tests' risk, the gate at `dt = 0.01` stayed open more than 1.5 spans after a drop
 //! in 5.5 to 7 % of VALIDITY.md's runs, at `δ` in 2 to 3.5 %, with the same power). Both
-//! quantiles are taken at the integer part of `ν` (larger: fewer closings). Where the plant
+//! quantiles are taken at the integer above `ν` (no larger than the exact ones: a closing
+//! never less often; see [`Fresh::quantile`]). Where the plant
 //! is unchanged, each difference has mean zero and variance at most the sum of the two
 //! variances (disjoint parts: about equal; overlapping estimates have a positive
 //! covariance), so a comparison closes falsely with probability at most about its risk. One-sided,
@@ -141,12 +143,6 @@ impl ChangeGuard {
         Self {
             alpha,
             held,
-            // Every window at the shortest window's pace: the split tests of the short
-            // windows see a change first, and a split of window v compares with window
-            // v − 1's estimate at the same block.
-            // A window longer than 64 shortest-window eighths is refreshed every 64th of
-            // itself instead (bounding each window's cost per block; the default four windows
-            // are all at the shortest window's pace).
             // Windows 0 and 1 at the shortest window's pace, window v >= 2 at 2^(v−1) times
             // it (see the module docs).
             spacing: {

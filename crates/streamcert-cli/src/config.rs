@@ -89,8 +89,10 @@ delta = 0.01            # the risk of a false deployment over the whole run
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
 # batch_blocks = 1       # blocks of h per batch of the variance (4 or 8 with sensor noise)
 # auto_batch = 8         # beside it, on windows long enough, the variance in batches of 8
-                         # blocks, each radius at half the risk, the smaller standing: sensor
-                         # noise needs batches, and the user need not know it (0: off)
+                         # blocks, the smaller radius standing: sensor noise needs batches,
+                         # and the user need not know it (0: off)
+# auto_batch_risk = 0.2  # the share of the risk the batched radius spends (the first radius
+                         # the rest: quick on process noise, which is the common case)
 # The guards (each on by default; closing never costs validity, only power; turning one off
 # certifies plants the certificate's risk does not cover):
 # hidden_dynamics = true # a window whose output's past increment predicts its next one (a
@@ -202,6 +204,8 @@ struct CalibrationSection {
     #[serde(default)]
     auto_batch: Option<usize>,
     #[serde(default)]
+    auto_batch_risk: Option<f64>,
+    #[serde(default)]
     hidden_dynamics: Option<bool>,
     #[serde(default)]
     nonlinearity: Option<bool>,
@@ -231,6 +235,7 @@ impl Default for CalibrationSection {
             instrument_intervals: None,
             batch_blocks: None,
             auto_batch: None,
+            auto_batch_risk: None,
             hidden_dynamics: None,
             nonlinearity: None,
             plant_change: None,
@@ -251,6 +256,7 @@ impl CalibrationSection {
             instrument_intervals: self.instrument_intervals.unwrap_or(d.instrument_intervals),
             batch_blocks: self.batch_blocks.unwrap_or(d.batch_blocks),
             auto_batch: self.auto_batch.unwrap_or(d.auto_batch),
+            auto_batch_risk: self.auto_batch_risk.unwrap_or(d.auto_batch_risk),
             hidden_dynamics: self.hidden_dynamics.unwrap_or(d.hidden_dynamics),
             nonlinearity: self.nonlinearity.unwrap_or(d.nonlinearity),
             plant_change: self.plant_change.unwrap_or(d.plant_change),

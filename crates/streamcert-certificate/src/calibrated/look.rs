@@ -45,26 +45,28 @@ impl CalibratedState {
             c.look(&look, &self.windows, &mut self.est, p);
         }
         // The second covariance (batches of `auto_batch` blocks) on the windows long enough
-        // for it: each radius at half the risk, the smaller standing.
+        // for it: the second radius at `auto_batch_risk` of the risk, the first at the rest,
+        // the smaller standing.
         let (mut variance, mut nu) = (variance, nu);
+        let second = self.cal.auto_batch_risk;
         let mut radius;
         let upper_radius;
         match self.auto_rate(w) {
             Some((_, v2, nu2)) => {
-                radius = calibrated_radius(variance, nu, risk / 2.0);
-                let r2 = calibrated_radius(v2, nu2, risk / 2.0);
-                let delta = self.cal.delta / 2.0;
-                upper_radius =
-                    calibrated_radius(variance, nu, delta).min(calibrated_radius(v2, nu2, delta));
+                radius = calibrated_radius(variance, nu, risk * (1.0 - second));
+                let r2 = calibrated_radius(v2, nu2, risk * second);
+                let delta = self.cal.delta;
+                upper_radius = calibrated_radius(variance, nu, delta * (1.0 - second))
+                    .min(calibrated_radius(v2, nu2, delta * second));
                 if r2 < radius {
                     (radius, variance, nu) = (r2, v2, nu2);
                 }
             }
             None if self.auto_applies(w) => {
                 // Not ready with batches (cannot happen on a full window): the first radius
-                // at the half of the risk it was given.
-                radius = calibrated_radius(variance, nu, risk / 2.0);
-                upper_radius = calibrated_radius(variance, nu, self.cal.delta / 2.0);
+                // at the share of the risk it was given.
+                radius = calibrated_radius(variance, nu, risk * (1.0 - second));
+                upper_radius = calibrated_radius(variance, nu, self.cal.delta * (1.0 - second));
             }
             None => {
                 radius = calibrated_radius(variance, nu, risk);

@@ -125,6 +125,11 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     let risk = DEFAULT_CONFIG.replace("# change_risk = 0.01 ", "change_risk = 0.002 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.change_risk(), 0.002);
+    // The batched radius's share of the risk: 0.2 unless stated.
+    assert_eq!(cal.auto_batch_risk, 0.2);
+    let share = DEFAULT_CONFIG.replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");
+    let c = parse(&share, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.auto_batch_risk, 0.5);
     let paper = DEFAULT_CONFIG.replace("enabled = true\ndelta", "enabled = false\ndelta");
     assert_eq!(parse(&paper, "x").unwrap().certifier.calibration, None);
 }

@@ -334,12 +334,19 @@ pub(crate) fn run(o: &Options) -> Result<()> {
     ));
     if let Some(old) = old_binary {
         eprintln!("throughput through the binaries (the old one: {})…", old.display());
-        let [old_s, new_s, one_s, workers_s] =
+        let ([old_s, new_s, one_s, workers_s], same) =
             cli::throughput(old, throughput_subsystems, tsteps, dt, out)?;
         writeln!(
             md,
             "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
-             processes on localhost, or one; every run wrote the same epoch rows):\n"
+             processes on localhost, or one; this build's runs wrote the same epoch rows, \
+             {}):\n",
+            if same {
+                "and so did c302992's"
+            } else {
+                "c302992's differ: its calibrated local certificates predate the later \
+                 changes of the default (see VALIDITY.md)"
+            }
         )?;
         md.push_str(&markdown(
             &["path", "seconds", "samples per second", "ratio to c302992"],

@@ -115,8 +115,9 @@
 //!   blocks computes it in batches of 8 at the same look; the batched radius at
 //!   [`Calibration::auto_batch_risk`] of the look's risk (default a fifth), the first at the
 //!   rest, the smaller standing (the union bound keeps the look's risk). At half each, the
-//!   scalar power cell at 20× the margin opened a look later (median 4.69 s against 3.19 s
-//!   without the second radius, 100 seeds); at a fifth at 3.19 s. Measured in
+//!   scalar power cell at 20× the margin certified at a median 3.94 s (VALIDITY.md at
+//!   f06157c, `cargo xtask validity --runs 1000`); at a fifth at 3.19 s, as without the
+//!   second radius. Measured in
 //!   VALIDITY.md with the default configuration. Batches of 16 were measured too (200 runs):
 //!   the power cell's spread factor fell to 1.33 (from 1.60 at 8) but the near-margin sensor
 //!   cell's rose to 1.47 (from 0.99): with fewer degrees of freedom the batched radius wins

@@ -65,9 +65,10 @@ pub struct Calibration {
     /// (default 0.2; `(0, 1)`). Any fixed split is valid (the union bound); it decides which
     /// noise the certificate is quickest on. Without sensor noise the first radius stands
     /// and pays `1 − share` of the risk; under sensor noise the second stands, its spread a
-    /// half or less of the first's, and pays `share`. At 0.5 the scalar cell at 20× the
-    /// margin opened at a median 4.69 s against 3.19 s without the second radius; at 0.2 at
-    /// 3.19 s (VALIDITY.md measures both noises at the default).
+    /// half or less of the first's, and pays `share`. At 0.5 the scalar power cell at 20× the
+    /// margin certified at a median 3.94 s, at 0.2 at 3.19 s, as without the second radius
+    /// (`cargo xtask validity --runs 1000`, VALIDITY.md at f06157c and as committed; it
+    /// measures both noises at the default).
     #[serde(default = "default_auto_batch_risk")]
     pub auto_batch_risk: f64,
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's

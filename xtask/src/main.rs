@@ -81,9 +81,11 @@ enum Command {
     /// tanks), checked by SHA-256, converted, certified, and the exchanger compared in °C
     /// and in K (REAL.md).
     Real {
-        /// Folder holding `exchanger.csv` and `tanque.csv` (see examples/real/README.md).
+        /// Folder holding the originals `exchanger.csv` and `tanque.csv` (see
+        /// examples/real/README.md): check their hashes and that converting them gives the
+        /// committed records.
         #[arg(long)]
-        from: PathBuf,
+        from: Option<PathBuf>,
         /// Output folder.
         #[arg(long, default_value = "target/real")]
         out: PathBuf,
@@ -264,7 +266,7 @@ fn main() -> Result<()> {
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { runs, out, only_change: None } => validity::run(runs, &out),
         Command::Validity { out, only_change: Some(runs), .. } => validity::change_only(runs, &out),
-        Command::Real { from, out } => real::run(&from, &out),
+        Command::Real { from, out } => real::run(from.as_deref(), &out),
         Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)

@@ -1,11 +1,13 @@
-//! `cargo xtask real --from DIR`: the two public plant records of `examples/real/`, checked
-//! by hash, converted to streamcert's CSV, certified with their configurations, and the heat
-//! exchanger's verdict compared in °C and in K (it must be the same: the affine model).
+//! `cargo xtask real`: the two public plant records of `examples/real/` (streamcert's CSV,
+//! checked by hash), certified with their configurations, and the heat exchanger's verdict
+//! compared in °C and in K (it must be the same: the affine model).
 //!
-//! The records are not in this repository; `DIR` holds `exchanger.csv` and `tanque.csv` of
-//! the public repository `Rafa7046/Non_Linear_Identification` at commit
+//! The committed files are conversions of `exchanger.csv` and `tanque.csv` of the public
+//! repository `Rafa7046/Non_Linear_Identification` at commit
 //! `e5c9b006b0a2ec1650bc018a5fb38d2f4363d4c7` (`src/data/`), themselves copies of the DaISy
 //! heat exchanger (97-002) and the cascaded tanks benchmark (see `examples/real/README.md`).
+//! With `--from DIR` (a folder holding those two files) the command checks the originals'
+//! hashes and that converting them gives the committed files byte for byte.
 
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
@@ -20,13 +22,16 @@ use streamcert_cli::output::Format;
 
 use crate::common::{markdown, median, write};
 
-/// One record: its file under `DIR`, its SHA-256, its configuration and the conversion.
+/// One record: the original's file name under `DIR` and its SHA-256, the committed
+/// conversion and its SHA-256, its configuration and the conversion.
 struct Record {
     name: &'static str,
     file: &'static str,
     sha256: &'static str,
+    converted: &'static str,
+    converted_sha256: &'static str,
     config: &'static str,
-    convert: fn(&str, f64) -> Result<String>,
+    convert: fn(&str) -> Result<String>,
 }
 
 const RECORDS: [Record; 2] = [
@@ -34,6 +39,8 @@ const RECORDS: [Record; 2] = [
         name: "exchanger",
         file: "exchanger.csv",
         sha256: "3dfbb1e1c2f789a3593b460373c5c0a649647ab5548478ed0992c68d5b2c5f34",
+        converted: "examples/real/exchanger.csv",
+        converted_sha256: "827b8fb3c724da60fb02eed30f08a6f77c86522a08302d2cc86d985baff1a754",
         config: "examples/real/exchanger.toml",
         convert: exchanger,
     },
@@ -41,19 +48,27 @@ const RECORDS: [Record; 2] = [
         name: "tanks",
         file: "tanque.csv",
         sha256: "ef2388ed822f3aef4aa80d6b0f2b466dd80b361786b3eafc7a2957c31ea323a7",
+        converted: "examples/real/tanks.csv",
+        converted_sha256: "2413320a0796a740ea94eb76e214bdf171f6b1a129765b42c5424cf4cce08de5",
         config: "examples/real/tanks.toml",
         convert: tanks,
     },
 ];
 
-/// `ts,q,th` (s, flow, °C) to `t,flow,temp` with `offset` added to the temperature (0: °C,
-/// 273.15: K).
-fn exchanger(text: &str, offset: f64) -> Result<String> {
-    let mut out = String::from("t,flow,temp\n");
-    for (i, line) in text.lines().enumerate().skip(1) {
+/// `ts,q,th` (s, flow, °C) to `t,flow,temp` (the temperature in °C).
+fn exchanger(text: &str) -> Result<String> {
+    to_kelvin(text, 0.0, "exchanger.csv").map(|s| s.replacen("ts,q,th", "t,flow,temp", 1))
+}
+
+/// The same three-column record with `offset` added to its third column (273.15: °C to K),
+/// the header kept.
+fn to_kelvin(text: &str, offset: f64, name: &str) -> Result<String> {
+    let mut lines = text.lines();
+    let mut out = format!("{}\n", lines.next().context("no header")?);
+    for (i, line) in lines.enumerate() {
         let f: Vec<&str> = line.split(',').collect();
-        let [t, q, th] = f[..] else { bail!("exchanger.csv line {}: 3 fields expected", i + 1) };
-        let th: f64 = th.trim().parse().with_context(|| format!("line {}", i + 1))?;
+        let [t, q, th] = f[..] else { bail!("{name} line {}: 3 fields expected", i + 2) };
+        let th: f64 = th.trim().parse().with_context(|| format!("line {}", i + 2))?;
         let _ = writeln!(out, "{},{},{}", t.trim(), q.trim(), th + offset);
     }
     Ok(out)
@@ -61,7 +76,7 @@ fn exchanger(text: &str, offset: f64) -> Result<String> {
 
 /// `"uEst","uVal","yEst","yVal","Ts"` (the estimation record: pump and level voltages,
 /// sampled every `Ts` = 4 s) to `t,pump,level`.
-fn tanks(text: &str, _: f64) -> Result<String> {
+fn tanks(text: &str) -> Result<String> {
     let mut out = String::from("t,pump,level\n");
     let mut ts = None;
     for (i, line) in text.lines().enumerate().skip(1) {
@@ -140,22 +155,32 @@ fn reasons(c: &Certified) -> String {
 }
 
 /// Check, convert and certify every record; write `REAL.md` under `out`.
-pub(crate) fn run(from: &Path, out: &Path) -> Result<()> {
+/// The file at `path`, refused unless its SHA-256 is `sha256`.
+fn checked(path: &Path, sha256: &str) -> Result<String> {
+    let bytes = std::fs::read(path)
+        .with_context(|| format!("reading {} (run from the repository root)", path.display()))?;
+    let digest: String = Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect();
+    if digest != sha256 {
+        bail!("{}: SHA-256 {digest}, expected {sha256} (another file?)", path.display());
+    }
+    Ok(String::from_utf8(bytes)?)
+}
+
+pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out)?;
     let mut rows = Vec::new();
     let mut units = String::new();
     for rec in &RECORDS {
-        let path = from.join(rec.file);
-        let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
-        let digest: String = Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect();
-        if digest != rec.sha256 {
-            bail!("{}: SHA-256 {digest}, expected {} (another file?)", path.display(), rec.sha256);
+        let csv = checked(Path::new(rec.converted), rec.converted_sha256)?;
+        if let Some(from) = from {
+            let original = checked(&from.join(rec.file), rec.sha256)?;
+            if (rec.convert)(&original)? != csv {
+                bail!("converting {} does not give {}", rec.file, rec.converted);
+            }
+            println!("{}: the original's hash and its conversion agree", rec.converted);
         }
-        let text = String::from_utf8(bytes)?;
         let config = std::fs::read_to_string(rec.config)
             .with_context(|| format!("reading {} (run from the repository root)", rec.config))?;
-        let csv = (rec.convert)(&text, 0.0)?;
-        write(&out.join(format!("{}.csv", rec.name)), &csv)?;
         let affine = certify_text(&config, &csv, rec.name)?;
         let origin = certify_text(
             &config.replace("model = \"affine\"", "model = \"through_origin\""),
@@ -182,7 +207,8 @@ pub(crate) fn run(from: &Path, out: &Path) -> Result<()> {
             // The same record in K: the same verdict at every row, the same certificates
             // within 10⁻⁹ relative (the working origin makes both runs integrate the same
             // excursions; only the rounding of forming them differs).
-            let kelvin = certify_text(&config, &(rec.convert)(&text, 273.15)?, "exchanger (K)")?;
+            let kelvin =
+                certify_text(&config, &to_kelvin(&csv, 273.15, rec.name)?, "exchanger (K)")?;
             let mut worst = 0.0f64;
             for (c, k) in affine.rows.iter().zip(&kelvin.rows) {
                 for col in ["calibrated_open", "gauss_open"] {
@@ -209,7 +235,7 @@ pub(crate) fn run(from: &Path, out: &Path) -> Result<()> {
         }
     }
     let mut s = String::from(
-        "# Real plant records\n\nProduced by `cargo xtask real --from DIR` (the records' sources, hashes and configurations: examples/real/README.md).\n\n",
+        "# Real plant records\n\nProduced by `cargo xtask real` (the records' sources, hashes and configurations: examples/real/README.md).\n\n",
     );
     let _ = writeln!(
         s,

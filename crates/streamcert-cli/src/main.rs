@@ -385,13 +385,13 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
             eprintln!(
-                "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} (first at {})",
+                "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} ({})",
                 s.rows,
                 s.replayed,
                 s.epochs,
                 s.certified,
                 s.open,
-                s.first_open.map_or("never".into(), |t| format!("t = {}", Sig(t))),
+                s.first_open.map_or("never opened".into(), |t| format!("first at t = {}", Sig(t))),
             );
             Ok(verdict(require.require_certified, s.open_at_end))
         }

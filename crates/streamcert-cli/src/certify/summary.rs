@@ -115,6 +115,11 @@ fn when(t: Option<f64>) -> String {
     t.map_or_else(|| "never".into(), |t| format!("t = {}", Sig(t)))
 }
 
+/// `first at t = …`, or `never opened`: a gate's first opening.
+fn first(t: Option<f64>) -> String {
+    t.map_or_else(|| "never opened".into(), |t| format!("first at t = {}", Sig(t)))
+}
+
 impl Summary {
     /// Count the calibrated verdict of one accepted row at time `t`.
     pub(crate) fn count_calibrated(&mut self, t: f64, ev: &Evidence) {
@@ -195,26 +200,26 @@ impl Summary {
         ));
         if cfg.calibration.is_some() {
             lines.push(format!(
-                "calibrated gate (risk delta over the run) open {:.1} % of rows (first at {})",
+                "calibrated gate (risk delta over the run) open {:.1} % of rows ({})",
                 100.0 * self.share_calibrated(),
-                when(self.first_deploy_calibrated),
+                first(self.first_deploy_calibrated),
             ));
         }
         if cfg.nonlinear.is_some() {
             lines.push(format!(
                 "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % \
-                 (first at {})",
+                 ({})",
                 100.0 * self.share_nonlinear(),
-                when(self.first_deploy_nonlinear),
+                first(self.first_deploy_nonlinear),
             ));
         }
         lines.push(format!(
-            "paper's gates (no stated risk): Gaussian open {:.1} % (first at {}), Wasserstein \
-             open {:.1} % (first at {})",
+            "paper's gates (no stated risk): Gaussian open {:.1} % ({}), Wasserstein \
+             open {:.1} % ({})",
             100.0 * self.share_gauss(),
-            when(self.first_deploy_gauss),
+            first(self.first_deploy_gauss),
             100.0 * self.share_wass(),
-            when(self.first_deploy_wass),
+            first(self.first_deploy_wass),
         ));
         lines.join("\n")
     }

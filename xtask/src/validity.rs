@@ -320,6 +320,9 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
             &rows
         )
     );
+    s.push_str(
+        "The row \"model through the origin\" runs the 5× cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between the two rows is the price of the intercept on such a loop.\n\n",
+    );
     // Plant change.
     s.push_str(&change::table(change_runs, &bar)?);
     bar.finish_and_clear();

@@ -25,6 +25,8 @@ fn require_certified_sets_the_exit_status_from_the_verdict() {
         let certified = v["certified_at_end"].as_bool().expect("bool");
         let verdict = v["verdict"].as_str().expect("verdict");
         assert_eq!(verdict.starts_with("verdict: CERTIFIED"), certified, "{verdict}");
+        // A certified verdict states the assumption its risk rests on.
+        assert_eq!(verdict.contains("the risk assumes dynamics linear"), certified, "{verdict}");
         assert_eq!(out.status.code(), Some(if certified { 0 } else { 6 }), "{verdict}");
         assert_eq!(text(&out.stdout).lines().count(), 1 + 1501, "every row is written first");
         seen[usize::from(certified)] = true;

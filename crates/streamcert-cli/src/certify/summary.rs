@@ -171,9 +171,20 @@ impl Summary {
                     .zip(&self.calibrated_region)
                     .map(|(name, (lo, hi))| format!("{name} in [{}, {}]", Sig(*lo), Sig(*hi)))
                     .collect();
+                // The risk is stated for one Jacobian over the region; the nonlinearity guard
+                // tests that, it does not bound a rate that varies (NONLINEAR.md).
+                let scope = if cfg.nonlinear.is_some() {
+                    "the nonlinear gate's line below bounds the rate at every state of it"
+                } else if cal.nonlinearity {
+                    "the nonlinearity guard tests this but does not bound a rate that varies \
+                     over the region: for a nonlinear scalar loop enable [nonlinear]"
+                } else {
+                    "the nonlinearity guard is off"
+                };
                 format!(
                     "verdict: CERTIFIED from {} to the end (calibrated certificate, risk \
-                     delta = {} over the run), over the region {}",
+                     delta = {} over the run), over the region {}; the risk assumes dynamics \
+                     linear over that region ({scope})",
                     when(Some(since)),
                     Sig(cal.delta),
                     if region.is_empty() { "(none recorded)".into() } else { region.join(", ") }

@@ -91,20 +91,35 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         let CertifyError::InvalidConfig { field, .. } = err else { panic!("{err}") };
         assert_eq!(field, "calibration.batch_blocks");
     }
-    // The change guard's risk per comparison lies in (0, 1).
-    for (risk, valid) in [(0.0, false), (1.0, false), (f64::NAN, false), (1e-9, true), (0.5, true)]
-    {
-        let cfg = CertifierConfig {
-            calibration: Some(Calibration { change_risk: Some(risk), ..Calibration::new(0.01) }),
-            ..calibrated(1, vec![-0.54], 150, 1)
-        };
-        match Certifier::new(cfg) {
-            Ok(_) => assert!(valid, "{risk} accepted"),
-            Err(CertifyError::InvalidConfig { field, reason }) => {
-                assert!(!valid && field == "calibration.change_risk", "{risk}: {field} {reason}");
-                assert!(reason.contains("(0, 1)"), "{reason}");
+    // The change guard's risk per comparison and the model guards' risk per test lie in
+    // (0, 1).
+    type WithRisk = fn(f64) -> Calibration;
+    let risks: [(&str, WithRisk); 2] = [
+        ("calibration.change_risk", |r| Calibration {
+            change_risk: Some(r),
+            ..Calibration::new(0.01)
+        }),
+        ("calibration.guard_risk", |r| Calibration {
+            guard_risk: Some(r),
+            ..Calibration::new(0.01)
+        }),
+    ];
+    for (name, with) in risks {
+        for (risk, valid) in
+            [(0.0, false), (1.0, false), (f64::NAN, false), (1e-9, true), (0.5, true)]
+        {
+            let cfg = CertifierConfig {
+                calibration: Some(with(risk)),
+                ..calibrated(1, vec![-0.54], 150, 1)
+            };
+            match Certifier::new(cfg) {
+                Ok(_) => assert!(valid, "{name} {risk} accepted"),
+                Err(CertifyError::InvalidConfig { field, reason }) => {
+                    assert!(!valid && field == name, "{risk}: {field} {reason}");
+                    assert!(reason.contains("(0, 1)"), "{reason}");
+                }
+                Err(e) => panic!("{risk}: {e}"),
             }
-            Err(e) => panic!("{risk}: {e}"),
         }
     }
 }

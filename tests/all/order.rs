@@ -1,9 +1,9 @@
 //! The hidden-dynamics guard (`Calibration::hidden_dynamics`, on by default): outputs with a
 //! hidden state are not certified on the first-order model, first-order loops keep their
-//! certificates.
+//! certificates; and the model guards' risk (`Calibration::guard_risk`) only closes.
 
 use streamcert::certificate::{Calibration, Certifier, CertifierConfig, NotCertified};
-use streamcert::dynamics::{LinearScenario, Process, Trajectory};
+use streamcert::dynamics::{LinearScenario, Process, ScalarDrift, ScalarScenario, Trajectory};
 use streamcert::regression::{InputIntegral, RegressionConfig};
 
 use crate::calibrated::clopper_pearson;
@@ -121,4 +121,48 @@ fn first_order_loops_keep_their_certificates() {
     eprintln!("first order: opened {opened} of 40, guard closings {share:.4} of samples");
     assert_eq!(opened, 40);
     assert!(share < 0.01, "the guard closed {share} of the samples");
+}
+
+/// `Calibration::guard_risk` only closes: on the nonlinear study's `−x tanh x` loop (`K =
+/// −1.1`, where the nonlinearity guard has work to do) and on a first-order linear loop, the
+/// default configuration's gate at `guard_risk = 0.05` is open only at samples where the
+/// default's (`δ/W = 0.0025`) is; it closes at more samples in some run, and the default's
+/// gate opens in some run (so the comparison is not vacuous).
+#[test]
+fn a_larger_guard_risk_only_closes() {
+    assert_eq!(Calibration::new(0.01).guard_risk(4), 0.0025);
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(1, 1, 150, 5, 1e-4)
+    };
+    let cfg = |k: f64, guard_risk| CertifierConfig {
+        calibration: Some(Calibration { guard_risk, ..Calibration::new(0.01) }),
+        ..CertifierConfig::new(reg, vec![k], 0.1, 0.05, 1)
+    };
+    let tanh = ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1);
+    let linear =
+        LinearScenario { steps: 4000, ..scalar(0.5, -1.0, Process::Gaussian { sigma: 0.1 }, 1.0) };
+    let (mut fewer, mut opened, mut compared) = (0, 0, 0);
+    for seed in 0..8u64 {
+        let (traj, k) = if seed % 2 == 0 {
+            (tanh.run(seed).expect("valid"), -1.1)
+        } else {
+            (run_scenario(&linear, 70_000 + seed), -1.5)
+        };
+        let mut default = Certifier::new(cfg(k, None)).expect("valid");
+        let mut larger = Certifier::new(cfg(k, Some(0.05))).expect("valid");
+        let (mut open_default, mut open_larger) = (0, 0);
+        for i in 0..traj.len() {
+            let (t, y, u) = (traj.t[i], &traj.output(i)[..1], traj.input(i));
+            let a = larger.push(t, y, u).expect("valid").calibrated.open;
+            let b = default.push(t, y, u).expect("valid").calibrated.open;
+            assert!(!a || b, "seed {seed}, t = {t}: open only at the larger risk");
+            open_default += usize::from(b);
+            open_larger += usize::from(a);
+            compared += 1;
+        }
+        fewer += usize::from(open_larger < open_default);
+        opened += usize::from(open_default > 0);
+    }
+    assert!(compared > 30_000 && fewer >= 1 && opened >= 2, "{compared} {fewer} {opened}");
 }

@@ -379,9 +379,9 @@ impl CalibratedState {
             .map(|groups| {
                 // Batches of one block: see `Calibration::guard_unknowns`.
                 let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
-                // Any window's rejection closes every look: δ split over the windows keeps
-                // the false closings of a look at about δ.
-                let alpha = cal.delta / lengths.len() as f64;
+                // Any window's rejection closes every look: by default δ split over the
+                // windows keeps the false closings of a look at about δ.
+                let alpha = cal.guard_risk(lengths.len());
                 ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
             })
             .collect::<Result<_, _>>()?,

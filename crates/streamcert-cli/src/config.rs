@@ -99,6 +99,9 @@ delta = 0.01            # the risk of a false deployment over the whole run
                          # hidden state: a mass measured by its position) does not stand
 # nonlinearity = true    # a window whose outputs' squares and cubes predict the increment (a
                          # slope that varies over the explored region) does not stand
+# guard_risk = 0.0025    # risk of each of these two tests (default: delta / windows); larger
+                         # closes more often, never less: fewer false openings on a nonlinear
+                         # loop (it does not make them rare: use [nonlinear]), less power
 # plant_change = true    # a window's look stands only while a fresh estimate on the newest
                          # data is not significantly below it (the plant changed)
 # change_risk = 0.01     # risk of each such comparison (default: delta); a false one closes
@@ -213,6 +216,8 @@ struct CalibrationSection {
     plant_change: Option<bool>,
     #[serde(default)]
     change_risk: Option<f64>,
+    #[serde(default)]
+    guard_risk: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -240,6 +245,7 @@ impl Default for CalibrationSection {
             nonlinearity: None,
             plant_change: None,
             change_risk: None,
+            guard_risk: None,
         }
     }
 }
@@ -261,6 +267,7 @@ impl CalibrationSection {
             nonlinearity: self.nonlinearity.unwrap_or(d.nonlinearity),
             plant_change: self.plant_change.unwrap_or(d.plant_change),
             change_risk: self.change_risk.or(d.change_risk),
+            guard_risk: self.guard_risk.or(d.guard_risk),
             ..d
         }
     }

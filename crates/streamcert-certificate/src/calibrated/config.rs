@@ -73,7 +73,8 @@ pub struct Calibration {
     pub auto_batch_risk: f64,
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
     /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
-    /// at risk `δ / W` per look of each of the `W` windows; where any window's latest test
+    /// at risk [`guard_risk`](Self::guard_risk) (default `δ / W` per look of each of the `W`
+    /// windows); where any window's latest test
     /// rejects no linear calibrated look stands, and a window whose test could not run does
     /// not stand
     /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
@@ -88,7 +89,7 @@ pub struct Calibration {
     /// The nonlinearity guard (default on, every output): at every look, the same larger fit
     /// with the square and the cube of each output's excursion integrated over the column as
     /// `2p` more regressors, and the joint Wald test of their `2p²` coefficients at risk
-    /// `δ / W`; where any window's latest test rejects no linear calibrated look stands
+    /// [`guard_risk`](Self::guard_risk) (default `δ / W`); where any window's latest test rejects no linear calibrated look stands
     /// (`NotCertified::VaryingDynamics`), and a window whose test could not run does not stand
     /// (`NotCertified::LinearityUntested`). Off, a loop whose slope varies over the explored
     /// region is certified on its average slope, above the smallest local rate it visits,
@@ -115,6 +116,17 @@ pub struct Calibration {
     /// `δ / (W (W + 1) / 2 + W)` for `W` windows (see the guard's module, `guard::change`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub change_risk: Option<f64>,
+    /// The model guards' risk per test (the hidden-dynamics and the nonlinearity tests, each
+    /// at every look of every window; `None`, the default: `δ / W` for `W` windows, so that
+    /// the false closings of a look stay near `δ`; `(0, 1)`). Closing costs no validity, so
+    /// this is a false-closing rate, traded against protection: a larger risk lowers the
+    /// tests' thresholds, so the gate closes at every sample where it closes at the default
+    /// and at more (tested), sooner on a hidden state or a varying slope, more often on a
+    /// plant the first-order linear model fits. It does not make the linear certificate
+    /// valid on a nonlinear loop (NONLINEAR.md; the nonlinear certificate is the one that
+    /// bounds every state of the region).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub guard_risk: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -165,6 +177,7 @@ impl Calibration {
             nonlinearity: true,
             plant_change: true,
             change_risk: None,
+            guard_risk: None,
         }
     }
 
@@ -181,6 +194,13 @@ impl Calibration {
     #[must_use]
     pub fn change_risk(&self) -> f64 {
         self.change_risk.unwrap_or(self.delta)
+    }
+
+    /// The model guards' risk per test with `windows` windows:
+    /// [`guard_risk`](Self::guard_risk), or `δ / windows` when it is not set.
+    #[must_use]
+    pub fn guard_risk(&self, windows: usize) -> f64 {
+        self.guard_risk.unwrap_or(self.delta / windows.max(1) as f64)
     }
 
     /// The extra regressors per output of the model guards' larger fits for `p` outputs: `p`
@@ -282,6 +302,11 @@ impl Calibration {
         if let Some(r) = self.change_risk {
             if !(r > 0.0 && r < 1.0) {
                 return bad("calibration.change_risk", format!("must lie in (0, 1), got {r}"));
+            }
+        }
+        if let Some(r) = self.guard_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return bad("calibration.guard_risk", format!("must lie in (0, 1), got {r}"));
             }
         }
         if !(self.auto_batch_risk > 0.0 && self.auto_batch_risk < 1.0) {

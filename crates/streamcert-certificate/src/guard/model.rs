@@ -33,8 +33,9 @@
 //! ```
 //!
 //! (Hotelling's quantile, `Ω̂` the batch-means coefficient covariance of the larger fit, `ν`
-//! its effective number of batches less its unknowns per output, `α = δ/W` the guard's risk
-//! per look of each of the `W` windows), rejects at risk about `α` when the linear
+//! its effective number of batches less its unknowns per output, `α` the guard's risk per
+//! test, [`Calibration::guard_risk`](crate::Calibration::guard_risk), by default `δ/W` per
+//! look of each of the `W` windows), rejects at risk about `α` when the linear
 //! first-order model holds. Where any window's latest test rejects, no calibrated look stands
 //! (`NotCertified::HiddenDynamics`, `NotCertified::VaryingDynamics`: a hidden state or a
 //! varying slope seen on one window is the plant's, and the longest windows have the power);

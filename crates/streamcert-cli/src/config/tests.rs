@@ -125,6 +125,11 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     let risk = DEFAULT_CONFIG.replace("# change_risk = 0.01 ", "change_risk = 0.002 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.change_risk(), 0.002);
+    // The model guards' risk: δ over the windows unless stated.
+    assert_eq!((cal.guard_risk, cal.guard_risk(4)), (None, cal.delta / 4.0));
+    let risk = DEFAULT_CONFIG.replace("# guard_risk = 0.0025 ", "guard_risk = 0.05 ");
+    let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.guard_risk(4), 0.05);
     // The batched radius's share of the risk: 0.2 unless stated.
     assert_eq!(cal.auto_batch_risk, 0.2);
     let share = DEFAULT_CONFIG.replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");

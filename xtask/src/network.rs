@@ -245,7 +245,12 @@ pub(crate) fn run(
          δ = {DELTA}. The composed rate can exceed the true rate only if a local certificate \
          overstates its rate (the composition is monotone in the local rates and the \
          Collatz–Wielandt value is a lower bound), so `largest composed rate − true rate` must \
-         be at most 0."
+         be at most 0 (`-inf`: at every composition some subsystem had no certificate).\n\n\
+         The local certificates run with their default guards. The network gate needs every \
+         subsystem's certificate at once, so a guard that closes each subsystem at a small share \
+         of samples (VALIDITY.md's `guard closed`, at δ = 0.01) leaves some subsystem closed at \
+         almost every epoch once N is large: for a network of N subsystems to be certified, the \
+         guards' false closings per subsystem must fall well below 1/N."
     );
     if !notes.is_empty() {
         let _ = writeln!(md, "\n{notes}");

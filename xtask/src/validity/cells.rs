@@ -26,6 +26,10 @@ pub(super) struct Cell {
     pub(super) truth: Option<f64>,
     /// The regression's model (the default: affine, an intercept in every regression).
     pub(super) model: Model,
+    /// The calibrated certificate as it was before the defaults of the safe-by-default and
+    /// plant-data issues: the model through the origin, no guards, no automatic batches (the
+    /// power table's "before" columns, on the same runs).
+    pub(super) before: bool,
 }
 
 /// A cell with the defaults for the fields most cells leave alone.
@@ -48,6 +52,7 @@ pub(super) fn plain(
         observed,
         truth: None,
         model: Model::Affine,
+        before: false,
     }
 }
 
@@ -61,7 +66,7 @@ impl Cell {
         let (p, m) = (self.observed, self.scenario.m);
         let reg = RegressionConfig {
             input_integral: InputIntegral::ZeroOrderHold,
-            model: self.model,
+            model: if self.before { Model::ThroughOrigin } else { self.model },
             ..RegressionConfig::new(p, m, self.window, H, 1e-4)
         };
         let mut cfg = CertifierConfig::new(
@@ -72,8 +77,12 @@ impl Cell {
             self.consecutive,
         );
         if c.is_none() {
-            cfg.calibration =
-                Some(Calibration { batch_blocks: self.batch, ..Calibration::new(DELTA) });
+            let cal = Calibration { batch_blocks: self.batch, ..Calibration::new(DELTA) };
+            cfg.calibration = Some(if self.before {
+                Calibration { auto_batch: 0, ..cal.unguarded() }
+            } else {
+                cal
+            });
         }
         cfg
     }
@@ -269,6 +278,11 @@ pub(super) fn power_cells() -> Vec<Cell> {
     let sensor_cell =
         plain("scalar, sensor noise σ_v = 0.05, β* = 3".into(), sensor, vec![-2.0], 150, 10);
     cells.push(sensor_cell.clone());
+    cells.push(Cell {
+        family: format!("{}, model through the origin", sensor_cell.family),
+        model: Model::ThroughOrigin,
+        ..sensor_cell.clone()
+    });
     // M = 150, or the smallest window the setting accepts with the intercept (165 at b = 8).
     for (batch, window) in [(4, 150), (8, 165)] {
         cells.push(Cell {

@@ -379,8 +379,8 @@ impl CalibratedState {
             .map(|groups| {
                 // Batches of one block: see `Calibration::guard_unknowns`.
                 let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
-                // Any window's rejection closes every look: by default δ split over the
-                // windows keeps the false closings of a look at about δ.
+                // A window's rejection closes it and every shorter window: by default δ
+                // split over the windows keeps the false closings of a look at about δ.
                 let alpha = cal.guard_risk(lengths.len());
                 ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
             })

@@ -74,9 +74,8 @@ pub struct Calibration {
     /// The hidden-dynamics guard (default on): at every look, a larger fit with the output's
     /// past increment `ΔY_{q−h}` as one more regressor, and the Wald test of its coefficients
     /// at risk [`guard_risk`](Self::guard_risk) (default `δ / W` per look of each of the `W`
-    /// windows); where any window's latest test
-    /// rejects no linear calibrated look stands, and a window whose test could not run does
-    /// not stand
+    /// windows); where a window's latest test rejects, neither its linear calibrated look nor
+    /// a shorter window's stands, and a window whose test could not run does not stand
     /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
     /// certified on the first-order model even when the output carries a hidden state (a
     /// mass measured by its position), which the certificate's risk does not cover. It tests
@@ -89,7 +88,8 @@ pub struct Calibration {
     /// The nonlinearity guard (default on, every output): at every look, the same larger fit
     /// with the square and the cube of each output's excursion integrated over the column as
     /// `2p` more regressors, and the joint Wald test of their `2p²` coefficients at risk
-    /// [`guard_risk`](Self::guard_risk) (default `δ / W`); where any window's latest test rejects no linear calibrated look stands
+    /// [`guard_risk`](Self::guard_risk) (default `δ / W`); where a window's latest test rejects,
+    /// neither its linear calibrated look nor a shorter window's stands
     /// (`NotCertified::VaryingDynamics`), and a window whose test could not run does not stand
     /// (`NotCertified::LinearityUntested`). Off, a loop whose slope varies over the explored
     /// region is certified on its average slope, above the smallest local rate it visits,

@@ -36,9 +36,13 @@
 //! its effective number of batches less its unknowns per output, `α` the guard's risk per
 //! test, [`Calibration::guard_risk`](crate::Calibration::guard_risk), by default `δ/W` per
 //! look of each of the `W` windows), rejects at risk about `α` when the linear
-//! first-order model holds. Where any window's latest test rejects, no calibrated look stands
-//! (`NotCertified::HiddenDynamics`, `NotCertified::VaryingDynamics`: a hidden state or a
-//! varying slope seen on one window is the plant's, and the longest windows have the power);
+//! first-order model holds. Where a window's latest test rejects, neither that window's look
+//! nor any shorter window's stands (`NotCertified::HiddenDynamics`,
+//! `NotCertified::VaryingDynamics`: a shorter window's data are the newest part of the
+//! longer one's, and the longer windows' tests have the power); a longer window is judged by
+//! its own test and the still longer ones' (on linear loops the shortest window's curvature
+//! test, on few batches, rejects far above its nominal risk; letting it close every window
+//! kept a network of 10⁴ subsystems closed at every epoch, NETWORK.md at ab02361);
 //! where a window's tests could not run (the larger fit not ready), that window's look does
 //! not stand (`NotCertified::OrderUntested`, `NotCertified::LinearityUntested`): the
 //! certificate's model is then unchecked. The larger fit has `p` (order) and `2p`
@@ -267,13 +271,14 @@ impl ModelGuard {
     }
 
     /// Whether window `w`'s look may stand: `Ok` when its latest tests ran and found nothing
-    /// and no window's latest test rejects (the longer windows' tests have the power: a hidden
-    /// state or a varying slope seen on any window is the plant's), else the reason.
+    /// and no longer window's latest test rejects (their data hold window `w`'s, and their
+    /// tests have the power), else the reason.
     pub(crate) fn admits(&self, w: usize, window: usize) -> Result<(), NotCertified> {
         let rejected = |tests: &[Option<NonlinearityTest>]| {
             tests
                 .iter()
                 .enumerate()
+                .skip(w)
                 .find_map(|(v, t)| t.filter(NonlinearityTest::significant).map(|t| (v, t)))
         };
         if let Some((v, t)) = rejected(self.tests()) {
@@ -321,5 +326,40 @@ impl ModelGuard {
             .iter()
             .all(|(a, b)| a == b)
             && self.lags.iter().all(|v| v.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A rejection closes its own window and every shorter one, never a longer one; a window
+    /// without its own test does not stand.
+    #[test]
+    fn a_rejection_closes_its_window_and_the_shorter_ones() {
+        let groups = Groups { order: true, curvature: false };
+        let mut g = ModelGuard::new((1, 3, 5), groups, (1, 1, 1), &[150, 300, 600], 0.0025)
+            .expect("valid");
+        let (pass, fail) = (
+            NonlinearityTest { statistic: 1.0, threshold: 10.0 },
+            NonlinearityTest { statistic: 11.0, threshold: 10.0 },
+        );
+        let closed_by = |g: &ModelGuard, w: usize| match g.admits(w, g.windows.window(w)) {
+            Ok(()) => None,
+            Err(NotCertified::HiddenDynamics { window, .. }) => Some(window),
+            Err(other) => panic!("{other:?}"),
+        };
+        g.latest = vec![Some(fail), Some(pass), Some(pass)];
+        assert_eq!((0..3).map(|w| closed_by(&g, w)).collect::<Vec<_>>(), [Some(150), None, None]);
+        g.latest = vec![Some(pass), Some(fail), Some(pass)];
+        assert_eq!(
+            (0..3).map(|w| closed_by(&g, w)).collect::<Vec<_>>(),
+            [Some(300), Some(300), None]
+        );
+        g.latest = vec![Some(pass), Some(pass), Some(fail)];
+        assert!((0..3).all(|w| closed_by(&g, w) == Some(600)));
+        g.latest = vec![Some(pass), None, Some(pass)];
+        assert!(matches!(g.admits(1, 300), Err(NotCertified::OrderUntested { window: 300 })));
+        assert_eq!(closed_by(&g, 0), None);
     }
 }

@@ -338,8 +338,8 @@ mod tests {
     #[test]
     fn a_rejection_closes_its_window_and_the_shorter_ones() {
         let groups = Groups { order: true, curvature: false };
-        let mut g = ModelGuard::new((1, 3, 5), groups, (1, 1, 1), &[150, 300, 600], 0.0025)
-            .expect("valid");
+        let mut g =
+            ModelGuard::new((1, 3, 5), groups, (1, 1, 1), &[150, 300, 600], 0.0025).expect("valid");
         let (pass, fail) = (
             NonlinearityTest { statistic: 1.0, threshold: 10.0 },
             NonlinearityTest { statistic: 11.0, threshold: 10.0 },

@@ -57,12 +57,12 @@ const RECORDS: [Record; 2] = [
 
 /// `ts,q,th` (s, flow, °C) to `t,flow,temp` (the temperature in °C).
 fn exchanger(text: &str) -> Result<String> {
-    to_kelvin(text, 0.0, "exchanger.csv").map(|s| s.replacen("ts,q,th", "t,flow,temp", 1))
+    add_to_third_column(text, 0.0, "exchanger.csv").map(|s| s.replacen("ts,q,th", "t,flow,temp", 1))
 }
 
-/// The same three-column record with `offset` added to its third column (273.15: °C to K),
-/// the header kept.
-fn to_kelvin(text: &str, offset: f64, name: &str) -> Result<String> {
+/// The same three-column record with `offset` added to its third column (0: the values as
+/// recorded; 273.15: °C to K), the header kept.
+fn add_to_third_column(text: &str, offset: f64, name: &str) -> Result<String> {
     let mut lines = text.lines();
     let mut out = format!("{}\n", lines.next().context("no header")?);
     for (i, line) in lines.enumerate() {
@@ -154,7 +154,6 @@ fn reasons(c: &Certified) -> String {
         .join("; ")
 }
 
-/// Check, convert and certify every record; write `REAL.md` under `out`.
 /// The file at `path`, refused unless its SHA-256 is `sha256`.
 fn checked(path: &Path, sha256: &str) -> Result<String> {
     let bytes = std::fs::read(path)
@@ -166,6 +165,8 @@ fn checked(path: &Path, sha256: &str) -> Result<String> {
     Ok(String::from_utf8(bytes)?)
 }
 
+/// Check and certify every committed record (and, with `from`, check the originals and their
+/// conversion); write `REAL.md` under `out`.
 pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out)?;
     let mut rows = Vec::new();
@@ -207,8 +208,11 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
             // The same record in K: the same verdict at every row, the same certificates
             // within 10⁻⁹ relative (the working origin makes both runs integrate the same
             // excursions; only the rounding of forming them differs).
-            let kelvin =
-                certify_text(&config, &to_kelvin(&csv, 273.15, rec.name)?, "exchanger (K)")?;
+            let kelvin = certify_text(
+                &config,
+                &add_to_third_column(&csv, 273.15, rec.name)?,
+                "exchanger (K)",
+            )?;
             let mut worst = 0.0f64;
             for (c, k) in affine.rows.iter().zip(&kelvin.rows) {
                 for col in ["calibrated_open", "gauss_open"] {

@@ -43,7 +43,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cfg.ambiguity = Some(AmbiguityConfig::paper(150));
     let mut cert = Certifier::new(cfg)?;
-    // Gaussian + calibrated (δ = 0.01, four windows), as the bench's `gaussian_and_calibrated`.
+    // Gaussian + calibrated (δ = 0.01, the default windows), as the bench's `gaussian_and_calibrated`.
     let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cal_cfg.calibration = Some(Calibration::new(0.01));
     let mut cal = Certifier::new(cal_cfg.clone())?;

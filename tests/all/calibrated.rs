@@ -254,7 +254,8 @@ fn every_look_matches_its_formula(batch: usize, model: Model) {
             let j = &theta * &t_mat;
             let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
             let nu = ess.min(batches as f64) - dd as f64;
-            let share = [150.0 / 450.0, 300.0 / 450.0][w];
+            // Two windows: an equal share of δ each.
+            let share = 0.5;
             let risk = look_risk(0.01, share, look.look);
             let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
             // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.

@@ -11,13 +11,53 @@ use crate::calibrated::calibrated;
 #[test]
 fn default_windows_double_until_the_longest_holds_200_blocks() {
     let cal = Calibration::new(0.01);
-    assert_eq!(cal.window_lengths(150, 5), vec![150, 300, 600, 1200]);
+    // At least five windows; more while the longest holds fewer than 200 blocks.
+    assert_eq!(cal.window_lengths(150, 5), vec![150, 300, 600, 1200, 2400]);
     assert_eq!(cal.window_lengths(20, 5), vec![20, 40, 80, 160, 320, 640, 1280]);
-    assert_eq!(cal.window_lengths(2000, 5), vec![2000, 4000, 8000, 16000]);
+    assert_eq!(cal.window_lengths(50, 5), vec![50, 100, 200, 400, 800, 1600]);
+    assert_eq!(cal.window_lengths(2000, 5), vec![2000, 4000, 8000, 16000, 32000]);
     let capped = Calibration { max_window: Some(600), ..cal };
     assert_eq!(capped.window_lengths(20, 5), vec![20, 40, 80, 160, 320]);
     let fixed = Calibration { windows: Some(2), ..cal };
     assert_eq!(fixed.window_lengths(20, 5), vec![20, 40]);
+}
+
+/// Oracle: the shares sum to one, equal by default, proportional to the length when asked;
+/// and a certifier's looks spend them (the first look of window `w` at `δ share_w / 2`).
+#[test]
+fn the_risk_split_across_windows() {
+    use streamcert::certificate::RiskSplit;
+    let lengths = [150, 300, 600, 1200, 2400];
+    let equal = RiskSplit::Equal.shares(&lengths);
+    assert_eq!(equal, vec![0.2; 5]);
+    let by_length = RiskSplit::ByLength.shares(&lengths);
+    for (s, m) in by_length.iter().zip(lengths) {
+        assert!((s - m as f64 / 4650.0).abs() < 1e-15, "{s}");
+    }
+    assert!((by_length.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+    assert_eq!(Calibration::new(0.01).risk_split, RiskSplit::Equal);
+    // Through a certifier: the shortest window's first look, under either split, has the
+    // radius of its share's risk.
+    use streamcert::dynamics::Process;
+    let scenario = crate::support::scalar(-0.5, -1.0, Process::Gaussian { sigma: 0.1 }, 1.0);
+    let traj = crate::support::run(&scenario, 77);
+    for (split, share) in [(RiskSplit::Equal, 0.2), (RiskSplit::ByLength, 150.0 / 4650.0)] {
+        let mut cfg = calibrated(1, vec![-1.0], 150, 10);
+        cfg.calibration =
+            cfg.calibration.map(|c| Calibration { risk_split: split, auto_batch: 0, ..c });
+        let mut c = Certifier::new(cfg).unwrap();
+        let mut checked = false;
+        for i in 0..traj.len() {
+            c.push(traj.t[i], traj.output(i), traj.input(i)).unwrap();
+            if let Some(l) = c.calibrated_looks()[0].filter(|l| l.look == 1) {
+                let want = calibrated_radius(l.sd * l.sd, l.nu, look_risk(0.01, share, 1));
+                assert!((l.radius - want).abs() <= 1e-12 * want, "{split:?}: {} {want}", l.radius);
+                checked = true;
+                break;
+            }
+        }
+        assert!(checked, "{split:?}: no first look");
+    }
 }
 
 #[test]
@@ -143,8 +183,8 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
     assert_eq!(auto.calibration.map(|c| c.auto_batch_risk), Some(0.2));
     let mut off = auto.clone();
     off.calibration = off.calibration.map(|c| Calibration { auto_batch: 0, ..c });
-    let lengths = [150.0, 300.0, 600.0, 1200.0];
-    let total: f64 = lengths.iter().sum();
+    // The default five windows (150 to 2400 columns), an equal share of δ each.
+    let windows = 5.0;
     for share in [0.2, 0.5] {
         let mut cfg = auto.clone();
         cfg.calibration = cfg.calibration.map(|c| Calibration { auto_batch_risk: share, ..c });
@@ -165,7 +205,7 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
                     assert_eq!(la.radius.to_bits(), lb.radius.to_bits());
                     continue;
                 }
-                let risk = look_risk(0.01, lengths[w] / total, la.look) * (1.0 - share);
+                let risk = look_risk(0.01, 1.0 / windows, la.look) * (1.0 - share);
                 let first = calibrated_radius(lb.sd * lb.sd, lb.nu, risk);
                 assert!(la.radius <= first * (1.0 + 1e-12), "window {w}: {} > {first}", la.radius);
                 batched_won += usize::from(la.radius < first * (1.0 - 1e-9));

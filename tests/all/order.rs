@@ -166,3 +166,64 @@ fn a_larger_guard_risk_only_closes() {
     }
     assert!(compared > 30_000 && fewer >= 1 && opened >= 2, "{compared} {fewer} {opened}");
 }
+
+/// The nonlinear certificate's own order test (its larger fit holds the past increment,
+/// on with `Calibration::hidden_dynamics`): on the damped mass and the oscillator by position
+/// its reason closes the nonlinear gate in most of 20 runs and never with the test off; on a
+/// first-order nonlinear loop (the cubic `−x − 0.3 x³` under `K = −1`, rate at least 2, 40×
+/// the margin) the nonlinear gate still opens in every one of 20 runs, and the test's
+/// closings are a small share of the samples.
+#[test]
+fn the_nonlinear_certificate_tests_its_order_too() {
+    use streamcert::certificate::NonlinearConfig;
+    let nonlinear = |k: f64, order: bool| CertifierConfig {
+        calibration: Some(Calibration { hidden_dynamics: order, ..Calibration::new(0.01) }),
+        nonlinear: Some(NonlinearConfig::with_degree(3)),
+        ..config(k, true)
+    };
+    // (opened, runs whose reasons name the hidden dynamics, samples so closed, samples)
+    let run = |cfg: &CertifierConfig, traj: &Trajectory| {
+        let mut cert = Certifier::new(cfg.clone()).expect("valid");
+        let (mut opened, mut closed) = (false, 0);
+        for i in 0..traj.len() {
+            let ev = cert.push(traj.t[i], &traj.output(i)[..1], traj.input(i)).expect("finite");
+            opened |= ev.nonlinear.open;
+            closed += usize::from(matches!(
+                ev.nonlinear.reason,
+                Some(NotCertified::HiddenDynamics { .. })
+            ));
+        }
+        (opened, closed)
+    };
+    for a in [[0.0, 1.0, 0.0, -2.0], [0.0, 1.0, -1.0, -0.05]] {
+        let scenario = by_position(a);
+        let (mut named, mut named_off) = (0, 0);
+        for s in 0..20 {
+            let traj = run_scenario(&scenario, 8800 + s);
+            named += usize::from(run(&nonlinear(0.0, true), &traj).1 > 0);
+            named_off += usize::from(run(&nonlinear(0.0, false), &traj).1 > 0);
+        }
+        eprintln!("{a:?}: the order test closed the nonlinear gate in {named} of 20 runs");
+        assert!(named >= 15, "{a:?}: the reason named in {named} of 20 runs");
+        assert_eq!(named_off, 0);
+    }
+    let cubic = ScalarScenario {
+        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
+        k_explore: -1.0,
+        dither: 3.0,
+        dither_hold: 1.0,
+        ..ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
+    };
+    let (mut opened, mut closed, mut samples) = (0, 0, 0);
+    for s in 0..20 {
+        let traj = cubic.run(9900 + s).expect("valid scenario");
+        let (o, c) = run(&nonlinear(-1.0, true), &traj);
+        opened += usize::from(o);
+        closed += c;
+        samples += traj.len();
+    }
+    let share = closed as f64 / samples as f64;
+    eprintln!("cubic: opened {opened} of 20, order closings {share:.4} of samples");
+    assert_eq!(opened, 20);
+    assert!(share < 0.02, "the order test closed {share} of the samples");
+}

@@ -60,12 +60,15 @@
 //! `k`-th look spends
 //!
 //! ```text
-//! δ_{w,k} = δ · (M_w / Σ_v M_v) · 1 / (k (k + 1)),        Σ_{w,k} δ_{w,k} = δ
+//! δ_{w,k} = δ · share_w · 1 / (k (k + 1)),   share_w = 1 / W,   Σ_{w,k} δ_{w,k} = δ
 //! ```
 //!
 //! so by the union bound the probability that any look of any window overstates a rate below
-//! the margin is at most `δ` for a run of any length and any stopping rule. Longer windows get
-//! more risk because they look less often and certify the marginal loops. The price of the
+//! the margin is at most `δ` for a run of any length and any stopping rule. By default every
+//! window gets the same share `1 / W` (`W` windows): each doubling of the window is one more
+//! time scale the loop may need, and none is favoured;
+//! [`RiskSplit::ByLength`](crate::RiskSplit::ByLength) gives the longer windows more
+//! (`M_w / Σ M_v`, the split before). The price of the
 //! schedule is decision time: a window certifies at its looks only, up to
 //! `⌈look_spacing · B_w⌉ · h` samples after the data would allow it.
 //!
@@ -164,7 +167,7 @@ mod look;
 mod update;
 
 pub(crate) use crate::look::{Look, standing};
-pub use config::Calibration;
+pub use config::{Calibration, RiskSplit};
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
 use coupling::{CouplingLook, CouplingState};
 
@@ -251,7 +254,7 @@ pub(crate) struct CalibratedState {
     windows: InstrumentedWindows,
     /// `T = [I_p; K]`, `d × p` row-major.
     tmat: Vec<f64>,
-    /// Risk share per window, `M_w / Σ M_v`.
+    /// Risk share per window ([`RiskSplit::shares`](crate::RiskSplit::shares)).
     shares: Vec<f64>,
     /// Columns of the regression already absorbed (its `columns_built`).
     seen: u64,
@@ -329,12 +332,10 @@ impl CalibratedState {
                     reg,
                     &nl_gain,
                     &lengths,
-                    cal.instrument_lag,
-                    cal.instrument_intervals,
+                    (cal.instrument_lag, cal.instrument_intervals, cal.hidden_dynamics),
                 )
             })
             .transpose()?;
-        let total: f64 = lengths.iter().map(|&w| w as f64).sum();
         let tmat = (0..d * p)
             .map(|idx| {
                 let (r, c) = (idx / p, idx % p);
@@ -352,7 +353,7 @@ impl CalibratedState {
             horizon: reg.horizon,
             ridge: reg.ridge,
             min_pivot: reg.min_excitation_ratio,
-            shares: lengths.iter().map(|&w| w as f64 / total).collect(),
+            shares: cal.risk_split.shares(&lengths),
             until_look: vec![0; lengths.len()],
             look_cols: vec![0; lengths.len()],
             looks: vec![0; lengths.len()],

@@ -196,7 +196,7 @@ impl CertifierConfig {
             c.validate(&self.regression, self.margin)?;
         }
         if let Some(n) = &self.nonlinear {
-            n.validate(&self.regression, self.calibration.is_some())?;
+            n.validate(&self.regression, self.calibration.as_ref())?;
         }
         if let Some(c) = &self.couplings {
             c.validate(&self.regression, &self.gain, self.calibration.is_some())?;

@@ -53,7 +53,7 @@
 //! corners of the box of slopes. The certificate is the smallest cell bound (so it holds
 //! between grid points too). `ν` and the risk schedule are the calibrated certificate's: the effective
 //! number of blocks (weights in the direction `a` at the region's midpoint) less `D + m`, and
-//! `δ_{w,k} = δ (M_w/ΣM) / (k (k+1))`. With `D = 1` the certificate equals the linear
+//! `δ_{w,k} = (δ/W) / (k (k+1))`. With `D = 1` the certificate equals the linear
 //! calibrated certificate (up to rounding; a property test).
 //!
 //! ## Nonlinearity test
@@ -77,6 +77,12 @@
 //! band or the cubic drift open far less often, and where they still open their value is
 //! rarely above the truth; the matching libraries are unchanged or slightly slower.
 //!
+//! With [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics) (on by
+//! default) the same larger fit also holds the output's increment over the `h` samples
+//! before the column, and its Wald test (same risk) is the certificate's order test: a
+//! window's certificate stands only where it ran and found nothing
+//! ([`NotCertified::HiddenDynamics`], [`NotCertified::OrderUntested`]).
+//!
 //! ## Assumptions (when one fails the guarantee is void)
 //! * One output (`p = 1`) whose drift lies in the span of the feature library over the
 //!   region, plus `B u`; a drift that does not is covered only as far as the library's best
@@ -85,9 +91,10 @@
 //!   band and on cubics).
 //! * Every assumption of the calibrated certificate (white process noise, exogenous
 //!   exploration, instruments relevant, negligible ridge), with the features as regressors.
-//! * The output is the state (or the feature model holds for the measured output); sensor
-//!   noise widens the reported region slightly (the box of noisy samples), which only makes
-//!   the minimum smaller.
+//! * The output is the state (or the feature model holds for the measured output; the order
+//!   test refuses where the past increment shows otherwise); sensor noise widens the
+//!   reported region slightly (the box of noisy samples), which only makes the minimum
+//!   smaller.
 
 mod bounds;
 mod cells;
@@ -98,7 +105,7 @@ mod features;
 pub use bounds::{f_quantile, polynomial_bounds, simultaneous_multiplier};
 use cells::Bounds;
 pub(crate) use check::hotelling_wald;
-use check::{LackOfFit, WaldAt, wald};
+use check::{LackOfFit, WaldAt, refused, wald};
 pub use config::NonlinearConfig;
 pub use features::{Feature, FeatureSet};
 
@@ -158,6 +165,12 @@ pub struct NonlinearLook {
     /// of the extra terms in the larger fit ([`NonlinearConfig::check_terms`]).
     #[serde(default)]
     pub misfit: Option<NonlinearityTest>,
+    /// The hidden-dynamics test (when [`Calibration::hidden_dynamics`] is on and the larger
+    /// fit is ready): the Wald test of the past increment `ΔY_{q−h}` in the larger fit.
+    ///
+    /// [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
+    #[serde(default)]
+    pub order: Option<NonlinearityTest>,
 }
 
 /// One look's circumstances, from the calibrated schedule that drives it.
@@ -226,13 +239,15 @@ pub(crate) struct NonlinearState {
 }
 
 impl NonlinearState {
+    /// The state for `cfg` on the calibrated windows `lengths`, instrumented as they are
+    /// (`lag`, `intervals`); `order`: whether the larger fit holds the past increment (the
+    /// hidden-dynamics test, [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics)).
     pub(crate) fn new(
         cfg: NonlinearConfig,
         reg: &RegressionConfig,
         gain: &[f64],
         lengths: &[usize],
-        lag: usize,
-        intervals: usize,
+        (lag, intervals, order): (usize, usize, bool),
     ) -> Result<Self, CertifyError> {
         let library = cfg.library();
         // The inputs' gains, then zero for the affine model's `τ` (an input with gain zero).
@@ -249,8 +264,8 @@ impl NonlinearState {
                 _ => None,
             })
             .collect();
-        let check = (!powers.is_empty())
-            .then(|| LackOfFit::new(powers, dg, m, reg.horizon, lag, intervals, lengths))
+        let check = (!powers.is_empty() || order)
+            .then(|| LackOfFit::new((powers, order), dg, m, (reg.horizon, lag, intervals), lengths))
             .transpose()?;
         Ok(Self {
             check,
@@ -372,8 +387,10 @@ impl NonlinearState {
         let at =
             WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: 1, q: dg - 1, nu, alpha };
         let test = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
-        let misfit =
-            self.check.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha));
+        let (misfit, order) = self
+            .check
+            .as_mut()
+            .map_or((None, None), |c| c.test(w, &self.dir, ridge, min_pivot, alpha));
         (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
             window: self.windows.window(w),
             look: k,
@@ -387,6 +404,7 @@ impl NonlinearState {
             upper: (upper < margin).then_some(upper),
             test,
             misfit,
+            order,
         })
     }
 
@@ -397,70 +415,52 @@ impl NonlinearState {
         warming: NotCertified,
     ) -> (Option<NonlinearLook>, Option<NotCertified>) {
         // With the lack-of-fit check, a look stands only where the check ran and found no
-        // missing term (the certificate's model is its library). The hidden-dynamics guard
-        // tests the linear model's order, so it does not gate this certificate: on a
-        // nonlinear loop the linear model's misfit reads as a past-increment term (measured:
-        // the −x tanh x loop at σ = 0.02 closed at most samples).
-        let checked = self.check.is_some();
+        // missing term (the certificate's model is its library); with the hidden-dynamics
+        // test, only where it ran and found no past-increment term in the same larger fit
+        // (the linear guard's order test does not gate this certificate: on a nonlinear loop
+        // the linear model's misfit reads as a past-increment term; measured: the −x tanh x
+        // loop at σ = 0.02 closed at most samples).
+        let (powers, order) = self.check.as_ref().map_or((false, false), LackOfFit::terms);
         let mut misfit = None;
         let (best, contradicted) = standing(&self.latest, margin, |_, look| {
-            if !checked {
-                return true;
-            }
             let window = look.window;
-            match look.misfit {
-                Some(t) if t.significant() => {
-                    misfit.get_or_insert(NotCertified::LibraryMisfit {
-                        window,
-                        statistic: t.statistic,
-                        threshold: t.threshold,
-                    });
+            let order = order
+                .then(|| {
+                    refused(
+                        look.order,
+                        |t: NonlinearityTest| NotCertified::HiddenDynamics {
+                            window,
+                            statistic: t.statistic,
+                            threshold: t.threshold,
+                        },
+                        NotCertified::OrderUntested { window },
+                    )
+                })
+                .flatten();
+            let library = powers
+                .then(|| {
+                    refused(
+                        look.misfit,
+                        |t: NonlinearityTest| NotCertified::LibraryMisfit {
+                            window,
+                            statistic: t.statistic,
+                            threshold: t.threshold,
+                        },
+                        NotCertified::LibraryUntested { window },
+                    )
+                })
+                .flatten();
+            match order.or(library) {
+                Some(reason) => {
+                    misfit.get_or_insert(reason);
                     false
                 }
-                Some(_) => true,
-                None => {
-                    misfit.get_or_insert(NotCertified::LibraryUntested { window });
-                    false
-                }
+                None => true,
             }
         });
         let blocked =
             if best.is_some() { None } else { Some(contradicted.or(misfit).unwrap_or(warming)) };
         (best, blocked)
-    }
-
-    /// Check a deserialised state against a fresh one.
-    pub(crate) fn check(&self, fresh: &Self) -> Result<(), CertifyError> {
-        self.windows.check_state()?;
-        let ok = self.cfg == fresh.cfg
-            && self.library == fresh.library
-            && self.horizon == fresh.horizon
-            && self.gain == fresh.gain
-            && same_windows(&self.windows, &fresh.windows)
-            && self.est.matches(&fresh.est)
-            && self.latest.len() == fresh.latest.len()
-            && match (&self.check, &fresh.check) {
-                (Some(a), Some(b)) => a.matches(b),
-                (None, None) => true,
-                _ => false,
-            }
-            && [
-                (self.z.len(), fresh.z.len()),
-                (self.dir.len(), fresh.dir.len()),
-                (self.cov.len(), fresh.cov.len()),
-                (self.poly_f.len(), fresh.poly_f.len()),
-                (self.poly_s.len(), fresh.poly_s.len()),
-                (self.work.len(), fresh.work.len()),
-                (self.sub.len(), fresh.sub.len()),
-                (self.rhs.len(), fresh.rhs.len()),
-            ]
-            .iter()
-            .all(|(a, b)| a == b);
-        if ok {
-            Ok(())
-        } else {
-            Err(CertifyError::Checkpoint("nonlinear state does not match its configuration".into()))
-        }
     }
 }
 

@@ -3,7 +3,7 @@
 use serde::Deserialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
-    Calibration, Certifier, CertifierConfig, FeatureSet, NonlinearConfig, ResidualSource,
+    Calibration, Certifier, CertifierConfig, FeatureSet, NonlinearConfig, ResidualSource, RiskSplit,
 };
 use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 
@@ -82,7 +82,10 @@ residuals = "one_step"  # keeps the tail shape eps detects (the paper is silent)
 # paper's two certificates alone, which carry no stated risk (the summary says so).
 enabled = true
 delta = 0.01            # the risk of a false deployment over the whole run
-# windows = 4            # M, 2M, 4M, 8M (default: doubling until the longest holds 200 h)
+# windows = 5            # M, 2M, ..., 16M (default: at least five, doubling until the
+                         # longest holds 200 h: a long window makes up for the intercept)
+# risk_split = "equal"   # delta / windows each, every time scale alike ("by_length": the
+                         # longer windows more, the shortest less: a fast loop waits longer)
 # max_window = 1200      # drop windows longer than this (default: none)
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
@@ -99,7 +102,7 @@ delta = 0.01            # the risk of a false deployment over the whole run
                          # hidden state: a mass measured by its position) does not stand
 # nonlinearity = true    # a window whose outputs' squares and cubes predict the increment (a
                          # slope that varies over the explored region) does not stand
-# guard_risk = 0.0025    # risk of each of these two tests (default: delta / windows); larger
+# guard_risk = 0.002     # risk of each of these two tests (default: delta / windows); larger
                          # closes more often, never less: fewer false openings on a nonlinear
                          # loop (it does not make them rare: use [nonlinear]), less power
 # plant_change = true    # a window's look stands only while a fresh estimate on the newest
@@ -218,6 +221,8 @@ struct CalibrationSection {
     change_risk: Option<f64>,
     #[serde(default)]
     guard_risk: Option<f64>,
+    #[serde(default)]
+    risk_split: Option<RiskSplit>,
 }
 
 fn default_true() -> bool {
@@ -246,6 +251,7 @@ impl Default for CalibrationSection {
             plant_change: None,
             change_risk: None,
             guard_risk: None,
+            risk_split: None,
         }
     }
 }
@@ -268,6 +274,7 @@ impl CalibrationSection {
             plant_change: self.plant_change.unwrap_or(d.plant_change),
             change_risk: self.change_risk.or(d.change_risk),
             guard_risk: self.guard_risk.or(d.guard_risk),
+            risk_split: self.risk_split.unwrap_or(d.risk_split),
             ..d
         }
     }

@@ -53,7 +53,7 @@ fn the_calibrated_certificate_is_the_default_verdict() {
     let rho_cal: f64 = last[12].parse().expect("rho_calibrated");
     let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
     let window: usize = last[14].parse().expect("calibrated_window");
-    assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200].contains(&window));
+    assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200, 2400].contains(&window));
     // The gate is open exactly when no reason is given.
     assert_eq!(last[15] == "1", last[16].is_empty(), "{last:?}");
     // The summary's first line is the calibrated verdict, with its risk.

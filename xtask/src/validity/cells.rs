@@ -1,7 +1,7 @@
 //! The study's cells: the linear loops, their candidate gains and truths, and the
 //! certifier settings each runs.
 
-use streamcert_certificate::{Calibration, CertifierConfig};
+use streamcert_certificate::{Calibration, CertifierConfig, RiskSplit};
 use streamcert_dynamics::{LinearScenario, Process};
 use streamcert_regression::{InputIntegral, Model, RegressionConfig};
 
@@ -27,9 +27,14 @@ pub(super) struct Cell {
     /// The regression's model (the default: affine, an intercept in every regression).
     pub(super) model: Model,
     /// The calibrated certificate as it was before the defaults of the safe-by-default and
-    /// plant-data issues: the model through the origin, no guards, no automatic batches (the
-    /// power table's "before" columns, on the same runs).
+    /// plant-data issues: the model through the origin, no guards, no automatic batches, at
+    /// least four windows with the risk split by length (the power table's "before" columns,
+    /// on the same runs).
     pub(super) before: bool,
+    /// The windows as they were when those issues were filed (at least four, the risk split
+    /// by length), every other default kept: what the fifth window and the equal split
+    /// change.
+    pub(super) filed_windows: bool,
 }
 
 /// A cell with the defaults for the fields most cells leave alone.
@@ -53,6 +58,7 @@ pub(super) fn plain(
         truth: None,
         model: Model::Affine,
         before: false,
+        filed_windows: false,
     }
 }
 
@@ -78,8 +84,17 @@ impl Cell {
         );
         if c.is_none() {
             let cal = Calibration { batch_blocks: self.batch, ..Calibration::new(DELTA) };
+            // The windows when the issues were filed: at least four, the risk split by length.
+            let mut windows = 4;
+            while windows < 16 && self.window << (windows - 1) < 200 * H {
+                windows += 1;
+            }
+            let filed =
+                Calibration { windows: Some(windows), risk_split: RiskSplit::ByLength, ..cal };
             cfg.calibration = Some(if self.before {
-                Calibration { auto_batch: 0, ..cal.unguarded() }
+                Calibration { auto_batch: 0, ..filed.unguarded() }
+            } else if self.filed_windows {
+                filed
             } else {
                 cal
             });
@@ -292,5 +307,17 @@ pub(super) fn power_cells() -> Vec<Cell> {
             ..sensor_cell.clone()
         });
     }
+    // What the default windows (five, an equal share of δ each) change: cells above on the
+    // four windows split by length of the filing, every other default kept. Last, so that
+    // the cells above keep their seeds (a cell's seeds follow its index).
+    let filed = |cell: &Cell| Cell {
+        family: format!("{}, four windows split by length", cell.family),
+        filed_windows: true,
+        ..cell.clone()
+    };
+    let compared = ["scalar, β* = 5× margin", "scalar, β* = 20× margin", &sensor_cell.family];
+    let more: Vec<Cell> =
+        cells.iter().filter(|c| compared.contains(&c.family.as_str())).map(filed).collect();
+    cells.extend(more);
     cells
 }

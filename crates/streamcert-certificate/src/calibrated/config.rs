@@ -14,9 +14,12 @@ pub struct Calibration {
     /// Risk `δ ∈ (0, 1)` over the whole run.
     pub delta: f64,
     /// Number of windows `M, 2M, 4M, …`. `None` (default): double from `M` until there are at
-    /// least four and the longest holds at least 200 blocks of `h` columns (about 200 degrees
+    /// least five and the longest holds at least 200 blocks of `h` columns (about 200 degrees
     /// of freedom, where the Student-t quantile at the risks a look spends is within 2 % of the
-    /// normal one), at most 16. `Some(n)`: exactly `n` (`1..=16`).
+    /// normal one), at most 16. At least five, so that the longest window spans `16 M`: with
+    /// the affine model's intercept a window learns nothing from the loop's level, which a
+    /// longer window makes up for (VALIDITY.md's power cell at 5× the margin). `Some(n)`:
+    /// exactly `n` (`1..=16`).
     #[serde(default)]
     pub windows: Option<usize>,
     /// Cap on the window length in columns: windows above it are dropped (default none).
@@ -79,9 +82,12 @@ pub struct Calibration {
     /// (`NotCertified::HiddenDynamics`, `NotCertified::OrderUntested`). Off, a rate is
     /// certified on the first-order model even when the output carries a hidden state (a
     /// mass measured by its position), which the certificate's risk does not cover. It tests
-    /// the linear model's order and gates the linear calibrated certificate; the nonlinear
-    /// certificate is not gated by it (on a nonlinear loop the linear model's misfit reads as
-    /// a past-increment term) and has no order test of its own. See the guard's module
+    /// the linear model's order and gates the linear calibrated certificate. The nonlinear
+    /// certificate (`[nonlinear]`) is not gated by that test (on a nonlinear loop the linear
+    /// model's misfit reads as a past-increment term); with this flag on, its own larger fit
+    /// (the lack-of-fit check's) holds the past increment too, and its Wald test at the
+    /// nonlinear certificate's test risk gates the nonlinear certificate the same way (one
+    /// more unknown: its smallest window grows by `h`). See the guard's module
     /// (`guard::model`) for what it sees and what it cannot.
     #[serde(default = "default_true")]
     pub hidden_dynamics: bool,
@@ -127,6 +133,47 @@ pub struct Calibration {
     /// bounds every state of the region).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub guard_risk: Option<f64>,
+    /// How `δ` is split across the windows (default [`RiskSplit::Equal`], `δ / W` each). Any
+    /// fixed split is valid (the union bound); it decides which loops are certified sooner.
+    #[serde(default, skip_serializing_if = "RiskSplit::is_equal")]
+    pub risk_split: RiskSplit,
+}
+
+/// How the calibrated certificate splits its risk `δ` across its `W` windows `M_w`; window
+/// `w`'s `k`-th look then spends `δ · share_w / (k (k + 1))`
+/// ([`look_risk`](crate::look_risk)).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum RiskSplit {
+    /// `share_w = 1 / W` (the default): each doubling of the window is one more time scale
+    /// the loop may need, and none is favoured. The shortest window, which certifies a fast
+    /// loop first, keeps its share when longer windows are added.
+    #[default]
+    Equal,
+    /// `share_w = M_w / Σ_v M_v`: the longer windows, which look less often, get more (the
+    /// split before the default changed to [`Equal`](Self::Equal); with five windows the
+    /// shortest gets `1/31` of `δ`, and a fast loop waits a look longer).
+    ByLength,
+}
+
+impl RiskSplit {
+    /// Whether this is the default split.
+    #[must_use]
+    pub fn is_equal(&self) -> bool {
+        *self == Self::Equal
+    }
+
+    /// The shares `share_w` of the windows `lengths` (columns), summing to 1.
+    #[must_use]
+    pub fn shares(self, lengths: &[usize]) -> Vec<f64> {
+        match self {
+            Self::Equal => vec![1.0 / lengths.len().max(1) as f64; lengths.len()],
+            Self::ByLength => {
+                let total: f64 = lengths.iter().map(|&w| w as f64).sum();
+                lengths.iter().map(|&w| w as f64 / total).collect()
+            }
+        }
+    }
 }
 
 fn default_true() -> bool {
@@ -178,6 +225,7 @@ impl Calibration {
             plant_change: true,
             change_risk: None,
             guard_risk: None,
+            risk_split: RiskSplit::Equal,
         }
     }
 
@@ -242,7 +290,7 @@ impl Calibration {
     pub fn window_lengths(&self, base: usize, horizon: usize) -> Vec<usize> {
         let length = |i: usize| base.saturating_mul(1usize << i.min(30));
         let count = self.windows.unwrap_or_else(|| {
-            let mut n = 4;
+            let mut n = 5;
             while n < 16 && length(n - 1) < 200 * horizon {
                 n += 1;
             }

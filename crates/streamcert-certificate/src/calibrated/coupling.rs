@@ -13,7 +13,7 @@
 //! Ω̂_C  = the block of the coefficient covariance (InstrumentedWindows::coefficient_covariance)
 //! c_w   = t_ν(1 − δ_{b,w,k}/2)                      (one entry: two-sided Student t)
 //! c_w²  = ν r/(ν − r + 1) · F_{r, ν−r+1}(1 − δ_{b,w,k})  (r = p·q entries: Hotelling's T²)
-//! δ_{b,w,k} = (δ_c / blocks) · (M_w / Σ M_v) / (k (k + 1))
+//! δ_{b,w,k} = (δ_c / blocks) · (1 / W) / (k (k + 1))
 //! ```
 //!
 //! `‖C‖₂ <= ‖Ĉ‖₂ + ‖C − Ĉ‖_F` and `‖e‖² <= λ_max(Ω) · eᵀΩ⁻¹e` for `e = vec(C − Ĉ)`, whose

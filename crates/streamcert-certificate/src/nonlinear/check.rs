@@ -1,6 +1,10 @@
-//! The lack-of-fit check of the feature library ([`NonlinearConfig::check_terms`]): a second
-//! instrumented fit on the library plus `e` powers of `y` it lacks, on the same columns,
-//! windows and looks, and the Wald test of those `e` coefficients,
+//! The lack-of-fit check of the feature library ([`NonlinearConfig::check_terms`]) and the
+//! nonlinear certificate's hidden-dynamics test
+//! ([`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics)): a second
+//! instrumented fit on the library plus `e` powers of `y` it lacks and, for the order test,
+//! the output's increment over the `h` samples before the column (`ΔY_{q−h}`, as the linear
+//! certificate's guard, `guard::model`), on the same columns, windows and looks, and the Wald
+//! test of those `e` coefficients (and, separately, of the past increment's),
 //!
 //! ```text
 //! W = θ̂_Eᵀ Ω̂_EE⁻¹ θ̂_E   against   ν e/(ν − e + 1) · F_{e, ν−e+1}(1 − α)
@@ -9,8 +13,12 @@
 //! (Hotelling's quantile, as the nonlinearity test; `ν` = effective blocks less the larger
 //! fit's unknowns, `α` = the test risk or `δ`). If the drift lies in the library's span the
 //! extra coefficients are zero and the test rejects with probability about `α`; where it
-//! rejects, the certificate's model is contradicted by the data. `O(h e + (D + e + m)²)` per
-//! column, no allocation.
+//! rejects, the certificate's model is contradicted by the data. Under a first-order plant in
+//! the library's span with white noise the past increment's coefficient is zero (its
+//! interval ends where the column's noise begins); where its test rejects, the output carries
+//! a state the model does not hold. The order test belongs in this fit, not in the linear
+//! model's: on a nonlinear loop the linear model's misfit reads as a past-increment term.
+//! `O(h e + (D + e + m)²)` per column, no allocation.
 //!
 //! [`NonlinearConfig::check_terms`]: super::NonlinearConfig::check_terms
 
@@ -18,16 +26,26 @@ use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, WindowEstimate, linalg};
 
 use super::{NonlinearityTest, f_quantile};
-use crate::CertifyError;
+use crate::{CertifyError, NotCertified};
 
 /// The larger fit and its scratch.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(super) struct LackOfFit {
     /// The exponents `k` of the extra terms `y^k`.
     powers: Vec<u8>,
-    /// Library features `D` (the extra terms follow them, then the inputs).
+    /// Library features `D` (the extra terms follow them, then the past increment when
+    /// `order`, then the inputs).
     features: usize,
     horizon: usize,
+    /// Whether the fit holds the past increment `ΔY_{q−h}` (the order test).
+    #[serde(default)]
+    order: bool,
+    /// The increments of the last `h` columns (ring, `h` values when `order`), and the
+    /// columns pushed since the last reset.
+    #[serde(default)]
+    lags: Vec<f64>,
+    #[serde(default)]
+    pushed: u64,
     windows: InstrumentedWindows,
     est: WindowEstimate,
     // Scratch (meaningless between calls).
@@ -102,45 +120,57 @@ pub(crate) fn hotelling_wald(
 }
 
 impl LackOfFit {
-    /// The check with extra terms `y^k`, `k` in `powers`, after `features` library features
-    /// and before `inputs` inputs, on windows `lengths`.
+    /// The check with extra terms `y^k`, `k` in `powers`, and the past increment when
+    /// `order`, after `features` library features and before `inputs` inputs, on windows
+    /// `lengths`.
     pub(super) fn new(
-        powers: Vec<u8>,
+        (powers, order): (Vec<u8>, bool),
         features: usize,
         inputs: usize,
-        horizon: usize,
-        lag: usize,
-        intervals: usize,
+        (horizon, lag, intervals): (usize, usize, usize),
         lengths: &[usize],
     ) -> Result<Self, CertifyError> {
         let e = powers.len();
-        let d = features + e + inputs;
+        let d = features + e + usize::from(order) + inputs;
         Ok(Self {
             windows: InstrumentedWindows::with_regressors(1, d, horizon, lag, intervals, lengths)?,
             est: WindowEstimate::with_regressors(1, d, intervals),
             powers,
             features,
             horizon,
+            order,
+            lags: vec![0.0; if order { horizon } else { 0 }],
+            pushed: 0,
             z: vec![0.0; d],
             dir: vec![0.0; d],
             cov: vec![0.0; d * d],
-            sub: vec![0.0; e * e],
-            rhs: vec![0.0; e],
-            work: vec![0.0; e],
+            sub: vec![0.0; e.max(1) * e.max(1)],
+            rhs: vec![0.0; e.max(1)],
+            work: vec![0.0; e.max(1)],
         })
     }
 
     pub(super) fn reset(&mut self) {
         self.windows.reset();
+        self.lags.fill(0.0);
+        self.pushed = 0;
     }
 
     /// Absorb a column: `z_main` holds the library's integrals then the inputs' (`D + m`),
     /// `ts`/`ys` the column's `h + 1` samples; the extra terms are integrated by the same
-    /// trapezoidal rule.
+    /// trapezoidal rule. The past increment is the increment of the column `h` columns
+    /// earlier (zero for the first `h` columns after a reset, as the linear guard's).
     pub(super) fn push(&mut self, z_main: &[f64], dy: &[f64], ts: &[f64], ys: &[f64]) {
         let (dg, e) = (self.features, self.powers.len());
+        let o = usize::from(self.order);
         self.z[..dg].copy_from_slice(&z_main[..dg]);
-        self.z[dg + e..].copy_from_slice(&z_main[dg..]);
+        self.z[dg + e + o..].copy_from_slice(&z_main[dg..]);
+        if self.order {
+            let slot = (self.pushed % self.horizon as u64) as usize;
+            self.z[dg + e] = self.lags[slot];
+            self.lags[slot] = dy[0];
+        }
+        self.pushed += 1;
         let extra = &mut self.z[dg..dg + e];
         extra.fill(0.0);
         // Each sample's powers once (`y^k` by repeated multiplication), then the trapezoids.
@@ -164,9 +194,11 @@ impl LackOfFit {
         self.windows.push_column(&self.z, dy);
     }
 
-    /// Window `w`'s test at a look. `dir_main` is the certificate's direction `a(y_mid)`
-    /// (library slopes, then `K`), extended by zeros for the extra terms (it only weighs the
-    /// blocks for `ν`).
+    /// Window `w`'s tests at a look: the lack-of-fit terms' (`None` without powers) and the
+    /// past increment's (`None` without the order term), each `None` also when the larger
+    /// fit is not ready. `dir_main` is the certificate's direction `a(y_mid)` (library
+    /// slopes, then `K`), extended by zeros for the extra terms (it only weighs the blocks for
+    /// `ν`).
     pub(super) fn test(
         &mut self,
         w: usize,
@@ -174,21 +206,30 @@ impl LackOfFit {
         ridge: f64,
         min_pivot: f64,
         alpha: f64,
-    ) -> Option<NonlinearityTest> {
-        let (dg, e) = (self.features, self.powers.len());
+    ) -> (Option<NonlinearityTest>, Option<NonlinearityTest>) {
+        let (dg, e, o) = (self.features, self.powers.len(), usize::from(self.order));
         let d = self.z.len();
         self.dir[..dg].copy_from_slice(&dir_main[..dg]);
-        self.dir[dg..dg + e].fill(0.0);
-        self.dir[dg + e..].copy_from_slice(&dir_main[dg..d - e]);
+        self.dir[dg..dg + e + o].fill(0.0);
+        self.dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
         self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
         if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
         {
-            return None;
+            return (None, None);
         }
         let blocks = (self.est.columns / self.horizon) as f64;
         let nu = self.est.effective_blocks.min(blocks) - d as f64;
-        let at = WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: dg, q: e, nu, alpha };
-        wald(&at, &mut self.sub, &mut self.rhs, &mut self.work)
+        let theta = &self.est.theta[..d];
+        let at = WaldAt { theta, cov: &self.cov, first: dg, q: e, nu, alpha };
+        let misfit = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
+        let at = WaldAt { theta, cov: &self.cov, first: dg + e, q: o, nu, alpha };
+        let order = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
+        (misfit, order)
+    }
+
+    /// Whether the fit holds the lack-of-fit powers, and the past increment.
+    pub(super) fn terms(&self) -> (bool, bool) {
+        (!self.powers.is_empty(), self.order)
     }
 
     /// Whether a deserialised check matches a fresh one.
@@ -197,6 +238,9 @@ impl LackOfFit {
             && self.powers == fresh.powers
             && self.features == fresh.features
             && self.horizon == fresh.horizon
+            && self.order == fresh.order
+            && self.lags.len() == fresh.lags.len()
+            && self.lags.iter().all(|v| v.is_finite())
             && super::same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && [
@@ -209,5 +253,55 @@ impl LackOfFit {
             ]
             .iter()
             .all(|(a, b)| a == b)
+    }
+}
+
+/// Why a test keeps a look from standing: `significant(t)` where it rejects, `untested` where
+/// it did not run, `None` where it ran and found nothing.
+pub(super) fn refused(
+    t: Option<NonlinearityTest>,
+    significant: impl FnOnce(NonlinearityTest) -> NotCertified,
+    untested: NotCertified,
+) -> Option<NotCertified> {
+    match t {
+        Some(t) if t.significant() => Some(significant(t)),
+        Some(_) => None,
+        None => Some(untested),
+    }
+}
+
+impl super::NonlinearState {
+    /// Check a deserialised state against a fresh one.
+    pub(crate) fn check(&self, fresh: &Self) -> Result<(), CertifyError> {
+        self.windows.check_state()?;
+        let ok = self.cfg == fresh.cfg
+            && self.library == fresh.library
+            && self.horizon == fresh.horizon
+            && self.gain == fresh.gain
+            && super::same_windows(&self.windows, &fresh.windows)
+            && self.est.matches(&fresh.est)
+            && self.latest.len() == fresh.latest.len()
+            && match (&self.check, &fresh.check) {
+                (Some(a), Some(b)) => a.matches(b),
+                (None, None) => true,
+                _ => false,
+            }
+            && [
+                (self.z.len(), fresh.z.len()),
+                (self.dir.len(), fresh.dir.len()),
+                (self.cov.len(), fresh.cov.len()),
+                (self.poly_f.len(), fresh.poly_f.len()),
+                (self.poly_s.len(), fresh.poly_s.len()),
+                (self.work.len(), fresh.work.len()),
+                (self.sub.len(), fresh.sub.len()),
+                (self.rhs.len(), fresh.rhs.len()),
+            ]
+            .iter()
+            .all(|(a, b)| a == b);
+        if ok {
+            Ok(())
+        } else {
+            Err(CertifyError::Checkpoint("nonlinear state does not match its configuration".into()))
+        }
     }
 }

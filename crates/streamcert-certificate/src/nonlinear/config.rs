@@ -110,23 +110,29 @@ impl NonlinearConfig {
             .collect()
     }
 
-    /// Check the settings against the regression (one output) and the calibration's smallest
-    /// window for `D + m` unknowns.
+    /// Check the settings against the regression (one output) and the calibration (which
+    /// must be present) and its smallest window for the larger fit's `D + e + m` unknowns
+    /// (`e`: the lack-of-fit terms, and the past increment when
+    /// [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics) is on).
     ///
     /// # Errors
     /// [`CertifyError::InvalidConfig`] saying what would be valid.
-    pub fn validate(&self, reg: &RegressionConfig, calibrated: bool) -> Result<(), CertifyError> {
+    pub fn validate(
+        &self,
+        reg: &RegressionConfig,
+        calibration: Option<&crate::Calibration>,
+    ) -> Result<(), CertifyError> {
         let bad = |field: &'static str, reason: String| {
             Err(CertifyError::InvalidConfig { field, reason })
         };
-        if !calibrated {
+        let Some(calibration) = calibration else {
             return bad(
                 "nonlinear",
                 "the nonlinear certificate is calibrated: it needs a calibration (set \
                  [calibration] delta, for example 0.01)"
                     .into(),
             );
-        }
+        };
         if reg.outputs != 1 {
             return bad(
                 "nonlinear",
@@ -159,7 +165,9 @@ impl NonlinearConfig {
                 format!("must lie in 0..=7 (powers up to y^8), got {}", self.check_terms),
             );
         }
-        let e = self.check_features().len();
+        // The larger fit: the lack-of-fit terms and, with the hidden-dynamics guard, the
+        // past increment.
+        let e = self.check_features().len() + usize::from(calibration.hidden_dynamics);
         // The affine model's intercept is one more unknown (its `τ` an input with gain 0).
         let affine = usize::from(reg.model == streamcert_regression::Model::Affine);
         let d = self.regressors(reg.inputs + affine) + e;
@@ -169,12 +177,15 @@ impl NonlinearConfig {
                 "window",
                 format!(
                     "M = {} is too short for the nonlinear certificate with {} features, its \
-                     {e} lack-of-fit terms, h = {} and m = {} (+ 1 for the affine model's \
-                     intercept): the smallest valid window is {min} columns \
-                     (h · (D + e + m + 2)); or set check_terms = 0 (no check: the library is \
-                     then trusted to hold the drift)",
+                     larger fit's {e} extra terms ({} lack-of-fit terms, + 1 for the \
+                     hidden-dynamics guard's past increment when on), h = {} and m = {} (+ 1 \
+                     for the affine model's intercept): the smallest valid window is {min} \
+                     columns (h · (D + e + m + 2)); or set check_terms = 0 (no check: the \
+                     library is then trusted to hold the drift) and [calibration] \
+                     hidden_dynamics = false (the output is then trusted to be the state)",
                     reg.window,
                     self.library().len(),
+                    self.check_features().len(),
                     reg.horizon,
                     reg.inputs
                 ),

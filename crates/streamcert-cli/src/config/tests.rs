@@ -46,7 +46,7 @@ fn calibration_section_selects_the_calibrated_certificate() {
     let on = DEFAULT_CONFIG.replace("delta = 0.01 ", "delta = 0.05 ");
     let c = parse(&on, "x").unwrap();
     assert_eq!(c.certifier.calibration, Some(Calibration::new(0.05)));
-    let tuned = on.replace("# windows = 4 ", "windows = 2 ");
+    let tuned = on.replace("# windows = 5 ", "windows = 2 ");
     let c = parse(&tuned, "x").unwrap();
     assert_eq!(c.certifier.calibration.map(|c| c.windows), Some(Some(2)));
     let batched = on.replace("# batch_blocks = 1 ", "batch_blocks = 4 ");
@@ -127,9 +127,15 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     assert_eq!(c.change_risk(), 0.002);
     // The model guards' risk: δ over the windows unless stated.
     assert_eq!((cal.guard_risk, cal.guard_risk(4)), (None, cal.delta / 4.0));
-    let risk = DEFAULT_CONFIG.replace("# guard_risk = 0.0025 ", "guard_risk = 0.05 ");
+    let risk = DEFAULT_CONFIG.replace("# guard_risk = 0.002 ", "guard_risk = 0.05 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.guard_risk(4), 0.05);
+    // The risk split across windows: equal unless stated; a misspelt split is refused.
+    assert_eq!(cal.risk_split, streamcert_certificate::RiskSplit::Equal);
+    let split = DEFAULT_CONFIG.replace("# risk_split = \"equal\" ", "risk_split = \"by_length\" ");
+    let c = parse(&split, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.risk_split, streamcert_certificate::RiskSplit::ByLength);
+    assert!(parse(&split.replace("by_length", "bylength"), "x").is_err());
     // The batched radius's share of the risk: 0.2 unless stated.
     assert_eq!(cal.auto_batch_risk, 0.2);
     let share = DEFAULT_CONFIG.replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");

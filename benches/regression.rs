@@ -11,7 +11,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, certificate_value,
+    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, RiskSplit,
+    certificate_value,
 };
 use streamcert::regression::{EstimateStatus, Model, RegressionConfig, SlidingRegression};
 
@@ -159,7 +160,14 @@ fn certifier_step(c: &mut Criterion) {
             cfg.regression.model = Model::ThroughOrigin;
         }
         if variant == 6 {
-            cfg.calibration = Some(Calibration::new(0.01).unguarded());
+            // The calibrated step as it was before the intercept, the guards and the default
+            // windows changed: four windows, the risk split by length.
+            let was = Calibration {
+                windows: Some(4),
+                risk_split: RiskSplit::ByLength,
+                ..Calibration::new(0.01).unguarded()
+            };
+            cfg.calibration = Some(was);
         }
         if variant == 4 {
             cfg.nonlinear = Some(NonlinearConfig::with_degree(3));

@@ -325,9 +325,10 @@ fn the_configuration_says_what_is_valid() {
     cfg.calibration = None;
     let err = Certifier::new(cfg).unwrap_err();
     assert!(matches!(err, CertifyError::InvalidConfig { field: "nonlinear", .. }), "{err}");
-    // Cubic library, lack-of-fit y⁴ y⁵, past increment, u, intercept: h (3+2+1+1+1+2) = 50.
-    let err = Certifier::new(config(-1.0, 0.05, 45, 3)).unwrap_err();
-    let says = ["is 50", "check_terms = 0", "hidden_dynamics = false"];
+    // Cubic library, lack-of-fit y⁴ y⁵ (the past increment in a fit of its own), u,
+    // intercept: h (3 + 2 + 1 + 1 + 2) = 45.
+    let err = Certifier::new(config(-1.0, 0.05, 40, 3)).unwrap_err();
+    let says = ["is 45", "check_terms = 0", "hidden_dynamics = false"];
     assert!(says.iter().all(|s| err.to_string().contains(s)), "{err}");
     let mut unchecked = config(-1.0, 0.05, 40, 3);
     unchecked.nonlinear =
@@ -338,11 +339,11 @@ fn the_configuration_says_what_is_valid() {
     short.calibration = short.calibration.map(Calibration::unguarded); // (else 40 first)
     let err = Certifier::new(short).unwrap_err();
     assert!(err.to_string().contains("smallest valid window is 35"), "{err}");
-    // Through the origin, one unknown fewer: 45.
-    let mut origin = config(-1.0, 0.05, 40, 3);
+    // Through the origin, one unknown fewer: 40.
+    let mut origin = config(-1.0, 0.05, 35, 3);
     origin.regression.model = streamcert::regression::Model::ThroughOrigin;
     let err = Certifier::new(origin).unwrap_err();
-    assert!(err.to_string().contains("smallest valid window is 45"), "{err}");
+    assert!(err.to_string().contains("smallest valid window is 40"), "{err}");
     let mut many = config(-1.0, 0.05, 200, 3);
     many.nonlinear = Some(NonlinearConfig { check_terms: 8, ..NonlinearConfig::with_degree(3) });
     let err = Certifier::new(many).unwrap_err();
@@ -449,8 +450,6 @@ fn the_lack_of_fit_check_closes_the_gate_of_a_library_that_misses_the_drift() {
     };
     let library = FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("valid");
     let mut cfg = config(-1.0, 0.05, 50, 1);
-    let alone = |c| Calibration { hidden_dynamics: false, ..c }; // the lack-of-fit check alone
-    cfg.calibration = cfg.calibration.map(alone);
     cfg.nonlinear =
         Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_features(library) });
     let (unchecked, none) = false_openings(&band, &cfg, 10);

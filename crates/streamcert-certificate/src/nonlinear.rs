@@ -78,8 +78,9 @@
 //! rarely above the truth; the matching libraries are unchanged or slightly slower.
 //!
 //! With [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics) (on by
-//! default) the same larger fit also holds the output's increment over the `h` samples
-//! before the column, and its Wald test (same risk) is the certificate's order test: a
+//! default) a third fit, the library plus the output's increment over the `h` samples
+//! before the column, gives the certificate's order test (its Wald test, same risk; a fit of
+//! its own, so that the past increment does not take the lack-of-fit check's power): a
 //! window's certificate stands only where it ran and found nothing
 //! ([`NotCertified::HiddenDynamics`], [`NotCertified::OrderUntested`]).
 //!
@@ -226,6 +227,11 @@ pub(crate) struct NonlinearState {
     /// The lack-of-fit check, when `check_terms > 0`.
     #[serde(default)]
     check: Option<LackOfFit>,
+    /// The order test's fit (the library plus the past increment), when
+    /// `Calibration::hidden_dynamics` is on: its own fit, since in the lack-of-fit check's
+    /// the past increment would carry the terms a library misses and take that test's power.
+    #[serde(default)]
+    order: Option<LackOfFit>,
     // Scratch (meaningless between calls): one column's regressors, `a(y_mid)`, `Ω̂_θ`, the
     // polynomials of `β̂(y)` and `s(y)²`, their bound work space, the Wald sub-problem.
     z: Vec<f64>,
@@ -264,11 +270,12 @@ impl NonlinearState {
                 _ => None,
             })
             .collect();
-        let check = (!powers.is_empty() || order)
-            .then(|| LackOfFit::new((powers, order), dg, m, (reg.horizon, lag, intervals), lengths))
-            .transpose()?;
+        let fit = |terms| LackOfFit::new(terms, dg, m, (reg.horizon, lag, intervals), lengths);
+        let check = (!powers.is_empty()).then(|| fit((powers, false))).transpose()?;
+        let order = order.then(|| fit((Vec::new(), true))).transpose()?;
         Ok(Self {
             check,
+            order,
             cfg,
             library,
             horizon: reg.horizon,
@@ -304,7 +311,7 @@ impl NonlinearState {
     pub(crate) fn reset(&mut self) {
         self.windows.reset();
         self.latest.fill(None);
-        if let Some(c) = &mut self.check {
+        for c in self.check.iter_mut().chain(self.order.iter_mut()) {
             c.reset();
         }
     }
@@ -339,7 +346,7 @@ impl NonlinearState {
                 }
             }
         }
-        if let Some(c) = &mut self.check {
+        for c in self.check.iter_mut().chain(self.order.iter_mut()) {
             c.push(&self.z, dy, ts, ys);
         }
         self.windows.push_column_ranged(&self.z, dy, &[Interval { lo, hi }])
@@ -387,10 +394,10 @@ impl NonlinearState {
         let at =
             WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: 1, q: dg - 1, nu, alpha };
         let test = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
-        let (misfit, order) = self
-            .check
-            .as_mut()
-            .map_or((None, None), |c| c.test(w, &self.dir, ridge, min_pivot, alpha));
+        let misfit =
+            self.check.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha).0);
+        let order =
+            self.order.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha).1);
         (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
             window: self.windows.window(w),
             look: k,
@@ -416,11 +423,11 @@ impl NonlinearState {
     ) -> (Option<NonlinearLook>, Option<NotCertified>) {
         // With the lack-of-fit check, a look stands only where the check ran and found no
         // missing term (the certificate's model is its library); with the hidden-dynamics
-        // test, only where it ran and found no past-increment term in the same larger fit
+        // test, only where it ran and found no past-increment term in its own larger fit
         // (the linear guard's order test does not gate this certificate: on a nonlinear loop
         // the linear model's misfit reads as a past-increment term; measured: the −x tanh x
         // loop at σ = 0.02 closed at most samples).
-        let (powers, order) = self.check.as_ref().map_or((false, false), LackOfFit::terms);
+        let (powers, order) = (self.check.is_some(), self.order.is_some());
         let mut misfit = None;
         let (best, contradicted) = standing(&self.latest, margin, |_, look| {
             let window = look.window;

@@ -85,9 +85,10 @@ pub struct Calibration {
     /// the linear model's order and gates the linear calibrated certificate. The nonlinear
     /// certificate (`[nonlinear]`) is not gated by that test (on a nonlinear loop the linear
     /// model's misfit reads as a past-increment term); with this flag on, its own larger fit
-    /// (the lack-of-fit check's) holds the past increment too, and its Wald test at the
-    /// nonlinear certificate's test risk gates the nonlinear certificate the same way (one
-    /// more unknown: its smallest window grows by `h`). See the guard's module
+    /// (beside the lack-of-fit check's, on the library plus the past increment) gives its Wald
+    /// test at the nonlinear certificate's test risk, which gates the nonlinear certificate
+    /// the same way (its smallest window is that of the larger of the two fits). See the
+    /// guard's module
     /// (`guard::model`) for what it sees and what it cannot.
     #[serde(default = "default_true")]
     pub hidden_dynamics: bool,

@@ -49,9 +49,9 @@
 //! (nonlinearity) more unknowns per output, so the smallest window the calibrated
 //! certificate accepts grows with them
 //! ([`Calibration::smallest_window`](crate::Calibration::smallest_window)). The nonlinear
-//! certificate is not gated by this guard: its own larger fit holds the lack-of-fit terms
-//! and the past increment (`nonlinear::check`), since on a nonlinear loop the linear model's
-//! misfit reads as a past-increment term.
+//! certificate is not gated by this guard: a larger fit of its own holds the library and the
+//! past increment (`nonlinear::check`), since on a nonlinear loop the linear model's misfit
+//! reads as a past-increment term.
 //!
 //! **What it sees**: dynamics whose effect on the next `h` samples is carried by the past
 //! increment (second-order and lightly damped outputs, an integrator behind a lag, a measured

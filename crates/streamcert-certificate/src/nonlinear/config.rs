@@ -165,9 +165,9 @@ impl NonlinearConfig {
                 format!("must lie in 0..=7 (powers up to y^8), got {}", self.check_terms),
             );
         }
-        // The larger fit: the lack-of-fit terms and, with the hidden-dynamics guard, the
-        // past increment.
-        let e = self.check_features().len() + usize::from(calibration.hidden_dynamics);
+        // The larger fits: the lack-of-fit terms, and (a fit of its own) the hidden-dynamics
+        // test's past increment.
+        let e = self.check_features().len().max(usize::from(calibration.hidden_dynamics));
         // The affine model's intercept is one more unknown (its `τ` an input with gain 0).
         let affine = usize::from(reg.model == streamcert_regression::Model::Affine);
         let d = self.regressors(reg.inputs + affine) + e;
@@ -177,8 +177,8 @@ impl NonlinearConfig {
                 "window",
                 format!(
                     "M = {} is too short for the nonlinear certificate with {} features, its \
-                     larger fit's {e} extra terms ({} lack-of-fit terms, + 1 for the \
-                     hidden-dynamics guard's past increment when on), h = {} and m = {} (+ 1 \
+                     larger fits' {e} extra terms ({} lack-of-fit terms; 1, the past \
+                     increment, for the hidden-dynamics test), h = {} and m = {} (+ 1 \
                      for the affine model's intercept): the smallest valid window is {min} \
                      columns (h · (D + e + m + 2)); or set check_terms = 0 (no check: the \
                      library is then trusted to hold the drift) and [calibration] \

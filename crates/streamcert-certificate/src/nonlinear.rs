@@ -431,32 +431,8 @@ impl NonlinearState {
         let mut misfit = None;
         let (best, contradicted) = standing(&self.latest, margin, |_, look| {
             let window = look.window;
-            let order = order
-                .then(|| {
-                    refused(
-                        look.order,
-                        |t: NonlinearityTest| NotCertified::HiddenDynamics {
-                            window,
-                            statistic: t.statistic,
-                            threshold: t.threshold,
-                        },
-                        NotCertified::OrderUntested { window },
-                    )
-                })
-                .flatten();
-            let library = powers
-                .then(|| {
-                    refused(
-                        look.misfit,
-                        |t: NonlinearityTest| NotCertified::LibraryMisfit {
-                            window,
-                            statistic: t.statistic,
-                            threshold: t.threshold,
-                        },
-                        NotCertified::LibraryUntested { window },
-                    )
-                })
-                .flatten();
+            let order = refused(order, look.order, NotCertified::OrderUntested { window });
+            let library = refused(powers, look.misfit, NotCertified::LibraryUntested { window });
             match order.or(library) {
                 Some(reason) => {
                     misfit.get_or_insert(reason);

@@ -254,18 +254,31 @@ impl LackOfFit {
     }
 }
 
-/// Why a test keeps a look from standing: `significant(t)` where it rejects, `untested` where
-/// it did not run, `None` where it ran and found nothing.
+/// Why a test (run when `on`) keeps a look from standing: `untested`
+/// (`NotCertified::OrderUntested` or `NotCertified::LibraryUntested`) where it did not run,
+/// its rejection (`HiddenDynamics`, `LibraryMisfit`) where it rejects, `None` where it ran and
+/// found nothing or is off.
 pub(super) fn refused(
-    t: Option<NonlinearityTest>,
-    significant: impl FnOnce(NonlinearityTest) -> NotCertified,
+    on: bool,
+    test: Option<NonlinearityTest>,
     untested: NotCertified,
 ) -> Option<NotCertified> {
-    match t {
-        Some(t) if t.significant() => Some(significant(t)),
-        Some(_) => None,
-        None => Some(untested),
-    }
+    let t = match test {
+        _ if !on => return None,
+        None => return Some(untested),
+        Some(t) if !t.significant() => return None,
+        Some(t) => t,
+    };
+    let (statistic, threshold) = (t.statistic, t.threshold);
+    Some(match untested {
+        NotCertified::OrderUntested { window } => {
+            NotCertified::HiddenDynamics { window, statistic, threshold }
+        }
+        NotCertified::LibraryUntested { window } => {
+            NotCertified::LibraryMisfit { window, statistic, threshold }
+        }
+        other => other,
+    })
 }
 
 impl super::NonlinearState {

@@ -88,8 +88,9 @@
 //! common-mode and unequal noise, p = 3, an operating point at `y₀ = 50` and `10⁶`, two
 //! outputs with a hidden state) opened in at most 18 of 2000 runs, with the 95 %
 //! Clopper–Pearson upper bound at most 2δ (the defaults: the affine model, every guard, five
-//! windows at an equal share of `δ`). In the first 1000 of those runs the cell at `M = 50`
-//! opened in 14 (upper bound 0.0234, above 2δ), in the second 1000 in 4; at 1000 runs under
+//! windows at an equal share of `δ`). In the first 1000 of those runs (`--runs 1000` runs
+//! them) the cell at `M = 50` opened in 14 (upper bound 0.0234, above 2δ), in the second
+//! 1000 in 4; at 1000 runs under
 //! the split by length (before) it had opened in 10. With the nominal `B − (p + m)` degrees
 //! of freedom instead of the effective number, the scalar cells opened in 14 to 28 of 1000
 //! (an earlier commit).

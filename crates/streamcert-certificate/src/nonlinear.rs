@@ -167,7 +167,8 @@ pub struct NonlinearLook {
     #[serde(default)]
     pub misfit: Option<NonlinearityTest>,
     /// The hidden-dynamics test (when [`Calibration::hidden_dynamics`] is on and the larger
-    /// fit is ready): the Wald test of the past increment `ΔY_{q−h}` in the larger fit.
+    /// fit is ready): the Wald test of the past increment `ΔY_{q−h}` in its own larger fit
+    /// (the library plus that increment).
     ///
     /// [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
     #[serde(default)]
@@ -395,9 +396,8 @@ impl NonlinearState {
             WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: 1, q: dg - 1, nu, alpha };
         let test = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
         let misfit =
-            self.check.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha).0);
-        let order =
-            self.order.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha).1);
+            self.check.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha));
+        let order = self.order.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha));
         (cert.is_finite() && beta_min.is_finite()).then_some(NonlinearLook {
             window: self.windows.window(w),
             look: k,

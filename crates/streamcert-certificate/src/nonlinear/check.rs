@@ -5,9 +5,9 @@
 //! library plus the output's increment over the `h` samples before the column (`ΔY_{q−h}`,
 //! as the linear certificate's guard, `guard::model`), on the same columns, windows and
 //! looks, and the Wald test of the extra coefficients. Separate fits: where the library
-//! misses the drift the past increment carries the missing terms, and in one fit the
-//! powers' test lost its power (measured: a library missing the cubic band opened falsely in
-//! 55 of 60 runs, against 5 without the past increment in the fit),
+//! misses the drift the past increment carries the missing terms, so in one fit the powers'
+//! test loses its power to it (`tests/all/nonlinear.rs`'s lack-of-fit test runs with the
+//! order test on),
 //!
 //! ```text
 //! W = θ̂_Eᵀ Ω̂_EE⁻¹ θ̂_E   against   ν e/(ν − e + 1) · F_{e, ν−e+1}(1 − α)
@@ -147,9 +147,9 @@ impl LackOfFit {
             z: vec![0.0; d],
             dir: vec![0.0; d],
             cov: vec![0.0; d * d],
-            sub: vec![0.0; e.max(1) * e.max(1)],
-            rhs: vec![0.0; e.max(1)],
-            work: vec![0.0; e.max(1)],
+            sub: vec![0.0; (e + usize::from(order)).pow(2)],
+            rhs: vec![0.0; e + usize::from(order)],
+            work: vec![0.0; e + usize::from(order)],
         })
     }
 
@@ -197,11 +197,10 @@ impl LackOfFit {
         self.windows.push_column(&self.z, dy);
     }
 
-    /// Window `w`'s tests at a look: the lack-of-fit terms' (`None` without powers; jointly
-    /// with the past increment when the fit holds it) and the past increment's alone (`None`
-    /// without the order term), each `None` also when the larger fit is not ready. `dir_main` is the certificate's direction `a(y_mid)` (library
-    /// slopes, then `K`), extended by zeros for the extra terms (it only weighs the blocks for
-    /// `ν`).
+    /// Window `w`'s test at a look: the Wald test of every extra term of this fit (the powers,
+    /// or the past increment; `None` when the larger fit is not ready). `dir_main` is the
+    /// certificate's direction `a(y_mid)` (library slopes, then `K`), extended by zeros for
+    /// the extra terms (it only weighs the blocks for `ν`).
     pub(super) fn test(
         &mut self,
         w: usize,
@@ -209,7 +208,7 @@ impl LackOfFit {
         ridge: f64,
         min_pivot: f64,
         alpha: f64,
-    ) -> (Option<NonlinearityTest>, Option<NonlinearityTest>) {
+    ) -> Option<NonlinearityTest> {
         let (dg, e, o) = (self.features, self.powers.len(), usize::from(self.order));
         let d = self.z.len();
         self.dir[..dg].copy_from_slice(&dir_main[..dg]);
@@ -218,16 +217,13 @@ impl LackOfFit {
         self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
         if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
         {
-            return (None, None);
+            return None;
         }
         let blocks = (self.est.columns / self.horizon) as f64;
         let nu = self.est.effective_blocks.min(blocks) - d as f64;
-        let theta = &self.est.theta[..d];
-        let at = WaldAt { theta, cov: &self.cov, first: dg, q: e, nu, alpha };
-        let misfit = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
-        let at = WaldAt { theta, cov: &self.cov, first: dg + e, q: o, nu, alpha };
-        let order = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
-        (misfit, order)
+        let at =
+            WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: dg, q: e + o, nu, alpha };
+        wald(&at, &mut self.sub, &mut self.rhs, &mut self.work)
     }
 
     /// Whether a deserialised check matches a fresh one.

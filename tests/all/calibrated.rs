@@ -126,8 +126,11 @@ fn instrumented_windows_equal_a_batch_recompute_at_every_column() {
 /// with `ν` the Welch–Satterthwaite effective number of blocks less `d`.
 #[test]
 fn every_look_matches_its_formula_for_two_outputs() {
-    every_look_matches_its_formula(1, Model::Affine);
-    every_look_matches_its_formula(1, Model::ThroughOrigin);
+    every_look_matches_its_formula(1, Model::Affine, 0.2);
+    every_look_matches_its_formula(1, Model::ThroughOrigin, 0.2);
+    // The batched radius at 95 % of the look's risk: it stands at some looks, so that its own
+    // formula is checked too.
+    every_look_matches_its_formula(1, Model::Affine, 0.95);
 }
 
 /// As above with batches of four blocks (`batch_blocks = 4`): the block sums are summed over
@@ -136,13 +139,13 @@ fn every_look_matches_its_formula_for_two_outputs() {
 /// `c_{2,h}/c_{4,h}`, `B` the number of batches, and the effective number over batch weights.
 #[test]
 fn every_look_matches_its_formula_with_batches_of_blocks() {
-    every_look_matches_its_formula(4, Model::Affine);
-    every_look_matches_its_formula(4, Model::ThroughOrigin);
+    every_look_matches_its_formula(4, Model::Affine, 0.2);
+    every_look_matches_its_formula(4, Model::ThroughOrigin, 0.2);
 }
 
 /// The affine model's windows regress on `[∫y; ∫u; τ]` (`τ` the column's span, instrumented by
 /// the instrument intervals' own spans, its row of `T` zero): `d = 5` unknowns per output.
-fn every_look_matches_its_formula(batch: usize, model: Model) {
+fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
     let affine = model == Model::Affine;
     let dd = 4 + usize::from(affine);
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
@@ -161,13 +164,14 @@ fn every_look_matches_its_formula(batch: usize, model: Model) {
         windows: Some(2),
         instrument_intervals: 3,
         batch_blocks: batch,
+        auto_batch_risk: auto_share,
         ..Calibration::new(0.01)
     });
     let traj = run_scenario(&scenario, 8);
     let mut cert = Certifier::new(cfg).expect("valid");
     let mut cols: Vec<(nalgebra::DVector<f64>, nalgebra::DVector<f64>)> = Vec::new();
     let mut last = [None, None];
-    let mut checked = 0;
+    let (mut checked, mut batched) = (0, 0);
     let t_mat = nalgebra::DMatrix::from_fn(dd, 2, |r, c| match r {
         0 | 1 => f64::from(u8::from(r == c)),
         2 | 3 => gain[(r - 2) * 2 + c],
@@ -216,52 +220,65 @@ fn every_look_matches_its_formula(batch: usize, model: Model) {
                 .expect("invertible");
             let theta = &cw * &q * &ainv;
             let x = &q * &ainv * &t_mat;
-            let blocks = n / H;
-            let batches = blocks.div_ceil(batch);
-            let c = |b: usize| {
-                let b = b as f64;
-                3.0 * b * 25.0 / (3.0 * b * 25.0 - 25.0 + 1.0)
-            };
-            let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
-            let mut weights = Vec::new();
-            // Batch k covers blocks [starts[k], starts[k + 1]), oldest first; the oldest holds
-            // the remainder.
-            let rem = blocks % batch;
-            let mut starts = vec![0];
-            starts.extend((if rem == 0 { batch } else { rem }..=blocks).step_by(batch));
-            for k in 0..batches {
-                let (b0, b1) = (starts[k], starts[k + 1]);
-                let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
-                let mut weight = 0.0;
-                for j in b0 * H..b1 * H {
-                    let (z, dy) = &window[j];
-                    let r = dy - &theta * z;
-                    let g = x.transpose() * inst(j);
-                    weight += g.norm_squared();
-                    let u = &r * g.transpose();
-                    sum += (&u + u.transpose()) * 0.5;
+            // The radius from the variance in batches of `batch` blocks at risk `risk`.
+            let radius_in = |batch: usize, risk: f64| {
+                let blocks = n / H;
+                let batches = blocks.div_ceil(batch);
+                let c = |b: usize| {
+                    let b = b as f64;
+                    3.0 * b * 25.0 / (3.0 * b * 25.0 - 25.0 + 1.0)
+                };
+                let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
+                let mut weights = Vec::new();
+                // Batch k covers blocks [starts[k], starts[k + 1]), oldest first; the oldest holds
+                // the remainder.
+                let rem = blocks % batch;
+                let mut starts = vec![0];
+                starts.extend((if rem == 0 { batch } else { rem }..=blocks).step_by(batch));
+                for k in 0..batches {
+                    let (b0, b1) = (starts[k], starts[k + 1]);
+                    let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
+                    let mut weight = 0.0;
+                    for j in b0 * H..b1 * H {
+                        let (z, dy) = &window[j];
+                        let r = dy - &theta * z;
+                        let g = x.transpose() * inst(j);
+                        weight += g.norm_squared();
+                        let u = &r * g.transpose();
+                        sum += (&u + u.transpose()) * 0.5;
+                    }
+                    let v = nalgebra::DVector::from_column_slice(sum.as_slice());
+                    omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
+                    weights.push(weight);
                 }
-                let v = nalgebra::DVector::from_column_slice(sum.as_slice());
-                omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
-                weights.push(weight);
-            }
-            assert_eq!(starts.len(), batches + 1);
-            assert_eq!(*starts.last().expect("batches"), blocks);
-            // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
-            let ess =
-                weights.iter().sum::<f64>().powi(2) / weights.iter().map(|w| w * w).sum::<f64>();
-            omega *= c(batch) * batches as f64 / (batches - dd) as f64;
+                assert_eq!(starts.len(), batches + 1);
+                assert_eq!(*starts.last().expect("batches"), blocks);
+                // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
+                let ess = weights.iter().sum::<f64>().powi(2)
+                    / weights.iter().map(|w| w * w).sum::<f64>();
+                omega *= c(batch) * batches as f64 / (batches - dd) as f64;
+                let nu = ess.min(batches as f64) - dd as f64;
+                let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
+                // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.
+                let lambda = omega.clone().symmetric_eigen().eigenvalues.max();
+                let grid = streamcert::certificate::rank_one_variance_bound(omega.as_slice());
+                t * lambda.min(grid).sqrt()
+            };
             let j = &theta * &t_mat;
             let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
-            let nu = ess.min(batches as f64) - dd as f64;
-            // Two windows: an equal share of δ each.
-            let share = 0.5;
-            let risk = look_risk(0.01, share, look.look);
-            let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
-            // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.
-            let lambda = omega.clone().symmetric_eigen().eigenvalues.max();
-            let grid = streamcert::certificate::rank_one_variance_bound(omega.as_slice());
-            let radius = t * lambda.min(grid).sqrt();
+            // Two windows: an equal share of δ each. In batches of one block, the window of
+            // 60 blocks also takes the automatic batches (⌊60 / 30⌋ = 2 blocks, 30 batches)
+            // at its share of the risk (default a fifth), the smaller radius standing; the
+            // window of 30 blocks (⌊30 / 30⌋ = 1) does not.
+            let risk = look_risk(0.01, 0.5, look.look);
+            let radius = if batch == 1 && w == 1 {
+                let first = radius_in(1, risk * (1.0 - auto_share));
+                let second = radius_in(2, risk * auto_share);
+                batched += usize::from(second < first);
+                first.min(second)
+            } else {
+                radius_in(batch, risk)
+            };
             assert!((look.beta_hat - beta).abs() < 1e-7 * (1.0 + beta.abs()), "{look:?} vs {beta}");
             assert!((look.radius - radius).abs() < 1e-7 * radius, "{look:?} vs {radius}");
             checked += 1;
@@ -271,6 +288,12 @@ fn every_look_matches_its_formula(batch: usize, model: Model) {
     // in the short window, `ν = min(ESS, 8) − d` is not positive at some looks, which then
     // give no certificate (and nothing to check).
     assert!(checked >= if batch == 1 { 25 } else { 5 }, "checked {checked} looks");
+    if auto_share > 0.9 {
+        // Measured: 4 of the 26 looks (of about 9 of the longer window; 30 batches against
+        // 60 blocks cost the batched radius degrees of freedom where no sensor noise pays
+        // for them).
+        assert!(batched >= 3, "the batched radius stood at {batched} of {checked} looks");
+    }
 }
 
 #[test]

@@ -44,7 +44,7 @@ fn the_risk_split_across_windows() {
     for (split, share) in [(RiskSplit::Equal, 0.2), (RiskSplit::ByLength, 150.0 / 4650.0)] {
         let mut cfg = calibrated(1, vec![-1.0], 150, 10);
         cfg.calibration =
-            cfg.calibration.map(|c| Calibration { risk_split: split, auto_batch: 0, ..c });
+            cfg.calibration.map(|c| Calibration { risk_split: split, auto_batches: 0, ..c });
         let mut c = Certifier::new(cfg).unwrap();
         let mut checked = false;
         for i in 0..traj.len() {
@@ -164,11 +164,12 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
     }
 }
 
-/// The automatic batches (`auto_batch`, default 8): on the windows with more than `2d`
-/// batches of 8 blocks, the look's radius is the smaller of the radius in batches of one
-/// block at `1 − auto_batch_risk` of the look's risk and the one in batches of 8 at
-/// `auto_batch_risk` (the union bound; default 0.2, and 0.5 here too); the windows too short
-/// for it keep the radius at the whole risk, bit for bit. Under sensor noise (which batches
+/// The automatic batches (`auto_batches`, default 30): window `w` of `B_w` blocks takes
+/// batches of `⌊B_w / max(30, 2d + 1)⌋` blocks (1, 2, 4, 8, 16 for the default windows from
+/// `M = 150`), and where that is at least 2 the look's radius is the smaller of the radius in
+/// batches of one block at `1 − auto_batch_risk` of the look's risk and the batched one at
+/// `auto_batch_risk` (the union bound; default 0.2, and 0.5 here too); the window too short
+/// for it keeps the radius at the whole risk, bit for bit. Under sensor noise (which batches
 /// of one block overstate) the batched radius is the one that stands at some looks.
 #[test]
 fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
@@ -182,13 +183,13 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
     let auto = calibrated(1, vec![-0.54], 150, 10);
     assert_eq!(auto.calibration.map(|c| c.auto_batch_risk), Some(0.2));
     let mut off = auto.clone();
-    off.calibration = off.calibration.map(|c| Calibration { auto_batch: 0, ..c });
+    off.calibration = off.calibration.map(|c| Calibration { auto_batches: 0, ..c });
     // The default five windows (150 to 2400 columns), an equal share of δ each.
     let windows = 5.0;
     for share in [0.2, 0.5] {
         let mut cfg = auto.clone();
         cfg.calibration = cfg.calibration.map(|c| Calibration { auto_batch_risk: share, ..c });
-        let mut batched_won = 0;
+        let (mut batched_won, mut compared) = (0, 0);
         for seed in 0..4 {
             let traj = crate::support::run(&scenario, 31_000 + seed);
             let (mut a, mut b) =
@@ -201,20 +202,30 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
                 let (Some(la), Some(lb)) = (la, lb) else { continue };
                 assert_eq!((la.look, la.beta_hat.to_bits()), (lb.look, lb.beta_hat.to_bits()));
                 if w == 0 {
-                    // 30 blocks: 4 batches of 8, not more than 2d = 6: no second radius.
+                    // 30 blocks: batches of ⌊30 / 30⌋ = 1 block: no second radius.
                     assert_eq!(la.radius.to_bits(), lb.radius.to_bits());
                     continue;
                 }
                 let risk = look_risk(0.01, 1.0 / windows, la.look) * (1.0 - share);
                 let first = calibrated_radius(lb.sd * lb.sd, lb.nu, risk);
                 assert!(la.radius <= first * (1.0 + 1e-12), "window {w}: {} > {first}", la.radius);
-                batched_won += usize::from(la.radius < first * (1.0 - 1e-9));
+                if la.radius < first * (1.0 - 1e-9) {
+                    // The batched radius stood: at its share of the risk, from 30 batches
+                    // (ν at most 30 − d = 27; 57 and more in batches of one block).
+                    batched_won += 1;
+                    let batched = look_risk(0.01, 1.0 / windows, la.look) * share;
+                    let expected = calibrated_radius(la.sd * la.sd, la.nu, batched);
+                    assert!((la.radius - expected).abs() <= 1e-12 * expected, "window {w}");
+                    assert!(la.nu <= 27.0 && la.nu < lb.nu, "window {w}: ν {} / {}", la.nu, lb.nu);
+                }
+                compared += 1;
             }
         }
-        // Measured: 3 (share 0.2) and 4 (0.5) of these 12 looks (the shorter long windows
-        // hold few batches of 8, whose t quantile at few degrees of freedom outweighs the
-        // tighter spread).
-        assert!(batched_won >= 2, "{share}: the batched radius stood at {batched_won} of 12");
+        assert_eq!(compared, 16, "four runs, the four longer windows");
+        // Measured: 6 (share 0.2) and 8 (0.5) of these 16 looks (3 and 4 with
+        // batches of a fixed 8 blocks, whose t quantile on the shorter long windows' few
+        // batches outweighed the tighter spread).
+        assert!(batched_won >= 4, "{share}: the batched radius stood at {batched_won} of 16");
     }
     for bad in [0.0, 1.0, f64::NAN] {
         let mut cfg = auto.clone();
@@ -222,11 +233,19 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
         let err = Certifier::new(cfg).unwrap_err().to_string();
         assert!(err.contains("auto_batch_risk") && err.contains("(0, 1)"), "{err}");
     }
+    // The blocks per batch, by the rule: about 30 batches, at least 2d + 1.
+    let cal = Calibration::new(0.01);
+    let rule: Vec<usize> = [30, 59, 60, 480, 481].map(|b| cal.auto_batch_blocks(b, 3)).into();
+    assert_eq!(rule, [1, 1, 2, 16, 16]);
+    // d = 21 (p = m = 10 with the intercept): 43 batches.
+    assert_eq!((cal.auto_batch_blocks(85, 21), cal.auto_batch_blocks(86, 21)), (1, 2));
+    let off = Calibration { auto_batches: 0, ..cal };
+    assert_eq!(off.auto_batch_blocks(480, 3), 0);
     // Refused values, with what is valid.
-    for bad in [1, 65] {
+    for bad in [1, 7] {
         let mut cfg = auto.clone();
-        cfg.calibration = cfg.calibration.map(|c| Calibration { auto_batch: bad, ..c });
+        cfg.calibration = cfg.calibration.map(|c| Calibration { auto_batches: bad, ..c });
         let err = Certifier::new(cfg).unwrap_err().to_string();
-        assert!(err.contains("auto_batch") && err.contains("2..=64"), "{err}");
+        assert!(err.contains("auto_batches") && err.contains("at least 8"), "{err}");
     }
 }

@@ -88,9 +88,10 @@
 //! common-mode and unequal noise, p = 3, an operating point at `y₀ = 50` and `10⁶`, two
 //! outputs with a hidden state) opened in at most 18 of 2000 runs, with the 95 %
 //! Clopper–Pearson upper bound at most 2δ (the defaults: the affine model, every guard, five
-//! windows at an equal share of `δ`). In the first 1000 of those runs (`--runs 1000` runs
-//! them) the cell at `M = 50` opened in 14 (upper bound 0.0234, above 2δ), in the second
-//! 1000 in 4; at 1000 runs under
+//! windows at an equal share of `δ`). With the automatic batches of a fixed 8 blocks before,
+//! in the first 1000 of those runs (`--runs 1000` runs them) the cell at `M = 50` opened in
+//! 14 (upper bound 0.0234, above 2δ), in the second 1000 in 4 (17 of 2000 with about 30
+//! batches per window); at 1000 runs under
 //! the split by length (before) it had opened in 10. With the nominal `B − (p + m)` degrees
 //! of freedom instead of the effective number, the scalar cells opened in 14 to 28 of 1000
 //! (an earlier commit).
@@ -102,7 +103,7 @@
 //! one-look `z`) and the spread factor `sd used / sd(β̂)`: 0.86 to 0.99 in the scalar cells
 //! without sensor noise (the just-identified estimate's spread across runs exceeds its
 //! batch-means sd, its tails being heavier than the normal; the spending covers it, every
-//! cell stays within 2δ), 1.20 to 1.86 for `p >= 2`, 1.05 (near the margin) and 1.52 (the
+//! cell stays within 2δ), 1.20 to 1.86 for `p >= 2`, 1.01 (near the margin) and 1.29 (the
 //! power cell) under sensor noise with the automatic batches. With the spending near 1.5
 //! alone, a ratio of at most 1.6 needs a spread factor of about 1. Measured with
 //! `cargo xtask validity --runs 1000` on variants of this module (none kept):
@@ -118,18 +119,25 @@
 //!   sphere, the smaller of it and the present radius at half the risk each): 2.23, 1.90,
 //!   3.20 and 2.11 (common-mode, unequal, `p = 3`, the `p = 2` power cell) against 2.37,
 //!   1.86, 3.04 and 2.23; `c` exceeds `t` by about what the direction saves.
-//! * Sensor noise, chosen automatically ([`Calibration::auto_batch`], the default): beside
-//!   the covariance in batches of one block, every window with more than `2d` batches of 8
-//!   blocks computes it in batches of 8 at the same look; the batched radius at
-//!   [`Calibration::auto_batch_risk`] of the look's risk (default a fifth), the first at the
-//!   rest, the smaller standing (the union bound keeps the look's risk). At half each, the
-//!   scalar power cell at 20× the margin certified at a median 3.94 s (VALIDITY.md at
-//!   f06157c, `cargo xtask validity --runs 1000`); at a fifth at 3.19 s, as without the
-//!   second radius. Measured in
-//!   VALIDITY.md with the default configuration. Batches of 16 were measured too (200 runs):
-//!   the power cell's spread factor fell to 1.33 (from 1.60 at 8) but the near-margin sensor
-//!   cell's rose to 1.47 (from 0.99): with fewer degrees of freedom the batched radius wins
-//!   less often, and then the spread used is the unbatched one.
+//! * Sensor noise, chosen automatically ([`Calibration::auto_batches`], the default): beside
+//!   the covariance in batches of one block, every window of `B_w` blocks computes it in
+//!   about 30 batches at the same look (`b_w = ⌊B_w / max(30, 2d + 1)⌋` blocks each, where
+//!   `b_w >= 2`: 2, 4, 8, 16 for the four longer default windows from `M = 150`); the batched
+//!   radius at [`Calibration::auto_batch_risk`] of the look's risk (default a fifth), the
+//!   first at the rest, the smaller standing (the union bound keeps the look's risk). At half
+//!   each, the scalar power cell at 20× the margin certified at a median 3.94 s (VALIDITY.md
+//!   at f06157c, `cargo xtask validity --runs 1000`); at a fifth at 3.19 s, as without the
+//!   second radius. A fixed number of batches rather than a fixed size: sensor noise
+//!   telescopes across blocks, so batches of `b` overstate the spread by about `√(1 + c/b)`
+//!   (`c ≈ 10` on the sensor power cell), and the longest windows, which decide the late
+//!   looks, get the largest batches while every window keeps about 27 degrees of freedom.
+//!   On the sensor power cell (100 runs each, power cells only): batches of a fixed 8
+//!   blocks (the rule before) spread factor 1.45, median first opening 6.19 s; about 20, 30
+//!   and 40 batches per window 1.11, 1.24 and 1.32 at 3.19, 3.19 and 6.19 s, the efficiency
+//!   ratio `ρ / (z·sd)` 2.57, 2.52 and 2.56 (2.69 before): 30 is the default. Every other
+//!   power cell measured the same under the four rules. In VALIDITY.md (400 runs) the power
+//!   cell went from 1.52 and 4.69 s to 1.29 and 3.19 s, the near-margin sensor cell's spread
+//!   factor from 1.05 to 1.01, with 0 of 2000 false openings under both.
 //! * Sensor noise: batches of `b` blocks ([`Calibration::batch_blocks`], kept as an option):
 //!   in VALIDITY.md the sensor cell's spread factor falls from 1.78 to 1.23 and 1.07 for
 //!   `b = 4, 8` and the power cell's from 3.92 to 2.06 and 1.42, but the spending rises (1.78

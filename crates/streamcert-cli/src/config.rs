@@ -91,8 +91,8 @@ delta = 0.01            # the risk of a false deployment over the whole run
 # instrument_lag = 1     # samples between the instrument's interval and the column's
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
 # batch_blocks = 1       # blocks of h per batch of the variance (4 or 8 with sensor noise)
-# auto_batch = 8         # beside it, on windows long enough, the variance in batches of 8
-                         # blocks, the smaller radius standing: sensor noise needs batches,
+# auto_batches = 30      # beside it, on windows long enough, the variance in about 30
+                         # batches, the smaller radius standing: sensor noise needs batches,
                          # and the user need not know it (0: off)
 # auto_batch_risk = 0.2  # the share of the risk the batched radius spends (the first radius
                          # the rest: quick on process noise, which is the common case)
@@ -208,7 +208,7 @@ struct CalibrationSection {
     #[serde(default)]
     batch_blocks: Option<usize>,
     #[serde(default)]
-    auto_batch: Option<usize>,
+    auto_batches: Option<usize>,
     #[serde(default)]
     auto_batch_risk: Option<f64>,
     #[serde(default)]
@@ -244,7 +244,7 @@ impl Default for CalibrationSection {
             instrument_lag: None,
             instrument_intervals: None,
             batch_blocks: None,
-            auto_batch: None,
+            auto_batches: None,
             auto_batch_risk: None,
             hidden_dynamics: None,
             nonlinearity: None,
@@ -267,7 +267,7 @@ impl CalibrationSection {
             instrument_lag: self.instrument_lag.unwrap_or(d.instrument_lag),
             instrument_intervals: self.instrument_intervals.unwrap_or(d.instrument_intervals),
             batch_blocks: self.batch_blocks.unwrap_or(d.batch_blocks),
-            auto_batch: self.auto_batch.unwrap_or(d.auto_batch),
+            auto_batches: self.auto_batches.unwrap_or(d.auto_batches),
             auto_batch_risk: self.auto_batch_risk.unwrap_or(d.auto_batch_risk),
             hidden_dynamics: self.hidden_dynamics.unwrap_or(d.hidden_dynamics),
             nonlinearity: self.nonlinearity.unwrap_or(d.nonlinearity),

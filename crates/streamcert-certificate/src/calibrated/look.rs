@@ -44,7 +44,7 @@ impl CalibratedState {
             let look = CouplingLook { w, k, t, share: self.shares[w], nu, window };
             c.look(&look, &self.windows, &mut self.est, p);
         }
-        // The second covariance (batches of `auto_batch` blocks) on the windows long enough
+        // The second covariance (about `auto_batches` batches) on the windows long enough
         // for it: the second radius at `auto_batch_risk` of the risk, the first at the rest,
         // the smaller standing.
         let (mut variance, mut nu) = (variance, nu);
@@ -86,18 +86,19 @@ impl CalibratedState {
         });
     }
 
-    /// Whether window `w` carries the second covariance ([`Calibration::auto_batch`]): on,
-    /// the first covariance in batches of one block, and more than `2d` batches of the
-    /// window's blocks (`d` regressors). Fixed by the window's length, so the risk split is
-    /// decided before any data.
-    ///
-    /// [`Calibration::auto_batch`]: crate::Calibration::auto_batch
-    pub(super) fn auto_applies(&self, w: usize) -> bool {
-        let b = self.cal.auto_batch;
+    /// Blocks per batch of window `w`'s second covariance
+    /// ([`Calibration::auto_batch_blocks`](crate::Calibration::auto_batch_blocks)).
+    pub(super) fn auto_blocks(&self, w: usize) -> usize {
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
-        let blocks = self.windows.window(w) / self.horizon;
-        b > 1 && self.cal.batch_blocks == 1 && blocks.div_ceil(b) > 2 * d
+        self.cal.auto_batch_blocks(self.windows.window(w) / self.horizon, d)
+    }
+
+    /// Whether window `w` carries the second covariance: on, the first covariance in batches
+    /// of one block, and at least two blocks per batch (then at least `2d + 1` batches).
+    /// Fixed by the window's length, so the risk split is decided before any data.
+    pub(super) fn auto_applies(&self, w: usize) -> bool {
+        self.cal.batch_blocks == 1 && self.auto_blocks(w) >= 2
     }
 
     /// Window `w`'s estimate with the second covariance, when it applies and is ready.
@@ -105,7 +106,7 @@ impl CalibratedState {
         if !self.auto_applies(w) {
             return None;
         }
-        self.windows.set_batch(self.cal.auto_batch);
+        self.windows.set_batch(self.auto_blocks(w));
         let r = self.rate(w, 0);
         self.windows.set_batch(self.cal.batch_blocks);
         r

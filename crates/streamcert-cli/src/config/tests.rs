@@ -141,6 +141,14 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     let share = DEFAULT_CONFIG.replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");
     let c = parse(&share, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.auto_batch_risk, 0.5);
+    // The automatic batches: about 30 per window unless stated; 0 turns them off; the key
+    // of the fixed-size rule before (`auto_batch`) is refused, not silently ignored.
+    assert_eq!(cal.auto_batches, 30);
+    let off = DEFAULT_CONFIG.replace("# auto_batches = 30 ", "auto_batches = 0 ");
+    assert_eq!(parse(&off, "x").unwrap().certifier.calibration.unwrap().auto_batches, 0);
+    let old = DEFAULT_CONFIG.replace("# auto_batches = 30 ", "auto_batch = 8 ");
+    let err = parse(&old, "x").unwrap_err().to_string();
+    assert!(err.contains("unknown field `auto_batch`"), "{err}");
     let paper = DEFAULT_CONFIG.replace("enabled = true\ndelta", "enabled = false\ndelta");
     assert_eq!(parse(&paper, "x").unwrap().certifier.calibration, None);
 }

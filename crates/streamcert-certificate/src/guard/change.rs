@@ -60,8 +60,9 @@
 //! of window `v` costs `O(B_v (k d + p²) + k³)`, twice per due block (its newest columns
 //! and its older part; window `v − 1`'s newest is the one taken at the same block), so about
 //! `3 B_0 / P_0 ≈ 24` block passes per block per window, `O(W (k d + p²))` per sample
-//! amortised, no allocation (for four windows 75 block passes per block; 165
-//! with every window at the shortest window's pace, 217 before the phases were aligned).
+//! amortised, no allocation (for the default five windows about 98 block passes per block;
+//! for four 75, 165 with every window at the shortest window's pace and 217 before the
+//! phases were aligned).
 //! This is still the largest part of the default step's cost (BENCHMARKS.md); a split
 //! statistic kept up to date per block instead of recomputed is the open way to cheaper.
 //! Pace and closing delay, measured (`cargo xtask validity --only-change 200`, dt = 0.01,

@@ -137,7 +137,11 @@
 //!   ratio `ρ / (z·sd)` 2.57, 2.52 and 2.56 (2.69 before): 30 is the default. Every other
 //!   power cell measured the same under the four rules. In VALIDITY.md (400 runs) the power
 //!   cell went from 1.52 and 4.69 s to 1.29 and 3.19 s, the near-margin sensor cell's spread
-//!   factor from 1.05 to 1.01, with 0 of 2000 false openings under both.
+//!   factor from 1.05 to 1.01, with 0 of 2000 false openings under both. (Batches of a
+//!   fixed 16 blocks, measured at an earlier commit on four windows, left the longest window
+//!   15 batches: the power cell's spread factor 1.33 but the near-margin sensor cell's 1.47,
+//!   the batched radius losing to its Student-t quantile: a count keeps the degrees of
+//!   freedom.)
 //! * Sensor noise: batches of `b` blocks ([`Calibration::batch_blocks`], kept as an option):
 //!   in VALIDITY.md the sensor cell's spread factor falls from 1.78 to 1.23 and 1.07 for
 //!   `b = 4, 8` and the power cell's from 3.92 to 2.06 and 1.42, but the spending rises (1.78

@@ -11,6 +11,7 @@ use streamcert::regression::{
     SlidingRegression,
 };
 
+mod coefficients;
 mod estimators;
 mod side_by_side;
 mod window_range;

@@ -374,9 +374,8 @@ impl NonlinearState {
             *a = f.slope(mid);
         }
         self.dir[dg..d].copy_from_slice(&self.gain);
-        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
-        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
-        {
+        let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
+        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
             return None;
         }
         let blocks = (self.est.columns / self.horizon) as f64;

@@ -90,7 +90,8 @@ delta = 0.01            # the risk of a false deployment over the whole run
 # look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
 # instrument_lag = 1     # samples between the instrument's interval and the column's
 # instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
-# batch_blocks = 1       # blocks of h per batch of the variance (4 or 8 with sensor noise)
+# batch_blocks = 1       # blocks of h per batch of the first variance (1: every block is
+                         # one; the automatic batches below take care of sensor noise)
 # auto_batches = 30      # beside it, on windows long enough, the variance in about 30
                          # batches, the smaller radius standing: sensor noise needs batches,
                          # and the user need not know it (0: off)

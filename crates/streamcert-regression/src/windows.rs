@@ -39,6 +39,7 @@
 use serde::{Deserialize, Serialize};
 
 mod batch;
+mod coefficients;
 mod estimate;
 mod region;
 

@@ -12,8 +12,10 @@ use streamcert_regression::linalg;
 
 impl CalibratedState {
     /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies; the
-    /// nonlinear certificate looks at the same window with the same risk.
-    pub(super) fn look(&mut self, w: usize, t: f64, margin: f64) {
+    /// nonlinear certificate looks at the same window with the same risk. Returns the
+    /// window's estimate [`rate`](Self::rate)`(w, 0)` (the change guard's fresh estimate of
+    /// the same block, so that it is not computed twice).
+    pub(super) fn look(&mut self, w: usize, t: f64, margin: f64) -> Option<(f64, f64, f64)> {
         self.looks[w] += 1;
         self.look_cols[w] = self.seen;
         let k = self.looks[w];
@@ -27,14 +29,15 @@ impl CalibratedState {
             o.look(w, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
-        let Some((beta_hat, variance, nu)) = self.rate(w, 0) else {
+        let rate = self.rate(w, 0);
+        let Some((beta_hat, variance, nu)) = rate else {
             self.latest[w] = None;
             if let Some(c) = &mut self.coupling {
                 let window = self.windows.window(w);
                 let look = CouplingLook { w, k, t, share: self.shares[w], nu: 0.0, window };
                 c.look(&look, &self.windows, &mut self.est, p);
             }
-            return;
+            return None;
         };
         let risk = look_risk(self.cal.delta, self.shares[w], k);
         let pp = self.col_range.len();
@@ -47,17 +50,20 @@ impl CalibratedState {
         // The second covariance (about `auto_batches` batches) on the windows long enough
         // for it: the second radius at `auto_batch_risk` of the risk, the first at the rest,
         // the smaller standing.
+        // The upper bound (at the whole `δ`, for a rate below the margin only) is computed
+        // where it is reported.
         let (mut variance, mut nu) = (variance, nu);
-        let second = self.cal.auto_batch_risk;
+        let (second, delta, below) = (self.cal.auto_batch_risk, self.cal.delta, beta_hat < margin);
         let mut radius;
         let upper_radius;
         match self.auto_rate(w) {
             Some((_, v2, nu2)) => {
                 radius = calibrated_radius(variance, nu, risk * (1.0 - second));
                 let r2 = calibrated_radius(v2, nu2, risk * second);
-                let delta = self.cal.delta;
-                upper_radius = calibrated_radius(variance, nu, delta * (1.0 - second))
-                    .min(calibrated_radius(v2, nu2, delta * second));
+                upper_radius = below.then(|| {
+                    calibrated_radius(variance, nu, delta * (1.0 - second))
+                        .min(calibrated_radius(v2, nu2, delta * second))
+                });
                 if r2 < radius {
                     (radius, variance, nu) = (r2, v2, nu2);
                 }
@@ -66,14 +72,15 @@ impl CalibratedState {
                 // Not ready with batches (cannot happen on a full window): the first radius
                 // at the share of the risk it was given.
                 radius = calibrated_radius(variance, nu, risk * (1.0 - second));
-                upper_radius = calibrated_radius(variance, nu, self.cal.delta * (1.0 - second));
+                upper_radius =
+                    below.then(|| calibrated_radius(variance, nu, delta * (1.0 - second)));
             }
             None => {
                 radius = calibrated_radius(variance, nu, risk);
-                upper_radius = calibrated_radius(variance, nu, self.cal.delta);
+                upper_radius = below.then(|| calibrated_radius(variance, nu, delta));
             }
         }
-        let upper = (beta_hat < margin).then_some(beta_hat + upper_radius);
+        let upper = upper_radius.map(|r| beta_hat + r);
         self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
             window: self.windows.window(w),
             look: k,
@@ -84,6 +91,7 @@ impl CalibratedState {
             nu,
             upper,
         });
+        rate
     }
 
     /// Blocks per batch of window `w`'s second covariance

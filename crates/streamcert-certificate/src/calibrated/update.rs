@@ -62,14 +62,15 @@ impl CalibratedState {
             // block: recompute it, so that it is the same whether or not the state was
             // restored from a checkpoint in between (a restore recomputes it).
             looked |= block_done && !self.windows.is_full(0);
-            // The windows that look at this block (at most 16).
+            // The windows that look at this block (at most 16), and their estimates.
             let mut looking = 0u32;
+            let mut rates = [None; 16];
             for w in 0..self.latest.len() {
                 if !block_done || !self.windows.is_full(w) {
                     continue;
                 }
                 if self.until_look[w] == 0 {
-                    self.look(w, t, margin);
+                    rates[w] = self.look(w, t, margin);
                     looked = true;
                     looking |= 1 << w;
                     let blocks = (self.windows.window(w) / self.horizon) as f64;
@@ -92,8 +93,13 @@ impl CalibratedState {
                         .change
                         .as_ref()
                         .is_some_and(|c| c.due(v, block) | (looking >> v & 1 == 1));
+                // A window's estimate on its newest blocks: its look's, where it looked at
+                // this block (the same numbers), else computed.
+                let newest_rate = |s: &mut Self, v: usize| {
+                    if looking >> v & 1 == 1 { rates[v] } else { s.rate(v, 0) }
+                };
                 if due {
-                    let newest = self.rate(v, 0).map(fresh);
+                    let newest = newest_rate(self, v).map(fresh);
                     // The split's two parts at the same block: the older part of window v
                     // and window v − 1's estimate now (taken above when it was due too).
                     let (older, newer) = if v == 0 {
@@ -103,7 +109,7 @@ impl CalibratedState {
                         let newer = if taken >> (v - 1) & 1 == 1 {
                             None
                         } else {
-                            Some(self.rate(v - 1, 0).map(fresh))
+                            Some(newest_rate(self, v - 1).map(fresh))
                         };
                         (self.rate(v, skip).map(fresh), newer)
                     };

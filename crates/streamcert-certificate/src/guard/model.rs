@@ -239,9 +239,8 @@ impl ModelGuard {
         // what makes that test anti-conservative.)
         self.dir.fill(0.0);
         self.dir[d * p..].fill(1.0);
-        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
-        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
-        {
+        let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
+        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
             return;
         }
         let nu = self.est.effective_blocks.min(self.est.batches as f64) - dd as f64;

@@ -214,9 +214,8 @@ impl LackOfFit {
         self.dir[..dg].copy_from_slice(&dir_main[..dg]);
         self.dir[dg..dg + e + o].fill(0.0);
         self.dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
-        self.windows.estimate(w, ridge, &self.dir, min_pivot, &mut self.est);
-        if !self.est.ready || !self.windows.coefficient_covariance(w, &mut self.est, &mut self.cov)
-        {
+        let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
+        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
             return None;
         }
         let blocks = (self.est.columns / self.horizon) as f64;

@@ -33,20 +33,20 @@ pub struct WindowEstimate {
     pub batches: usize,
     // Scratch: Cholesky factor of H + λI, Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
     // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
-    hfac: Vec<f64>,
-    q: Vec<f64>,
-    lu: Vec<f64>,
-    piv: Vec<usize>,
-    x: Vec<f64>,
-    row: Vec<f64>,
-    block: Vec<f64>,
-    sums: Vec<f64>,
+    pub(super) hfac: Vec<f64>,
+    pub(super) q: Vec<f64>,
+    pub(super) lu: Vec<f64>,
+    pub(super) piv: Vec<usize>,
+    pub(super) x: Vec<f64>,
+    pub(super) row: Vec<f64>,
+    pub(super) block: Vec<f64>,
+    pub(super) sums: Vec<f64>,
     // One block's coefficient influence (p × d), and `Q A⁻¹` (k rows of d), for
     // `coefficient_covariance`.
     #[serde(default)]
-    g: Vec<f64>,
+    pub(super) g: Vec<f64>,
     #[serde(default)]
-    qa: Vec<f64>,
+    pub(super) qa: Vec<f64>,
 }
 
 impl WindowEstimate {
@@ -104,7 +104,7 @@ impl WindowEstimate {
 /// `Q A⁻¹ v` (`k` values, handed to `put(b, value)`), with `A` given by its LU factors and `Q`
 /// as `d` rows of `k`; `v` (`d` values) is overwritten by `A⁻¹ v`.
 #[inline(always)]
-fn q_ainv(
+pub(super) fn q_ainv(
     lu: &[f64],
     piv: &[usize],
     q: &[f64],
@@ -189,6 +189,40 @@ impl InstrumentedWindows {
         min_pivot_ratio: f64,
         out: &mut WindowEstimate,
     ) {
+        if !self.solve_span(span, ridge, t, min_pivot_ratio, out) {
+            return;
+        }
+        let lay = self.layout();
+        let (p, d, k) = (lay.p, lay.d, lay.k);
+        let (sum_w, sum_w2) = match (p, d, k) {
+            (1, 2, 2) => self.block_scores(span, out, 1, 2, 2),
+            (1, 3, 3) => self.block_scores(span, out, 1, 3, 3),
+            (1, 4, 4) => self.block_scores(span, out, 1, 4, 4),
+            (1, 5, 5) => self.block_scores(span, out, 1, 5, 5),
+            (1, 6, 6) => self.block_scores(span, out, 1, 6, 6),
+            _ => self.block_scores(span, out, p, d, k),
+        };
+        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        let overlap = overlap_factor(self.batch, self.horizon);
+        let scale = overlap * out.batches as f64 / (out.batches - d) as f64;
+        for v in &mut out.score_cov {
+            *v *= scale;
+        }
+        out.ready = out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+    }
+
+    /// The two-stage least-squares solve of [`estimate`](Self::estimate) on the blocks `span`
+    /// selects, up to `X = Q A⁻¹ T` (into `out`; `out.ready` left `false`): `false` when the
+    /// span has too few batches, `H + λI` is not positive definite or `A` is singular to
+    /// working precision.
+    pub(super) fn solve_span(
+        &self,
+        span: (usize, usize),
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+    ) -> bool {
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let blocks = span.0.saturating_sub(span.1);
@@ -197,7 +231,7 @@ impl InstrumentedWindows {
         let batches = blocks.div_ceil(self.batch);
         out.batches = batches;
         if batches <= d {
-            return;
+            return false;
         }
         self.span_sums(span, &mut out.sums);
         let (nm, rest) = out.sums.split_at(lay.cw());
@@ -209,7 +243,7 @@ impl InstrumentedWindows {
             }
         }
         if !linalg::cholesky_in_place(&mut out.hfac, k) {
-            return;
+            return false;
         }
         for i in 0..d {
             let qi = &mut out.q[i * k..(i + 1) * k];
@@ -229,7 +263,7 @@ impl InstrumentedWindows {
         let ratio = linalg::lu_in_place(&mut out.lu, d, &mut out.piv);
         out.pivot_ratio = ratio;
         if !(ratio > min_pivot_ratio) {
-            return;
+            return false;
         }
         // Θ̂ row i: (Cw_i Qᵀ... ) — θ_i = (Cw_i Q̃) A⁻¹ with Q̃ = (H + λI)⁻¹Nᵀ, so
         // θ_iᵀ = A⁻¹ (N (H + λI)⁻¹ Cw_iᵀ) since A is symmetric: r_a = Q_a · Cw_i.
@@ -253,21 +287,7 @@ impl InstrumentedWindows {
             }
             q_ainv(&out.lu, &out.piv, &out.q, d, k, row, |b, v| out.x[j * k + b] = v);
         }
-        let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(span, out, 1, 2, 2),
-            (1, 3, 3) => self.block_scores(span, out, 1, 3, 3),
-            (1, 4, 4) => self.block_scores(span, out, 1, 4, 4),
-            (1, 5, 5) => self.block_scores(span, out, 1, 5, 5),
-            (1, 6, 6) => self.block_scores(span, out, 1, 6, 6),
-            _ => self.block_scores(span, out, p, d, k),
-        };
-        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
-        let overlap = overlap_factor(self.batch, self.horizon);
-        let scale = overlap * batches as f64 / (batches - d) as f64;
-        for v in &mut out.score_cov {
-            *v *= scale;
-        }
-        out.ready = out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+        true
     }
 
     /// The block sums of the scores of window `w`, `S_j = sym((Cw_j − Θ̂ N_j) X)`, added as
@@ -373,128 +393,5 @@ impl InstrumentedWindows {
             score_cov[0] = cov;
         }
         (sum_w, sum_w2)
-    }
-
-    /// The batch-means covariance of the coefficients, after a ready
-    /// [`estimate`](Self::estimate) of the same window `w` (which leaves the factors in
-    /// `out`): with `r_j = Cw_j − Θ̂ N_j` (one row per output) and the block influence
-    /// `G_j = r_j Q A⁻¹` (`p × d`, so that `Σ_j G_j = Θ̂ − Θ` up to the ridge),
-    ///
-    /// ```text
-    /// Ω_θ = c_h · B/(B − d) · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
-    /// ```
-    ///
-    /// with the same factors (and the same batches, see [`with_batch`](Self::with_batch)) as
-    /// the score covariance of [`estimate`](Self::estimate). For a
-    /// direction `T` (`d × p`), the score covariance of `estimate` is the image of `Ω_θ`
-    /// under `vec(G) ↦ vec(sym(G T))`; for `p = 1` the variance of `(Θ̂ − Θ) T` is
-    /// `Tᵀ Ω_θ T`, for every `T` at once (what a certificate over a region of states needs).
-    /// `false` (and `cov` untouched) when `out` holds no ready estimate. `O(B (p k d + p² d²))`.
-    ///
-    /// # Panics
-    /// If `cov` is shorter than `(p d)²`.
-    pub fn coefficient_covariance(
-        &self,
-        w: usize,
-        out: &mut WindowEstimate,
-        cov: &mut [f64],
-    ) -> bool {
-        if !out.ready {
-            return false;
-        }
-        let lay = self.layout();
-        // Literal dimensions for the common shapes let the compiler unroll the kernels.
-        match (lay.p, lay.d, lay.k) {
-            (1, 2, 2) => self.coefficient_covariance_dims(w, out, cov, 1, 2, 2),
-            (1, 3, 3) => self.coefficient_covariance_dims(w, out, cov, 1, 3, 3),
-            (1, 4, 4) => self.coefficient_covariance_dims(w, out, cov, 1, 4, 4),
-            (1, 5, 5) => self.coefficient_covariance_dims(w, out, cov, 1, 5, 5),
-            (1, 6, 6) => self.coefficient_covariance_dims(w, out, cov, 1, 6, 6),
-            (p, d, k) => self.coefficient_covariance_dims(w, out, cov, p, d, k),
-        }
-        true
-    }
-
-    /// [`coefficient_covariance`](Self::coefficient_covariance) with the dimensions passed in.
-    #[inline(always)]
-    fn coefficient_covariance_dims(
-        &self,
-        w: usize,
-        out: &mut WindowEstimate,
-        cov: &mut [f64],
-        p: usize,
-        d: usize,
-        k: usize,
-    ) {
-        let lay = Layout { p, d, k };
-        let n = p * d;
-        let cov = &mut cov[..n * n];
-        cov.fill(0.0);
-        // Q A⁻¹ (k × d), once: column a of A⁻¹ is the solve of the unit vector e_a (A is
-        // symmetric, so row and column agree).
-        for a in 0..d {
-            let e = &mut out.g[..d];
-            e.fill(0.0);
-            e[a] = 1.0;
-            q_ainv(&out.lu, &out.piv, &out.q, d, k, e, |b, v| out.qa[b * d + a] = v);
-        }
-        let blocks = self.windows[w].min(self.block_len);
-        let stride = lay.stride();
-        let (older, newer) = self.window_blocks(w);
-        let (theta, qa) = (&out.theta[..p * d], &out.qa[..k * d]);
-        // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
-        // estimate; `stride >= p d` values).
-        let batch = self.batch;
-        let mut batches = Batches::new(blocks, batch, self.horizon);
-        let acc = &mut out.sums[..if batch > 1 { n } else { 0 }];
-        acc.fill(0.0);
-        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
-            let (bn, bcw) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()]);
-            for i in 0..p {
-                let th = &theta[i * d..(i + 1) * d];
-                let g = &mut out.g[i * d..(i + 1) * d];
-                g.fill(0.0);
-                for b in 0..k {
-                    // r_b = Cw_{j,i,b} − θ_i · N_{j,·,b}, then g += r_b · (Q A⁻¹)_b.
-                    let mut r = bcw[i * k + b];
-                    for a in 0..d {
-                        r -= th[a] * bn[a * k + b];
-                    }
-                    for (ga, &m) in g.iter_mut().zip(&qa[b * d..(b + 1) * d]) {
-                        *ga += r * m;
-                    }
-                }
-            }
-            let g = &out.g[..n];
-            if batch == 1 {
-                for a in 0..n {
-                    for b in a..n {
-                        cov[a * n + b] += g[a] * g[b];
-                    }
-                }
-                continue;
-            }
-            for (c, &v) in acc.iter_mut().zip(g) {
-                *c += v;
-            }
-            if let Some(f) = batches.close() {
-                for a in 0..n {
-                    for b in a..n {
-                        cov[a * n + b] += f * acc[a] * acc[b];
-                    }
-                }
-                acc.fill(0.0);
-            }
-        }
-        for a in 0..n {
-            for b in 0..a {
-                cov[a * n + b] = cov[b * n + a];
-            }
-        }
-        let batches = blocks.div_ceil(batch);
-        let scale = overlap_factor(batch, self.horizon) * batches as f64 / (batches - d) as f64;
-        for v in cov.iter_mut() {
-            *v *= scale;
-        }
     }
 }

@@ -1,0 +1,199 @@
+//! The batch-means covariance of a window's coefficients (what a test of some coefficients,
+//! or a certificate over a region of states, needs), after an estimate or fused with it.
+
+use super::batch::{Batches, overlap_factor};
+use super::estimate::q_ainv;
+use super::{InstrumentedWindows, Layout, WindowEstimate};
+
+impl InstrumentedWindows {
+    /// The batch-means covariance of the coefficients, after a ready
+    /// [`estimate`](Self::estimate) of the same window `w` (which leaves the factors in
+    /// `out`): with `r_j = Cw_j − Θ̂ N_j` (one row per output) and the block influence
+    /// `G_j = r_j Q A⁻¹` (`p × d`, so that `Σ_j G_j = Θ̂ − Θ` up to the ridge),
+    ///
+    /// ```text
+    /// Ω_θ = c_h · B/(B − d) · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
+    /// ```
+    ///
+    /// with the same factors (and the same batches, see [`with_batch`](Self::with_batch)) as
+    /// the score covariance of [`estimate`](Self::estimate). For a
+    /// direction `T` (`d × p`), the score covariance of `estimate` is the image of `Ω_θ`
+    /// under `vec(G) ↦ vec(sym(G T))`; for `p = 1` the variance of `(Θ̂ − Θ) T` is
+    /// `Tᵀ Ω_θ T`, for every `T` at once (what a certificate over a region of states needs).
+    /// `false` (and `cov` untouched) when `out` holds no ready estimate. `O(B (p k d + p² d²))`.
+    ///
+    /// # Panics
+    /// If `cov` is shorter than `(p d)²`.
+    pub fn coefficient_covariance(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+    ) -> bool {
+        if !out.ready {
+            return false;
+        }
+        self.influence_pass::<false>(w, out, cov);
+        true
+    }
+
+    /// [`estimate`](Self::estimate) and [`coefficient_covariance`](Self::coefficient_covariance)
+    /// of window `w` in one pass over its blocks, for a caller that needs `Θ̂`, `Ω_θ` and the
+    /// effective number of blocks but not the score covariance: `out` holds the estimate's
+    /// `Θ̂`, factors, `effective_blocks` and `batches` (bit for bit those of `estimate`; the
+    /// weights `w_j = tr(Xᵀ H_j X)` are summed in the same order), `out.score_cov` is zero,
+    /// and `out.ready` is `true` when every entry of `Θ̂` and `Ω_θ` is finite. Returns
+    /// `out.ready`; `cov` is written whenever the solve succeeded. One block pass where the two
+    /// calls take two.
+    ///
+    /// # Panics
+    /// If `cov` is shorter than `(p d)²`.
+    pub fn estimate_coefficients(
+        &self,
+        w: usize,
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+    ) -> bool {
+        if !self.solve_span(self.span(w, 0), ridge, t, min_pivot_ratio, out) {
+            return false;
+        }
+        let (sum_w, sum_w2) = self.influence_pass::<true>(w, out, cov);
+        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        out.score_cov.fill(0.0);
+        let n = self.layout().p * self.layout().d;
+        out.ready = out.theta.iter().chain(&cov[..n * n]).all(|v| v.is_finite());
+        out.ready
+    }
+
+    /// The pass over window `w`'s blocks behind both: `Ω_θ` into `cov`, and with `WEIGHTS` the
+    /// batch weights' `(Σ w, Σ w²)` (else zeros). Literal dimensions for the common shapes let
+    /// the compiler unroll the kernels.
+    fn influence_pass<const WEIGHTS: bool>(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+    ) -> (f64, f64) {
+        let lay = self.layout();
+        match (lay.p, lay.d, lay.k) {
+            (1, 2, 2) => self.influence_dims::<WEIGHTS>(w, out, cov, 1, 2, 2),
+            (1, 3, 3) => self.influence_dims::<WEIGHTS>(w, out, cov, 1, 3, 3),
+            (1, 4, 4) => self.influence_dims::<WEIGHTS>(w, out, cov, 1, 4, 4),
+            (1, 5, 5) => self.influence_dims::<WEIGHTS>(w, out, cov, 1, 5, 5),
+            (1, 6, 6) => self.influence_dims::<WEIGHTS>(w, out, cov, 1, 6, 6),
+            (p, d, k) => self.influence_dims::<WEIGHTS>(w, out, cov, p, d, k),
+        }
+    }
+
+    /// [`influence_pass`](Self::influence_pass) with the dimensions passed in.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn influence_dims<const WEIGHTS: bool>(
+        &self,
+        w: usize,
+        out: &mut WindowEstimate,
+        cov: &mut [f64],
+        p: usize,
+        d: usize,
+        k: usize,
+    ) -> (f64, f64) {
+        let lay = Layout { p, d, k };
+        let n = p * d;
+        let cov = &mut cov[..n * n];
+        cov.fill(0.0);
+        // Q A⁻¹ (k × d), once: column a of A⁻¹ is the solve of the unit vector e_a (A is
+        // symmetric, so row and column agree).
+        for a in 0..d {
+            let e = &mut out.g[..d];
+            e.fill(0.0);
+            e[a] = 1.0;
+            q_ainv(&out.lu, &out.piv, &out.q, d, k, e, |b, v| out.qa[b * d + a] = v);
+        }
+        let blocks = self.windows[w].min(self.block_len);
+        let stride = lay.stride();
+        let (older, newer) = self.window_blocks(w);
+        let (theta, qa, x) = (&out.theta[..p * d], &out.qa[..k * d], &out.x[..p * k]);
+        // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
+        // estimate; `stride >= p d` values), its weight in `batch_w`.
+        let batch = self.batch;
+        let mut batches = Batches::new(blocks, batch, self.horizon);
+        let acc = &mut out.sums[..if batch > 1 { n } else { 0 }];
+        acc.fill(0.0);
+        let (mut sum_w, mut sum_w2, mut batch_w) = (0.0, 0.0, 0.0);
+        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
+            let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
+            for i in 0..p {
+                let th = &theta[i * d..(i + 1) * d];
+                let g = &mut out.g[i * d..(i + 1) * d];
+                g.fill(0.0);
+                for b in 0..k {
+                    // r_b = Cw_{j,i,b} − θ_i · N_{j,·,b}, then g += r_b · (Q A⁻¹)_b.
+                    let mut r = bcw[i * k + b];
+                    for a in 0..d {
+                        r -= th[a] * bn[a * k + b];
+                    }
+                    for (ga, &m) in g.iter_mut().zip(&qa[b * d..(b + 1) * d]) {
+                        *ga += r * m;
+                    }
+                }
+            }
+            // The block's weight, as `estimate` computes it.
+            let mut weight = 0.0;
+            if WEIGHTS {
+                for xj in x.chunks_exact(k) {
+                    for a in 0..k {
+                        let mut ha = 0.0;
+                        for b in 0..k {
+                            ha += bh[a * k + b] * xj[b];
+                        }
+                        weight += xj[a] * ha;
+                    }
+                }
+            }
+            let g = &out.g[..n];
+            if batch == 1 {
+                for a in 0..n {
+                    for b in a..n {
+                        cov[a * n + b] += g[a] * g[b];
+                    }
+                }
+                if WEIGHTS {
+                    sum_w += weight;
+                    sum_w2 += weight * weight;
+                }
+                continue;
+            }
+            for (c, &v) in acc.iter_mut().zip(g) {
+                *c += v;
+            }
+            batch_w += weight;
+            if let Some(f) = batches.close() {
+                for a in 0..n {
+                    for b in a..n {
+                        cov[a * n + b] += f * acc[a] * acc[b];
+                    }
+                }
+                acc.fill(0.0);
+                if WEIGHTS {
+                    sum_w += batch_w;
+                    sum_w2 += batch_w * batch_w;
+                }
+                batch_w = 0.0;
+            }
+        }
+        for a in 0..n {
+            for b in 0..a {
+                cov[a * n + b] = cov[b * n + a];
+            }
+        }
+        let batches = blocks.div_ceil(batch);
+        let scale = overlap_factor(batch, self.horizon) * batches as f64 / (batches - d) as f64;
+        for v in cov.iter_mut() {
+            *v *= scale;
+        }
+        (sum_w, sum_w2)
+    }
+}

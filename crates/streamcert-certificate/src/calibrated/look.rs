@@ -60,10 +60,11 @@ impl CalibratedState {
             Some((_, v2, nu2)) => {
                 radius = calibrated_radius(variance, nu, risk * (1.0 - second));
                 let r2 = calibrated_radius(v2, nu2, risk * second);
-                upper_radius = below.then(|| {
-                    calibrated_radius(variance, nu, delta * (1.0 - second))
-                        .min(calibrated_radius(v2, nu2, delta * second))
-                });
+                upper_radius =
+                    below.then(|| {
+                        calibrated_radius(variance, nu, delta * (1.0 - second))
+                            .min(calibrated_radius(v2, nu2, delta * second))
+                    });
                 if r2 < radius {
                     (radius, variance, nu) = (r2, v2, nu2);
                 }

@@ -58,7 +58,8 @@
 //! look until the next comparison, and a change to a still contracting plant closes the
 //! longer windows' looks until the shorter windows certify the new plant). A fresh estimate
 //! of window `v` costs `O(B_v (k d + p²) + k³)`, twice per due block (its newest columns
-//! and its older part; window `v − 1`'s newest is the one taken at the same block), so about
+//! and its older part; window `v − 1`'s newest is the one taken at the same block, and a
+//! window that looks at the block hands over its look's estimate), so about
 //! `3 B_0 / P_0 ≈ 24` block passes per block per window, `O(W (k d + p²))` per sample
 //! amortised, no allocation (for the default five windows about 98 block passes per block;
 //! for four 75, 165 with every window at the shortest window's pace and 217 before the

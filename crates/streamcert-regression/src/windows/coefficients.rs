@@ -2,7 +2,7 @@
 //! or a certificate over a region of states, needs), after an estimate or fused with it.
 
 use super::batch::{Batches, overlap_factor};
-use super::estimate::q_ainv;
+use super::estimate::{block_weight, q_ainv};
 use super::{InstrumentedWindows, Layout, WindowEstimate};
 
 impl InstrumentedWindows {
@@ -141,18 +141,7 @@ impl InstrumentedWindows {
                 }
             }
             // The block's weight, as `estimate` computes it.
-            let mut weight = 0.0;
-            if WEIGHTS {
-                for xj in x.chunks_exact(k) {
-                    for a in 0..k {
-                        let mut ha = 0.0;
-                        for b in 0..k {
-                            ha += bh[a * k + b] * xj[b];
-                        }
-                        weight += xj[a] * ha;
-                    }
-                }
-            }
+            let weight = if WEIGHTS { block_weight(bh, x, k) } else { 0.0 };
             let g = &out.g[..n];
             if batch == 1 {
                 for a in 0..n {

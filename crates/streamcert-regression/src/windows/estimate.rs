@@ -101,6 +101,23 @@ impl WindowEstimate {
     }
 }
 
+/// A block's weight `w_j = tr(Xᵀ H_j X)` (`bh` the block's `H_j`, `k × k`; `x` the `p` rows of
+/// `k` of `X`), summed in one fixed order (so that every pass gets the same bits).
+#[inline(always)]
+pub(super) fn block_weight(bh: &[f64], x: &[f64], k: usize) -> f64 {
+    let mut weight = 0.0;
+    for xj in x.chunks_exact(k) {
+        for a in 0..k {
+            let mut ha = 0.0;
+            for b in 0..k {
+                ha += bh[a * k + b] * xj[b];
+            }
+            weight += xj[a] * ha;
+        }
+    }
+    weight
+}
+
 /// `Q A⁻¹ v` (`k` values, handed to `put(b, value)`), with `A` given by its LU factors and `Q`
 /// as `d` rows of `k`; `v` (`d` values) is overwritten by `A⁻¹ v`.
 #[inline(always)]
@@ -347,16 +364,7 @@ impl InstrumentedWindows {
                     block[jj * p + i] = s;
                 }
             }
-            let mut weight = 0.0;
-            for xj in x.chunks_exact(k) {
-                for a in 0..k {
-                    let mut ha = 0.0;
-                    for b in 0..k {
-                        ha += bh[a * k + b] * xj[b];
-                    }
-                    weight += xj[a] * ha;
-                }
-            }
+            let weight = block_weight(bh, x, k);
             if batch == 1 {
                 if pp == 1 {
                     // One output: the sum in a register (in memory, every block waited for

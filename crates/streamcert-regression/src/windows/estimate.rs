@@ -168,7 +168,8 @@ impl InstrumentedWindows {
     /// then over batch weights. (A Bartlett weight ½ on neighbouring
     /// blocks, exact in expectation and less conservative under sensor noise, raised the
     /// false-opening rate of the study's scalar cell at `M = 150` to 16 in 1000: not used.) Cost `O(n (k d + p²) + B p⁴ + k³)`:
-    /// the calibrated certificate calls it at its looks only.
+    /// the calibrated certificate calls it at its looks and its change guard at the guard's
+    /// pace, never per sample.
     ///
     /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns,
     /// `H + λI` is not positive definite, `A` is singular to working precision (pivot ratio at

@@ -33,13 +33,13 @@ pub struct WindowEstimate {
     pub batches: usize,
     // Scratch: Cholesky factor of H + λI, Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
     // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
-    pub(super) hfac: Vec<f64>,
+    hfac: Vec<f64>,
     pub(super) q: Vec<f64>,
     pub(super) lu: Vec<f64>,
     pub(super) piv: Vec<usize>,
     pub(super) x: Vec<f64>,
-    pub(super) row: Vec<f64>,
-    pub(super) block: Vec<f64>,
+    row: Vec<f64>,
+    block: Vec<f64>,
     pub(super) sums: Vec<f64>,
     // One block's coefficient influence (p × d), and `Q A⁻¹` (k rows of d), for
     // `coefficient_covariance`.

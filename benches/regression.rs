@@ -14,7 +14,9 @@ use streamcert::certificate::{
     Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, RiskSplit,
     certificate_value,
 };
-use streamcert::regression::{EstimateStatus, Model, RegressionConfig, SlidingRegression};
+use streamcert::regression::{
+    EstimateStatus, InstrumentedWindows, Model, RegressionConfig, SlidingRegression,
+};
 
 /// A pre-generated stream of `len` samples with `p` outputs and `m` inputs.
 fn stream(p: usize, m: usize, len: usize) -> Vec<f64> {
@@ -124,7 +126,9 @@ fn certifier_step(c: &mut Criterion) {
     // hidden dynamics, nonlinearity, plant change). Variants 5 and 6 are their baselines in
     // the same run: the paper's model through the origin, and the calibrated certificate
     // without any guard (the calibrated step as it was before the intercept and the guards);
-    // variant 7 is the affine calibrated certificate without its guards.
+    // variant 7 is the affine calibrated certificate without its guards; variants 8 and 9
+    // are the default without its change guard and without its model guard (hidden dynamics
+    // and nonlinearity), so that each guard's share of the default step is measured.
     let cases = [
         (1usize, 1usize, 0u8),
         (1, 1, 1),
@@ -134,6 +138,8 @@ fn certifier_step(c: &mut Criterion) {
         (1, 1, 5),
         (1, 1, 6),
         (1, 1, 7),
+        (1, 1, 8),
+        (1, 1, 9),
         (10, 10, 0),
         (10, 10, 1),
         (10, 10, 5),
@@ -155,6 +161,17 @@ fn certifier_step(c: &mut Criterion) {
         }
         if variant == 7 {
             cfg.calibration = Some(Calibration::new(0.01).unguarded());
+        }
+        if variant == 8 {
+            cfg.calibration = Some(Calibration { plant_change: false, ..Calibration::new(0.01) });
+        }
+        if variant == 9 {
+            let no_model = Calibration {
+                hidden_dynamics: false,
+                nonlinearity: false,
+                ..Calibration::new(0.01)
+            };
+            cfg.calibration = Some(no_model);
         }
         if variant == 5 || variant == 6 {
             cfg.regression.model = Model::ThroughOrigin;
@@ -184,6 +201,8 @@ fn certifier_step(c: &mut Criterion) {
             "through_origin_gaussian_and_wasserstein",
             "through_origin_gaussian_and_calibrated_unguarded",
             "gaussian_and_calibrated_unguarded",
+            "gaussian_and_calibrated_without_change_guard",
+            "gaussian_and_calibrated_without_model_guard",
         ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
@@ -258,5 +277,30 @@ fn computation_only(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, regression_update, certifier_step, computation_only);
+/// What one column costs to push into the calibrated certificate's windows (the default five,
+/// 150 to 2400 columns, `h = 5`, `p = 1`): the linear windows' three regressors (`y`, `u`,
+/// the intercept's `τ`) and the model guard's larger fit's six (those, the past increment,
+/// the square and the cube). The guard's push is a floor under its cost per sample, before
+/// any test: BENCHMARKS.md compares it with what the cost target leaves the guards.
+fn windows_push(c: &mut Criterion) {
+    let mut group = c.benchmark_group("windows_push");
+    let len = 4096usize;
+    let data = stream(3, 3, len);
+    for regressors in [3usize, 6] {
+        let lengths = [150, 300, 600, 1200, 2400];
+        let mut windows =
+            InstrumentedWindows::with_regressors(1, regressors, 5, 1, 1, &lengths).expect("valid");
+        let mut k = 0usize;
+        group.bench_function(BenchmarkId::new("regressors", regressors), |b| {
+            b.iter(|| {
+                k = (k + 1) % len;
+                let col = &data[6 * k..6 * k + 6];
+                black_box(windows.push_column(black_box(&col[..regressors]), &col[5..]))
+            });
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(benches, regression_update, certifier_step, computation_only, windows_push);
 criterion_main!(benches);

@@ -65,8 +65,9 @@
 //! validity; a false closing costs power (measured in the tests and VALIDITY.md).
 //!
 //! `O(k d' + k²)` per column (`d'` the larger fit's regressors, `k` its instruments), no
-//! allocation; a test per look `O(B p² d'² + q³)`. On the default `p = m = 1` step about
-//! 290 ns per sample, of which about 37 ns push the column (BENCHMARKS.md).
+//! allocation; a test per look `O(B p² d'² + q³)`. On the default `p = m = 1` step the two
+//! guards cost about 300 ns per sample together, of which about 23 and 29 ns push their
+//! columns (BENCHMARKS.md).
 //!
 //! [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
 //! [`Calibration::nonlinearity`]: crate::Calibration::nonlinearity

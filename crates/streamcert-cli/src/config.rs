@@ -10,123 +10,7 @@ use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 use crate::CliError;
 
 /// The commented default configuration printed by `streamcert certify --print-config`.
-pub const DEFAULT_CONFIG: &str = r#"# streamcert certify configuration (TOML). Unknown keys are refused.
-
-[columns]
-# Name of the time column (seconds, strictly increasing).
-time = "t"
-# Measured outputs y (p columns) and applied inputs u (m columns), by header name.
-outputs = ["y_b"]       # (the names `streamcert simulate g5` writes for node b)
-inputs = ["u_b"]        # (the applied input of node b)
-# delimiter = ","       # or ";" or "tab"; quoted fields and a byte-order mark are accepted
-
-[controller]
-# Candidate gain K (m rows of p values): the controller u = K y to be certified (-4 is G5's).
-gain = [[-4.0]]
-
-[certificate]
-# Conservatism c of the paper's radius rho = c (1 + ||K||) RMS(R) / sqrt(lambda_min(Z Z^T / M)
-# + lambda), for the paper's two certificates only (they carry no stated risk; the verdict is
-# the calibrated one below). The paper gives no value; 0.1 is the reproduction's.
-conservatism = 0.1
-# Deploy once the certificate is >= margin for `consecutive` samples (the paper's gate rule;
-# 0.05 and 10 are its experiments' values, and a margin > 0 is what "contracts" means).
-margin = 0.05
-consecutive = 10        # n_s
-# A step above gap_factor times the median of the last 32 steps is a gap: the window
-# restarts there and the gates close (the row's reason says so).
-# gap_factor = 5.0
-# With two or more outputs, the metric the rate is measured in: one weight per output
-# (the rate of w1 y1, w2 y2, ...). Without it the units as logged decide (an output in mm
-# instead of m changes the verdict); the summary warns when the outputs' ranges differ by
-# more than 100x. For example the inverse of each output's typical range:
-# metric = [1.0, 0.01]
-
-[regression]
-# The model: "affine" fits an intercept beside the dynamics (dY = Theta Z + c tau), so the
-# verdict does not depend on the operating point or the sensor's units offset (°C or K);
-# "through_origin" is the paper's dY = Theta Z, valid only for a loop that runs about zero.
-model = "affine"
-window = 150            # M: columns in the sliding window (the paper's experiments)
-horizon = 5             # h: samples per integration interval (the paper's experiments)
-ridge = 1e-4            # lambda (far below the excitation of a dithered loop)
-# min_columns = 150     # warm-up (default: window)
-# Inputs held between samples by a digital controller (the common case) integrate exactly by
-# the zero-order hold; "trapezoidal" leaves a 10-15 % downward bias of beta_hat on them
-# (cargo xtask dither). Use "trapezoidal" for inputs that vary continuously between samples.
-input_integral = "zero_order_hold"
-estimator = "ordinary"  # the paper's; the calibrated certificate always uses its own
-                        # instrumented estimate ("instrumented" here changes the paper's)
-
-[ambiguity]
-# The paper's Wasserstein certificate and its radius eps(t) (Section III); the values are the
-# paper's. Like the Gaussian one it carries no stated risk.
-enabled = true          # also compute the Wasserstein certificate
-tail_window = 150       # residuals in the kurtosis and spike window (the paper's)
-eps_floor = 0.015       # eps_0 (the paper's)
-eps_cap = 0.32          # eps_max (the paper's)
-alpha_kurtosis = 0.03   # alpha_1 (the paper's)
-alpha_spike = 2.0       # alpha_2 (the paper's)
-# sigma0 for the 3 sigma0 spike test: a number, or omit to calibrate it as
-# 1.4826 * MAD of the first `tail_window` residuals.
-# sigma0 = 0.08
-residuals = "one_step"  # keeps the tail shape eps detects (the paper is silent); or "horizon"
-
-[calibration]
-# The verdict: an instrumented regression on several windows (M, 2M, 4M, ...) with a radius
-# from its own uncertainty (no c); its gate opens for a controller whose true rate is below
-# the margin with probability at most delta over the whole run (see the README for the
-# assumptions), and its guards close it where the data contradict its model. Needs margin > 0
-# and window >= h (u + 2), u = p + m + 1 (intercept) + 2p (the nonlinearity guard's fit):
-# 35 for p = m = 1, h = 5. `enabled = false` is the paper-only mode: the
-# paper's two certificates alone, which carry no stated risk (the summary says so).
-enabled = true
-delta = 0.01            # the risk of a false deployment over the whole run
-# windows = 5            # M, 2M, ..., 16M (default: at least five, doubling until the
-                         # longest holds 200 h: a long window makes up for the intercept)
-# risk_split = "equal"   # delta / windows each, every time scale alike ("by_length": the
-                         # longer windows more, the shortest less: a fast loop waits longer)
-# max_window = 1200      # drop windows longer than this (default: none)
-# look_spacing = 0.5     # a window looks every look_spacing * M_w columns once full
-# instrument_lag = 1     # samples between the instrument's interval and the column's
-# instrument_intervals = 1  # earlier intervals stacked into the instrument (>= 2: 2SLS)
-# batch_blocks = 1       # blocks of h per batch of the first variance (1: every block is
-                         # one; the automatic batches below take care of sensor noise)
-# auto_batches = 30      # beside it, on windows long enough, the variance in about 30
-                         # batches, the smaller radius standing: sensor noise needs batches,
-                         # and the user need not know it (0: off)
-# auto_batch_risk = 0.2  # the share of the risk the batched radius spends (the first radius
-                         # the rest: quick on process noise, which is the common case)
-# The guards (each on by default; closing never costs validity, only power; turning one off
-# certifies plants the certificate's risk does not cover):
-# hidden_dynamics = true # a window whose output's past increment predicts its next one (a
-                         # hidden state: a mass measured by its position) does not stand
-# nonlinearity = true    # a window whose outputs' squares and cubes predict the increment (a
-                         # slope that varies over the explored region) does not stand
-# guard_risk = 0.002     # risk of each of these two tests (default: delta / windows); larger
-                         # closes more often, never less: fewer false openings on a nonlinear
-                         # loop (it does not make them rare: use [nonlinear]), less power
-# plant_change = true    # a window's look stands only while a fresh estimate on the newest
-                         # data is not significantly below it (the plant changed)
-# change_risk = 0.01     # risk of each such comparison (default: delta); a false one closes
-                         # the gate for an eighth of the shortest window, larger closes sooner
-
-[nonlinear]
-# The calibrated certificate above assumes one Jacobian over its window. For a nonlinear
-# loop (one output), enable this: a fourth certificate, the smallest rate over the region of
-# outputs the window explored, for a drift polynomial in y up to `degree` (calibrated, same
-# windows and delta), and a test that closes the linear calibrated gate when the dynamics
-# vary over the region ("dynamics vary over the explored region"). Needs [calibration].
-enabled = false
-features = "polynomial"  # y, y^2, ..., y^degree; or a list such as ["y", "y*tanh(y)"]
-                         # (known: y, y^2 .. y^5, tanh(y), y*tanh(y); starts with "y")
-degree = 3              # cubic: the lowest odd degree whose slope varies
-region = "bounding_box"  # the range of y over the window's samples (the rule built so far)
-# cells = 32             # grid cells on which the minimum over the region is bounded
-# test_risk = 0.01       # risk of the nonlinearity and lack-of-fit tests (default: delta)
-# check_terms = 2        # lack-of-fit check: extra powers of y the library lacks (0: off);
-                         # where they are significant the nonlinear gate stays closed
-"#;
+pub const DEFAULT_CONFIG: &str = include_str!("config/default.toml");
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -323,16 +207,28 @@ struct Controller {
     gain: Vec<Vec<f64>>,
 }
 
+/// `conservatism` and `consecutive` may be omitted (0.1, the reproduction's `c`, and 10, the
+/// paper's `n_s`); `margin`, what "contracts" means for the user's plant, may not.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Certificate {
+    #[serde(default = "default_conservatism")]
     conservatism: f64,
     margin: f64,
+    #[serde(default = "default_consecutive")]
     consecutive: usize,
     #[serde(default)]
     gap_factor: Option<f64>,
     #[serde(default)]
     metric: Option<Vec<f64>>,
+}
+
+fn default_conservatism() -> f64 {
+    0.1
+}
+
+fn default_consecutive() -> usize {
+    10
 }
 
 /// Every key may be omitted: the defaults are the ones `--print-config` shows.
@@ -401,6 +297,11 @@ pub struct Config {
     pub certifier: CertifierConfig,
 }
 
+/// What a configuration must name, added to serde's "missing field" message.
+const REQUIRED: &str = "A configuration must give [columns] time, outputs and inputs, \
+     [controller] gain and [certificate] margin; every other key has a default \
+     (`streamcert certify --print-config` writes them all, each with its reason).";
+
 /// Parse and validate a configuration text; `path` names it in errors.
 ///
 /// # Errors
@@ -408,7 +309,14 @@ pub struct Config {
 /// parameter.
 pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
     let bad = |message: String| CliError::Config { path: path.to_string(), message };
-    let f: File = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let f: File = toml::from_str(text).map_err(|e| {
+        let message = e.to_string();
+        if message.contains("missing field") {
+            bad(format!("{}\n{REQUIRED}", message.trim_end()))
+        } else {
+            bad(message)
+        }
+    })?;
     let (p, m) = (f.columns.outputs.len(), f.columns.inputs.len());
     if p == 0 || m == 0 {
         return Err(bad(

@@ -167,3 +167,25 @@ fn every_default_in_print_config_carries_its_reason() {
         assert!(commented, "line {} has no reason: {l}", i + 1);
     }
 }
+
+/// Oracle: the printed configuration. A file with only the required keys gives the same
+/// certifier as `--print-config`'s (whose active lines are the defaults), and one without a
+/// required key names it and every required key.
+#[test]
+fn only_the_required_keys_give_the_printed_configuration() {
+    let minimal = "[columns]\ntime = \"t\"\noutputs = [\"y_b\"]\ninputs = [\"u_b\"]\n\
+                   [controller]\ngain = [[-4.0]]\n[certificate]\nmargin = 0.05\n";
+    let full = parse(DEFAULT_CONFIG, "default").unwrap();
+    let parsed = parse(minimal, "minimal").unwrap();
+    assert_eq!(parsed.certifier, full.certifier);
+    assert_eq!(parsed.columns, full.columns);
+    for (drop, key) in [("margin = 0.05\n", "margin"), ("gain = [[-4.0]]\n", "gain")] {
+        let err = parse(&minimal.replace(drop, ""), "x").unwrap_err().to_string();
+        assert!(err.contains(&format!("missing field `{key}`")), "{err}");
+        assert!(err.contains("[certificate] margin"), "{err}");
+        assert!(err.contains("--print-config"), "{err}");
+    }
+    // A key with a default set to another value is kept.
+    let other = minimal.replace("margin = 0.05\n", "margin = 0.05\nconsecutive = 3\n");
+    assert_eq!(parse(&other, "x").unwrap().certifier.consecutive, 3);
+}

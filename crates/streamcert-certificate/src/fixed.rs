@@ -48,6 +48,44 @@ impl fmt::Display for Sig {
     }
 }
 
+/// A range `[lo, hi]` as a person writes it: both ends as [`Sig`] writes them, unless six
+/// significant digits hide the range's width (an operating point far from zero: the region
+/// `[999999.36, 1000000.91]` would read `[999999, 1000001]`); then both ends with the decimals
+/// that give the width `hi − lo` three significant digits, trailing zeros dropped. Ends
+/// that are not finite, an empty or reversed range, and ends of `10¹⁵` or more in size (whose
+/// width `f64` cannot resolve to three digits anyway) are written as [`Sig`] writes them.
+#[derive(Debug, Clone, Copy)]
+pub struct SigRange(pub f64, pub f64);
+
+impl fmt::Display for SigRange {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let (lo, hi) = (self.0, self.1);
+        let (a, b) = (Sig(lo).to_string(), Sig(hi).to_string());
+        let width = hi - lo;
+        let size = lo.abs().max(hi.abs());
+        let shown = match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(x), Ok(y)) => y - x,
+            _ => f64::NAN,
+        };
+        // The six significant digits keep the width to within 0.5 % (a digit in the third).
+        if !(width > 0.0 && width.is_finite() && size < 1e15)
+            || (shown - width).abs() <= 5e-3 * width
+        {
+            return write!(f, "[{a}, {b}]");
+        }
+        let decimals = (3 - (width.log10().floor() as i32 + 1)).clamp(0, 17) as usize;
+        let trim = |x: f64| {
+            let text = format!("{x:.decimals$}");
+            if text.contains('.') {
+                text.trim_end_matches('0').trim_end_matches('.').to_string()
+            } else {
+                text
+            }
+        };
+        write!(f, "[{}, {}]", trim(lo), trim(hi))
+    }
+}
+
 /// `x` with `P` decimals (`P <= 9`), exactly as `format!("{:.P}", x)` writes it (tested
 /// against it on random and tie values).
 #[derive(Debug, Clone, Copy)]
@@ -181,6 +219,50 @@ mod tests {
             (f64::INFINITY, "inf"),
         ] {
             assert_eq!(Sig(x).to_string(), text, "{x:?}");
+        }
+    }
+
+    #[test]
+    fn sig_range_keeps_the_width_of_a_range_far_from_zero() {
+        for (lo, hi, text) in [
+            (-0.637455, 0.9089, "[-0.637455, 0.9089]"),
+            (999_999.362_545, 1_000_000.908_9, "[999999.36, 1000000.91]"),
+            (999_999.362_545, 999_999.362_9, "[999999.362545, 999999.3629]"),
+            (1e9 - 0.637455, 1e9 + 0.9089, "[999999999.36, 1000000000.91]"),
+            (49.362545, 50.9089, "[49.3625, 50.9089]"),
+            (1e9, 5e9, "[1e+9, 5e+9]"),
+            (2.0, 1.0, "[2, 1]"),
+            (f64::NEG_INFINITY, 1.0, "[-inf, 1]"),
+        ] {
+            assert_eq!(SigRange(lo, hi).to_string(), text, "{lo:?} {hi:?}");
+        }
+    }
+
+    proptest! {
+        /// Oracle: the range's own numbers. Both ends read back within six significant digits
+        /// or within half a unit of the width's third digit, and the width they span is the
+        /// range's to within one percent.
+        #[test]
+        fn sig_range_reads_back_with_its_width(
+            size_exp in -3.0f64..12.0,
+            negative in any::<bool>(),
+            relative_exp in -11.0f64..2.0,
+        ) {
+            // A width relative to the ends' size, from 10⁻¹¹ (which the check's own
+            // subtraction still resolves to 10⁻⁴ of itself) to 100.
+            let lo = if negative { -1.0 } else { 1.0 } * 10f64.powf(size_exp);
+            let hi = lo + lo.abs() * 10f64.powf(relative_exp);
+            let width = hi - lo;
+            let text = SigRange(lo, hi).to_string();
+            let inner = text.trim_start_matches('[').trim_end_matches(']');
+            let (a, b) = inner.split_once(", ").expect("two ends");
+            let (a, b): (f64, f64) = (a.parse().expect("lo"), b.parse().expect("hi"));
+            let unit = 10f64.powi(width.log10().floor() as i32 - 2);
+            for (x, back) in [(lo, a), (hi, b)] {
+                let close = (back - x).abs() <= (5e-6 * x.abs()).max(0.5 * unit) * (1.0 + 1e-9);
+                prop_assert!(close, "{} -> {}", x, text);
+            }
+            prop_assert!(((b - a) - width).abs() <= 0.01 * width, "{} {} -> {}", lo, hi, text);
         }
     }
 

@@ -89,7 +89,7 @@ pub use certifier::checkpoint::{
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
-pub use fixed::Sig;
+pub use fixed::{Sig, SigRange};
 pub use gate::{Gate, GateState};
 pub use nonlinear::{Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest};
 pub use radius::{certificate_surface, certificate_value};

@@ -2,7 +2,7 @@
 //! first line is the calibrated verdict.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig};
+use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRange};
 
 /// Counts over a run (continued across checkpoint and resume).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -169,7 +169,7 @@ impl Summary {
                 let region: Vec<String> = outputs
                     .iter()
                     .zip(&self.calibrated_region)
-                    .map(|(name, (lo, hi))| format!("{name} in [{}, {}]", Sig(*lo), Sig(*hi)))
+                    .map(|(name, (lo, hi))| format!("{name} in {}", SigRange(*lo, *hi)))
                     .collect();
                 // The risk is stated for one Jacobian over the region; the nonlinearity guard
                 // tests that, it does not bound a rate that varies (NONLINEAR.md).

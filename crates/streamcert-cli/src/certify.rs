@@ -360,6 +360,7 @@ impl Step<'_> {
                 eprintln!("skipped: {e}");
                 summary.skipped += 1;
                 self.cert.skip(f64::NAN);
+                summary.count_skip();
                 return Ok(None);
             }
             Err(e) => return Err(e),
@@ -384,6 +385,7 @@ impl Step<'_> {
                     eprintln!("skipped: {err}");
                     summary.skipped += 1;
                     self.cert.skip(s.t);
+                    summary.count_skip();
                     return Ok(None);
                 }
                 return Err(CliError::Row(err));

@@ -1,6 +1,7 @@
 //! The verdict a script and a person get from the binary: `--require-certified` sets the
 //! exit status, `--plot` draws the run, a header read as one field names the delimiter
-//! setting to change, and a real plant's verdict does not depend on its sensor's units.
+//! setting to change, a real plant's verdict does not depend on its sensor's units, and a
+//! skipped last row leaves the run not certified.
 
 mod common;
 
@@ -176,4 +177,43 @@ fn the_heat_exchanger_gets_the_same_verdict_in_celsius_and_kelvin() {
         matches!((a[beta].parse::<f64>(), b[beta].parse::<f64>()), (Ok(x), Ok(y)) if (x - y).abs() > 1e-3)
     });
     assert!(differs.count() > 1000, "through the origin the units change beta_hat");
+}
+
+/// A skipped row closes every gate (`--on-bad-row skip`, the library's `Certifier::skip`), so
+/// a run whose last row is bad is not certified at its end: the verdict, `certified_at_end`
+/// and `--require-certified` agree with the closed gate. The same rows without the bad one
+/// end certified, so the check can fail.
+#[test]
+fn a_skipped_last_row_leaves_the_run_not_certified_at_its_end() {
+    let cfg = config("skip-last");
+    let path = cfg.to_str().expect("utf8");
+    let data = simulate("1");
+    // The last row again, one step later, with a NaN where the configuration's output is.
+    let lines = text(&data);
+    let header: Vec<&str> = lines.lines().next().expect("header").split(',').collect();
+    let mut row: Vec<String> =
+        lines.lines().last().expect("rows").split(',').map(String::from).collect();
+    row[0] = format!("{}", row[0].parse::<f64>().expect("time") + 0.02);
+    row[header.iter().position(|&h| h == "y_b").expect("y_b")] = "NaN".into();
+    let mut bad = data.clone();
+    bad.extend_from_slice(format!("{}\n", row.join(",")).as_bytes());
+    let mut verdicts = Vec::new();
+    for (tag, input) in [("good", &data), ("bad", &bad)] {
+        let json = tmp(&format!("skip-last-{tag}.json"));
+        let args = ["certify", "--config", path, "--on-bad-row", "skip", "--require-certified"];
+        let mut args = args.to_vec();
+        args.extend(["--summary", json.to_str().expect("utf8")]);
+        let out = run(&args, input);
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).expect("summary")).expect("json");
+        let verdict = v["verdict"].as_str().expect("verdict").to_string();
+        let certified = v["certified_at_end"].as_bool().expect("bool");
+        assert_eq!(out.status.code(), Some(if certified { 0 } else { 6 }), "{verdict}");
+        verdicts.push((certified, verdict, v["skipped"].as_u64()));
+    }
+    assert!(verdicts[0].0, "the good rows end certified: {}", verdicts[0].1);
+    assert!(!verdicts[1].0, "{}", verdicts[1].1);
+    assert!(verdicts[1].1.contains("at the end: "), "{}", verdicts[1].1);
+    assert!(verdicts[1].1.contains("skipped"), "{}", verdicts[1].1);
+    assert_eq!((verdicts[0].2, verdicts[1].2), (Some(0), Some(1)));
 }

@@ -135,13 +135,27 @@ impl Summary {
         }
         self.calibrated_since = None;
         if let Some(r) = &v.reason {
-            let kind = r.kind();
-            match self.calibrated_reasons.iter_mut().find(|(k, _)| k == kind) {
-                Some((_, n)) => *n += 1,
-                None => self.calibrated_reasons.push((kind.to_string(), 1)),
-            }
-            self.calibrated_last_reason = Some(*r);
+            self.count_reason(*r);
         }
+    }
+
+    /// Count a skipped row (`--on-bad-row skip`): the certifier closes every gate there
+    /// ([`Certifier::skip`](streamcert_certificate::Certifier::skip)), so no gate is open
+    /// since an earlier time and a run whose last row is skipped is not certified at its end.
+    pub(crate) fn count_skip(&mut self) {
+        self.gauss_since = None;
+        self.calibrated_since = None;
+        self.count_reason(NotCertified::SkippedSample);
+    }
+
+    /// One row closed by `r`: counted by kind, and the latest reason.
+    fn count_reason(&mut self, r: NotCertified) {
+        let kind = r.kind();
+        match self.calibrated_reasons.iter_mut().find(|(k, _)| k == kind) {
+            Some((_, n)) => *n += 1,
+            None => self.calibrated_reasons.push((kind.to_string(), 1)),
+        }
+        self.calibrated_last_reason = Some(r);
     }
 
     /// The kind of reason that held the calibrated gate closed for the most rows.

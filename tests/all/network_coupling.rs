@@ -5,7 +5,7 @@
 //! pushes.
 
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, CouplingBlock, CouplingConfig,
+    Calibration, CertificateKind, Certifier, CertifierConfig, CouplingBlock, CouplingConfig,
 };
 use streamcert::compose::{Network, network_rate};
 use streamcert::dynamics::{Coupling, Process, Trajectory};
@@ -247,5 +247,25 @@ fn a_rejected_sample_in_a_batch_reports_the_epochs_before_it() {
         let err = fleet.push_batch(&b, threads, |r| got.push(r.clone())).expect_err("NaN");
         assert_eq!(Some(err.to_string()), serial_err, "{threads} threads");
         assert_eq!(got, want, "{threads} threads: the epochs before the bad sample");
+    }
+}
+
+/// Oracle: the union bound's sum. Split over two subsystems and two estimated couplings, the
+/// risks the calibrations and coupling bounds carry add up to the run-level `δ`; the paper's
+/// certificates carry none.
+#[test]
+fn the_split_risks_add_up_to_the_run_level_risk() {
+    for delta in [0.01, 0.05, 0.2] {
+        let cfg = network(delta);
+        let total = cfg.total_risk().expect("calibrated");
+        assert!((total - delta).abs() <= 1e-15, "{total} {delta}");
+        let shares: Vec<f64> = cfg
+            .subsystems
+            .iter()
+            .map(|s| s.certifier.calibration.as_ref().expect("calibrated").delta)
+            .collect();
+        assert_eq!(shares, vec![delta / 4.0; 2]);
+        let paper = NetworkConfig { certificate: CertificateKind::Gaussian, ..cfg };
+        assert_eq!(paper.total_risk(), None);
     }
 }

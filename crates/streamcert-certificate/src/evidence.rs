@@ -247,7 +247,12 @@ impl std::fmt::Display for NotCertified {
             Self::NoAmbiguityModel => f.write_str("no ambiguity model configured"),
             Self::NoCalibration => f.write_str("no calibration configured"),
             Self::Gap { dt, reference } => {
-                write!(f, "gap of {dt} s (reference step {reference} s): window reset")
+                write!(
+                    f,
+                    "gap of {} s (reference step {} s): window reset",
+                    Sig(*dt),
+                    Sig(*reference)
+                )
             }
             Self::RateDropped { window, upper } => write!(
                 f,

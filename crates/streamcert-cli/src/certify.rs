@@ -11,6 +11,7 @@ use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::Format;
 pub use summary::Summary;
+pub(crate) use summary::reason_words;
 
 mod summary;
 use crate::output::{EvidenceWriter, region_columns};
@@ -73,7 +74,7 @@ pub fn seal_checkpoint(
     let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
     let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
     let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
-    streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(e.to_string()))
+    streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(crate::resume::inner(e)))
 }
 
 /// Open a sealed `certify` checkpoint ([`seal_checkpoint`]) for the configuration `cfg`:
@@ -90,10 +91,10 @@ pub fn open_checkpoint(
     let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
     let text = std::str::from_utf8(bytes)
         .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
-    let json = streamcert_certificate::unseal(text, Some(&cfg.certifier))
-        .map_err(|e| bad(e.to_string()))?;
-    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
-    let cert = cp.certifier.verify().map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint =
+        crate::resume::open(text, &cfg.certifier, |cp: &Checkpoint| cp.certifier.config())
+            .map_err(bad)?;
+    let cert = cp.certifier.verify().map_err(|e| bad(crate::resume::inner(e)))?;
     if cert.config() != &cfg.certifier {
         return Err(bad("the checkpoint was written with a different configuration".into()));
     }

@@ -14,6 +14,7 @@ pub mod input;
 pub mod network;
 pub mod output;
 pub mod picture;
+mod resume;
 pub mod simulate;
 
 use std::fmt;

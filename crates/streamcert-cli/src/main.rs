@@ -384,6 +384,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 }
             };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
+            eprintln!("{}", network::verdict_line(&cfg.network, &s));
             eprintln!(
                 "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} ({})",
                 s.rows,

@@ -135,6 +135,10 @@ fn split_and_resume_equals_one_run() {
         second.as_bytes(),
     );
     assert_eq!(bad.status.code(), Some(5), "{}", text(&bad.stderr));
+    // The refusal names the setting that differs, with both values.
+    let said = text(&bad.stderr);
+    assert!(said.contains("margin: 0.05 in the checkpoint, 0.06 now"), "{said}");
+    assert!(!said.contains("checkpoint: checkpoint"), "{said}");
     // A damaged checkpoint (one flipped bit in the payload or the header, truncated, empty,
     // or another file altogether) is refused with exit 5 and a message, never a panic.
     let good = std::fs::read(&cp).expect("checkpoint");

@@ -217,3 +217,76 @@ fn a_skipped_last_row_leaves_the_run_not_certified_at_its_end() {
     assert!(verdicts[1].1.contains("skipped"), "{}", verdicts[1].1);
     assert_eq!((verdicts[0].2, verdicts[1].2), (Some(0), Some(1)));
 }
+
+/// `network`'s summary starts with its verdict: "CERTIFIED" exactly when the network gate is
+/// open at the last epoch (the last row's `open`, and `--require-certified`'s exit status),
+/// with the run-level risk; otherwise the reason that held longest and the one at the end.
+/// The paper-only certificate, named with the example's `risk` kept, composes (its local
+/// certificates differ from the calibrated ones) and its verdict says it has no stated risk.
+#[test]
+fn the_network_verdict_agrees_with_the_gate_at_the_last_epoch() {
+    let data = run(
+        &[
+            "simulate",
+            "g5",
+            "--experiment",
+            "2",
+            "--coupling",
+            "bidirectional",
+            "--seed",
+            "1",
+            "--steps",
+            "3000",
+        ],
+        b"",
+    );
+    assert!(data.status.success());
+    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let write = |tag: &str, body: &str| {
+        let path = tmp(&format!("network-verdict-{tag}.toml"));
+        std::fs::write(&path, body).expect("write");
+        path
+    };
+    let calibrated = write("calibrated", &example);
+    let all = text(&data.stdout);
+    let half: String = all.lines().take(1500).map(|l| format!("{l}\n")).collect();
+    let mut seen = [false, false];
+    let mut local_b = Vec::new();
+    for input in [all.as_str(), half.as_str()] {
+        let path = calibrated.to_str().expect("utf8");
+        let out = run(&["network", "--config", path, "--require-certified"], input.as_bytes());
+        let stderr = text(&out.stderr);
+        let verdict = stderr.lines().next().expect("a verdict line");
+        let rows = text(&out.stdout);
+        let header: Vec<&str> = rows.lines().next().expect("header").split(',').collect();
+        let last: Vec<&str> = rows.lines().last().expect("rows").split(',').collect();
+        let open = last[header.iter().position(|&h| h == "open").expect("open")] == "1";
+        assert_eq!(verdict.starts_with("verdict: network CERTIFIED"), open, "{verdict}");
+        assert!(verdict.contains("risk delta = 0.01"), "{verdict}");
+        assert_eq!(verdict.contains("the reason that held longest"), !open, "{verdict}");
+        assert_eq!(out.status.code(), Some(if open { 0 } else { 6 }), "{verdict}");
+        seen[usize::from(open)] = true;
+        if input.len() == all.len() {
+            let b = header.iter().position(|&h| h == "cert_B").expect("cert_B");
+            local_b = rows.lines().skip(1).map(|l| l.split(',').nth(b).map(String::from)).collect();
+        }
+    }
+    assert!(seen[0] && seen[1], "both outcomes exercised: {seen:?}");
+    let paper = write(
+        "paper",
+        &example.replace("certificate = \"calibrated\"", "certificate = \"gaussian\""),
+    );
+    let out = run(&["network", "--config", paper.to_str().expect("utf8")], &data.stdout);
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let stderr = text(&out.stderr);
+    assert!(stderr.starts_with("verdict (paper-only mode, NO STATED RISK)"), "{stderr}");
+    let rows = text(&out.stdout);
+    let b = rows.lines().next().expect("header").split(',').position(|h| h == "cert_B");
+    let paper_b: Vec<Option<String>> = rows
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(b.expect("cert_B")).map(String::from))
+        .collect();
+    assert_eq!(paper_b.len(), local_b.len());
+    assert_ne!(paper_b, local_b, "the Gaussian certificates compose, not the calibrated ones");
+}

@@ -130,6 +130,26 @@ impl NetworkConfig {
         self
     }
 
+    /// The run-level risk the network verdict carries: `Σ_i δ_i + Σ_i δ_{c,i}`, every
+    /// subsystem's calibrated risk and its coupling bounds' (by the union bound, the chance
+    /// that any local certificate overstates its rate or any estimated coupling bound
+    /// understates its gain during the run; [`split_risk`](Self::split_risk)`(δ)` makes it
+    /// `δ`). `None` when the network composes the paper's certificates, which carry no stated
+    /// risk.
+    #[must_use]
+    pub fn total_risk(&self) -> Option<f64> {
+        (self.certificate == CertificateKind::Calibrated).then(|| {
+            self.subsystems
+                .iter()
+                .map(|s| {
+                    let c = &s.certifier;
+                    c.calibration.as_ref().map_or(0.0, |cal| cal.delta)
+                        + c.couplings.as_ref().map_or(0.0, |k| k.delta)
+                })
+                .sum()
+        })
+    }
+
     /// Check every field (the subsystems' certifiers are checked when built).
     ///
     /// # Errors

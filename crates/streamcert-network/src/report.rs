@@ -1,7 +1,7 @@
 //! [`EpochReport`]: what the network service says at one epoch.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::NotCertified;
+use streamcert_certificate::{NotCertified, Sig};
 
 /// Why a subsystem does not count as certified at an epoch.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -28,7 +28,7 @@ impl std::fmt::Display for NotCertifiedLocal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::NoSample => f.write_str("no sample yet"),
-            Self::Stale { last } => write!(f, "stale: last sample at t = {last}"),
+            Self::Stale { last } => write!(f, "stale: last sample at t = {}", Sig(*last)),
             Self::Local(r) => write!(f, "{r}"),
             Self::CouplingUnbounded { from } => {
                 write!(f, "the coupling from subsystem {from} has no upper bound yet")

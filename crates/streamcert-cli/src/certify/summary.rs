@@ -261,8 +261,8 @@ impl Summary {
     }
 }
 
-/// A reason's kind in words.
-fn reason_words(kind: &str) -> String {
+/// A reason's kind in words, with the kind (the certify summary's and the network verdict's).
+pub(crate) fn reason_words(kind: &str) -> String {
     let words = match kind {
         "warming_up" => "warming up (too few columns yet)",
         "insufficient_excitation" | "weak_instruments" => {

@@ -337,7 +337,10 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
         if !(delta > 0.0 && delta < 1.0) {
             return Err(bad(format!("[network] risk must be in (0, 1), got {delta}")));
         }
+        // `split_risk` selects the calibrated certificate; the paper-only choice stands (its
+        // subsystems' calibrations still run at their share, for comparison).
         network = network.split_risk(delta);
+        network.certificate = section.certificate;
     }
     // Build once: every check of the network and of each certifier.
     NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
@@ -408,13 +411,16 @@ mod tests {
         assert_eq!(blocks, Some((vec![CouplingBlock { first: 1, len: 1 }], 0.01)));
         assert_eq!(cfg.network.estimated, vec![EstimatedCoupling { to: 0, from: 1, block: 0 }]);
         assert_eq!(cfg.network.couplings, vec![(1, 0, 0.4)]);
-        // A run-level risk with the paper's certificate named composes the calibrated one.
+        // A run-level risk with the paper's certificate named: the named certificate composes
+        // (the explicit paper-only choice, labelled as such), and the calibrations beside it
+        // run at their share.
         let text = paper.replace("# risk = 0.01 ", "risk = 0.02 ");
         let cfg = parse(&text, "risk").expect("valid");
-        assert_eq!(cfg.network.certificate, CertificateKind::Calibrated);
+        assert_eq!(cfg.network.certificate, CertificateKind::Gaussian);
         for s in &cfg.network.subsystems {
             assert_eq!(s.certifier.calibration.map(|c| c.delta), Some(0.01));
         }
+        assert_eq!(cfg.network.total_risk(), None, "the paper-only verdict states no risk");
     }
 
     #[test]

@@ -12,6 +12,7 @@ mod config;
 mod distributed;
 mod input;
 mod output;
+mod verdict;
 
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
@@ -23,6 +24,7 @@ pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse};
 pub use distributed::{Cluster, Reopen, SiteReport, run_timely};
 use input::Rows;
 use output::EpochWriter;
+pub use verdict::verdict_line;
 
 use crate::CliError;
 use crate::output::Format;
@@ -47,6 +49,18 @@ pub struct NetSummary {
     /// Whether the network gate was open at the last epoch (for `--require-certified`).
     #[serde(default)]
     pub open_at_end: bool,
+    /// Since when the network gate has been open without a break (`None`: closed).
+    #[serde(default)]
+    pub open_since: Option<f64>,
+    /// The network rate at the last epoch.
+    #[serde(default)]
+    pub last_rate: Option<f64>,
+    /// Epochs with the gate closed, by kind of reason (a kind counted once per epoch).
+    #[serde(default)]
+    pub reasons: Vec<(String, u64)>,
+    /// Why the gate was closed at the last epoch, in words (`None`: open).
+    #[serde(default)]
+    pub last_reason: Option<String>,
     /// The epochs of the picture (`--plot`), not checkpointed.
     #[serde(skip)]
     pub trace: Option<crate::picture::Trace>,
@@ -81,7 +95,8 @@ fn save(path: &Path, net: &NetworkCertifier, summary: &NetSummary) -> Result<(),
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let cp = Checkpoint { network: net.clone(), summary: summary.clone() };
     let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
-    let text = streamcert_certificate::seal(&json, net.config()).map_err(|e| bad(e.to_string()))?;
+    let text = streamcert_certificate::seal(&json, net.config())
+        .map_err(|e| bad(crate::resume::inner(e)))?;
     crate::certify::write_atomic(path, &text)
 }
 
@@ -90,9 +105,9 @@ fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), 
     let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
     let text = std::str::from_utf8(&bytes)
         .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
-    let json =
-        streamcert_certificate::unseal(text, Some(&cfg.network)).map_err(|e| bad(e.to_string()))?;
-    let cp: Checkpoint = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let cp: Checkpoint =
+        crate::resume::open(text, &cfg.network, |cp: &Checkpoint| cp.network.config())
+            .map_err(bad)?;
     let net = cp.network.verify().map_err(|e| bad(e.to_string()))?;
     if net.config() != &cfg.network {
         return Err(bad("the checkpoint was written with a different configuration".into()));

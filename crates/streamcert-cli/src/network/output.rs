@@ -80,6 +80,7 @@ impl<W: Write> EpochWriter<W> {
         summary.certified += u64::from(r.certified);
         summary.open += u64::from(r.open);
         summary.open_at_end = r.open;
+        super::verdict::count(summary, r, names);
         if let Some(trace) = &mut summary.trace {
             trace.push_epoch(r.t, r.rate, r.open, r.not_certified.len(), &r.local);
         }

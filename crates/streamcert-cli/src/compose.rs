@@ -1,6 +1,7 @@
 //! `streamcert compose`: local rates and coupling bounds in, the network certificate out.
 
 use serde_json::json;
+use streamcert_certificate::Sig;
 use streamcert_compose::{DenseMethod, Network, SparseOptions, certify_sparse, network_rate};
 
 use crate::CliError;
@@ -123,6 +124,13 @@ pub fn run(
     json_out: bool,
 ) -> Result<String, CliError> {
     let rates: Vec<f64> = numbers(rates_text, rates_name)?.concat();
+    // A rate that is not finite is the rates file's error, not the gains file's.
+    if let Some(k) = rates.iter().position(|r| !r.is_finite()) {
+        return Err(CliError::Input {
+            file: rates_name.into(),
+            message: format!("rate {} (subsystem {k}) must be finite, got {}", k + 1, rates[k]),
+        });
+    }
     let edges = gain_edges(gains_text, gains_name, rates.len(), format)?;
     let invalid = |e: streamcert_compose::ComposeError| CliError::Input {
         file: gains_name.into(),
@@ -173,15 +181,18 @@ pub fn run(
         });
         return Ok(format!("{v}\n"));
     }
+    // For a person: six significant digits (`--json` keeps every digit).
     let mut s = format!("subsystems: {}\ncoupling edges: {}\n", net.len(), net.edges());
-    s += &format!("network rate: {rate}\ncontracting: {}\n", if rate > 0.0 { "yes" } else { "no" });
+    let contracting = if rate > 0.0 { "yes" } else { "no" };
+    s += &format!("network rate: {}\ncontracting: {contracting}\n", Sig(rate));
     s += &format!(
         "symmetric (unweighted) bound: {}\n",
-        symmetric.map_or("not computed".into(), |v| v.to_string())
+        symmetric.map_or("not computed".into(), |v| Sig(v).to_string())
     );
-    s += &format!("critical coupling scale: {critical}\nmethod: {method_name}\n");
+    s += &format!("critical coupling scale: {}\nmethod: {method_name}\n", Sig(critical));
     if weights.len() <= 20 {
-        s += &format!("weights: {weights:?}\n");
+        let w: Vec<String> = weights.iter().map(|&v| Sig(v).to_string()).collect();
+        s += &format!("weights: [{}]\n", w.join(", "));
     } else {
         s += &format!("weights: {} values (use --json to get them)\n", weights.len());
     }

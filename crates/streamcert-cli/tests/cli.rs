@@ -381,11 +381,24 @@ fn compose_two_subsystems_equals_lemma_1() {
     let v: serde_json::Value = serde_json::from_str(&text(&out.stdout)).expect("json");
     let r = v["rate"].as_f64().expect("rate");
     assert!(r <= lemma + 1e-12 && r > lemma - 1e-3, "{r} vs {lemma}");
-    // A negative gain is an input error.
+    // The text form: the JSON's numbers to six significant digits, as a person writes them.
+    std::fs::write(&gains, "0 0.5\n0.5 0\n").expect("write");
+    let said = text(&compose(&rates, &gains, &[]).stdout);
+    let rate = format!("network rate: {}\n", streamcert_certificate::Sig(lemma));
+    assert!(said.contains(&rate), "{said}");
+    // A negative gain is an input error of the gains file; a rate that is not finite, of
+    // the rates file.
     std::fs::write(&gains, "0 -0.5\n0.5 0\n").expect("write");
     let out = compose(&rates, &gains, &[]);
     assert_eq!(out.status.code(), Some(3));
     assert!(text(&out.stderr).contains(">= 0"));
+    assert!(text(&out.stderr).contains("compose-gains.txt"), "{}", text(&out.stderr));
+    std::fs::write(&gains, "0 0.5\n0.5 0\n").expect("write");
+    std::fs::write(&rates, "0.8\nNaN\n").expect("write");
+    let out = compose(&rates, &gains, &[]);
+    assert_eq!(out.status.code(), Some(3));
+    let said = text(&out.stderr);
+    assert!(said.contains("compose-rates.txt") && said.contains("rate 2"), "{said}");
 }
 
 /// `simulate g5 --experiment E --seed s` writes the data of `cargo xtask reproduce` run `s`:

@@ -303,5 +303,59 @@ fn windows_push(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, regression_update, certifier_step, computation_only, windows_push);
+/// The slowest step: the sample that completes a block where the longest window looks and
+/// the guards run their tests (an `O(B)` pass over each window's blocks). Found by timing
+/// every step of a run once (the look's step is tens of times the median; the choice only
+/// picks which sample to measure), then measured on clones of the state just before it.
+/// The default configuration (`p = m = 1`, `h = 5`) at `M = 150` and `M = 600`: its cost
+/// grows with `M`, the amortised step's does not.
+fn worst_step(c: &mut Criterion) {
+    let mut group = c.benchmark_group("certifier_worst_step");
+    let len = 40_000usize;
+    let data = stream(1, 1, len);
+    for window in [150usize, 600] {
+        let mut cfg = CertifierConfig::new(
+            RegressionConfig::new(1, 1, window, 5, 1e-4),
+            vec![-1.0],
+            0.2,
+            0.05,
+            10,
+        );
+        cfg.calibration = Some(Calibration::new(0.01));
+        let mut cert = Certifier::new(cfg).expect("valid");
+        // The slowest step after every window is full (16 M columns and some).
+        let settle = 17 * window + 200;
+        let (mut worst, mut before, mut at) = (std::time::Duration::ZERO, None, 0);
+        for k in 0..len {
+            let s = &data[2 * k..2 * k + 2];
+            let t = 0.01 * (k + 1) as f64;
+            let snapshot = (k >= settle).then(|| cert.clone());
+            let start = std::time::Instant::now();
+            cert.push(t, &s[..1], &s[1..]).expect("valid");
+            let took = start.elapsed();
+            if took > worst && k >= settle {
+                (worst, before, at) = (took, snapshot, k);
+            }
+        }
+        let before = before.expect("a step after the windows filled");
+        let (t, s) = (0.01 * (at + 1) as f64, [data[2 * at], data[2 * at + 1]]);
+        group.bench_function(BenchmarkId::new("default", format!("p1_m1_M{window}")), |b| {
+            b.iter_batched(
+                || before.clone(),
+                |mut c| black_box(c.push(t, &s[..1], &s[1..]).expect("valid").calibrated.value),
+                criterion::BatchSize::SmallInput,
+            );
+        });
+    }
+    group.finish();
+}
+
+criterion_group!(
+    benches,
+    regression_update,
+    certifier_step,
+    computation_only,
+    windows_push,
+    worst_step
+);
 criterion_main!(benches);

@@ -42,12 +42,24 @@ fn run(bin: &Path, args: &[&str], stdin: &[u8]) -> Result<(i32, String, String)>
     let out = child.wait_with_output()?;
     let _ = feeder.join();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    let first = stderr
+    let mut first = stderr
         .lines()
         .find(|l| !l.starts_with("summary:") && !l.is_empty())
         .or_else(|| stderr.lines().next())
         .unwrap_or("")
         .to_string();
+    // A run that goes on after a message (a skipped row) ends with its verdict: append it.
+    if let Some(v) = stderr.lines().find(|l| l.starts_with("verdict")) {
+        if !first.starts_with("verdict") {
+            first = format!("{first} / {v}");
+        }
+    }
+    // A TOML error says what is wrong below its excerpt of the file: append those lines.
+    if first.contains("TOML parse error") {
+        for l in stderr.lines().skip(1).filter(|l| !l.trim().is_empty() && !l.contains('|')) {
+            first = format!("{first} / {}", l.trim());
+        }
+    }
     Ok((out.status.code().unwrap_or(-1), first, String::from_utf8_lossy(&out.stdout).into()))
 }
 
@@ -297,10 +309,34 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
         run(&bin, &["certify", "--config", &s(&short_cfg)?], lines[..50].join("\n").as_bytes())?,
     );
 
+    let required = "[columns]\ntime = \"t\"\noutputs = [\"y_b\"]\ninputs = [\"u_b\"]\n\
+                    [controller]\ngain = [[-4.0]]\n[certificate]\nmargin = 0.05\n";
+    let required_cfg = path("required.toml");
+    std::fs::write(&required_cfg, required)?;
+    record(
+        &mut rows,
+        "only the required keys (columns, gain, margin)",
+        run(&bin, &["certify", "--config", &s(&required_cfg)?], lines[..50].join("\n").as_bytes())?,
+    );
+    let no_margin_cfg = path("no-margin.toml");
+    std::fs::write(&no_margin_cfg, required.replace("margin = 0.05\n", ""))?;
+    record(
+        &mut rows,
+        "a required key missing (`margin`)",
+        run(&bin, &["certify", "--config", &s(&no_margin_cfg)?], b"")?,
+    );
+    let bad_last =
+        format!("{}\n{}\n", lines[..900].join("\n"), replace_field(lines[900], 3, "NaN"));
+    record(
+        &mut rows,
+        "a bad last row, `--on-bad-row skip` (a skipped row closes the gates)",
+        certify(&["--on-bad-row", "skip"], bad_last.as_bytes())?,
+    );
+
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "# Reliability: bad inputs and what the user sees\n\nProduced by `cargo xtask reliability` (target/reliability/RELIABILITY.md; a copy is committed at the top level). Each case runs the release `streamcert` binary on data from `streamcert simulate g5 --experiment 1 --seed 1` and the default configuration (`certify --print-config`), edited as the case says. Exit codes: 0 success, 2 configuration, 3 input data, 4 I/O, 5 checkpoint. The message is the first line on standard error (for runs that succeed, the summary line)."
+        "# Reliability: bad inputs and what the user sees\n\nProduced by `cargo xtask reliability` (target/reliability/RELIABILITY.md; a copy is committed at the top level). Each case runs the release `streamcert` binary on data from `streamcert simulate g5 --experiment 1 --seed 1` and the default configuration (`certify --print-config`), edited as the case says. Exit codes: 0 success, 2 configuration, 3 input data, 4 I/O, 5 checkpoint. The message is the first line on standard error (for runs that succeed, the verdict line; for a TOML error, with the lines that say what is wrong)."
     );
     let _ = writeln!(text, "\n{}", markdown(&["case", "exit", "message"], &rows));
     write(&out.join("RELIABILITY.md"), &text)?;

@@ -96,3 +96,56 @@ pub use radius::{certificate_surface, certificate_value};
 pub use row::{EVIDENCE_COLUMNS, EvidenceRow, ReasonText};
 pub use streamcert_regression::Interval;
 pub use streamcert_regression::ResidualSource;
+
+/// The module layering ARCHITECTURE.md states, checked on the source: `look` depends on no
+/// certificate, the guards only on `look` (never on the calibrated or nonlinear certificate),
+/// and the nonlinear certificate not on the calibrated one (which owns it).
+#[cfg(test)]
+mod layering {
+    /// The code lines of `source` (doc and line comments dropped) that name `module`.
+    fn uses(source: &str, module: &str) -> Vec<String> {
+        source
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.starts_with("//"))
+            .filter(|l| l.contains(&format!("crate::{module}")))
+            .map(String::from)
+            .collect()
+    }
+
+    #[test]
+    fn each_module_uses_only_the_modules_beneath_it() {
+        let look = [
+            include_str!("look.rs"),
+            include_str!("look/hotelling.rs"),
+            include_str!("look/quantile.rs"),
+            include_str!("look/standing.rs"),
+        ];
+        let guards = [include_str!("guard/change.rs"), include_str!("guard/model.rs")];
+        let nonlinear = [
+            include_str!("nonlinear.rs"),
+            include_str!("nonlinear/bounds.rs"),
+            include_str!("nonlinear/cells.rs"),
+            include_str!("nonlinear/check.rs"),
+            include_str!("nonlinear/config.rs"),
+            include_str!("nonlinear/features.rs"),
+        ];
+        for source in look {
+            for module in ["calibrated", "nonlinear", "guard", "certifier"] {
+                assert_eq!(uses(source, module), Vec::<String>::new(), "look uses {module}");
+            }
+        }
+        for source in guards {
+            for module in ["calibrated", "nonlinear", "certifier"] {
+                assert_eq!(uses(source, module), Vec::<String>::new(), "a guard uses {module}");
+            }
+        }
+        for source in nonlinear {
+            for module in ["calibrated", "guard", "certifier"] {
+                assert_eq!(uses(source, module), Vec::<String>::new(), "nonlinear uses {module}");
+            }
+        }
+        // The check sees a use where there is one.
+        assert_eq!(uses("use crate::calibrated::X;\n// crate::calibrated", "calibrated").len(), 1);
+    }
+}

@@ -103,9 +103,8 @@ mod check;
 mod config;
 mod features;
 
-pub use bounds::{f_quantile, polynomial_bounds, simultaneous_multiplier};
+pub use bounds::polynomial_bounds;
 use cells::Bounds;
-pub(crate) use check::hotelling_wald;
 use check::{LackOfFit, WaldAt, refused, wald};
 pub use config::NonlinearConfig;
 pub use features::{Feature, FeatureSet};
@@ -113,26 +112,10 @@ pub use features::{Feature, FeatureSet};
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, Interval, RegressionConfig, WindowEstimate};
 
+pub use crate::look::hotelling::{NonlinearityTest, f_quantile, simultaneous_multiplier};
 use crate::look::quantile::t_quantile;
 use crate::look::{Look, standing};
 use crate::{CertifyError, NotCertified};
-
-/// The Wald test of the terms of degree `>= 2` at one look.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct NonlinearityTest {
-    /// `W = θ̂_Hᵀ Ω̂_HH⁻¹ θ̂_H`.
-    pub statistic: f64,
-    /// Hotelling's quantile `ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)`, `q = D − 1`.
-    pub threshold: f64,
-}
-
-impl NonlinearityTest {
-    /// `true` when the dynamics vary over the region at the test's risk.
-    #[must_use]
-    pub fn significant(&self) -> bool {
-        self.statistic > self.threshold
-    }
-}
 
 /// One window's latest nonlinear look.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -444,9 +427,4 @@ impl NonlinearState {
             if best.is_some() { None } else { Some(contradicted.or(misfit).unwrap_or(warming)) };
         (best, blocked)
     }
-}
-
-/// Whether two window sets have the same lengths (a restored state against a fresh one).
-pub(crate) fn same_windows(a: &InstrumentedWindows, b: &InstrumentedWindows) -> bool {
-    a.count() == b.count() && (0..a.count()).all(|w| a.window(w) == b.window(w))
 }

@@ -27,8 +27,8 @@ use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, RegressionConfig, WindowEstimate, linalg};
 
 use crate::CertifyError;
+use crate::look::hotelling::simultaneous_multiplier;
 use crate::look::quantile::{look_risk, t_quantile};
-use crate::nonlinear::simultaneous_multiplier;
 
 /// One coupling block: the input channels `first .. first + len` of the subsystem are one
 /// neighbour's measured outputs (not actuated: their rows of `K` must be zero).

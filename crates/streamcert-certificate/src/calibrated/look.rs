@@ -163,7 +163,7 @@ impl CalibratedState {
             // The change guard: the look must agree with the newest data.
             if let Some(guard) = &self.change {
                 let first = self.look_cols[w].saturating_sub(look.window as u64);
-                if let Err(reason) = guard.admits(w, look, first) {
+                if let Err(reason) = guard.admits(w, (look.window, look.beta_hat, look.sd), first) {
                     changed.get_or_insert(reason);
                     return false;
                 }

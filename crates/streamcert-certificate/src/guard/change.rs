@@ -77,7 +77,7 @@
 use serde::{Deserialize, Serialize};
 
 use crate::NotCertified;
-use crate::calibrated::{WindowLook, t_quantile};
+use crate::look::quantile::t_quantile;
 
 /// The fresh estimate of the shortest window.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -224,14 +224,15 @@ impl ChangeGuard {
         self.fresh.first().copied().flatten()
     }
 
-    /// Whether window `w`'s `look`, whose data start at column `first`, agrees with the newest
-    /// data: `Err(PlantChanged)` when a window's split test rejects and the look holds data
-    /// from before that split's newer part, or when the fresh estimate of any window `v <= w`
-    /// (taken at every look, so at least as recent as any) lies significantly below it.
+    /// Whether window `w`'s look (its length in columns `window`, its `β̂_w` and `s_w`), whose
+    /// data start at column `first`, agrees with the newest data: `Err(PlantChanged)` when a
+    /// window's split test rejects and the look holds data from before that split's newer
+    /// part, or when the fresh estimate of any window `v <= w` (taken at every look, so at
+    /// least as recent as any) lies significantly below it.
     pub(crate) fn admits(
         &self,
         w: usize,
-        look: &WindowLook,
+        (window, beta_hat, sd): (usize, f64, f64),
         first: u64,
     ) -> Result<(), NotCertified> {
         // A drop inside a window: its newer part significantly below its older one, now or
@@ -239,21 +240,17 @@ impl ChangeGuard {
         for &(older, upper, boundary) in self.split.iter().flatten().chain(&self.changed) {
             if upper < older && first < boundary {
                 return Err(NotCertified::PlantChanged {
-                    window: look.window,
+                    window,
                     beta_hat: older,
                     newest_upper: upper,
                 });
             }
         }
         for f in self.fresh.iter().take(w + 1).flatten() {
-            let spread = (f.sd * f.sd + look.sd * look.sd).sqrt();
+            let spread = (f.sd * f.sd + sd * sd).sqrt();
             let upper = f.beta_hat + f.quantile * spread;
-            if upper < look.beta_hat {
-                return Err(NotCertified::PlantChanged {
-                    window: look.window,
-                    beta_hat: look.beta_hat,
-                    newest_upper: upper,
-                });
+            if upper < beta_hat {
+                return Err(NotCertified::PlantChanged { window, beta_hat, newest_upper: upper });
             }
         }
         Ok(())

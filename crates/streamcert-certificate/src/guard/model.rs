@@ -75,7 +75,8 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, WindowEstimate};
 
-use crate::nonlinear::{NonlinearityTest, hotelling_wald, same_windows};
+use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
+use crate::look::same_windows;
 use crate::{CertifyError, NotCertified};
 
 /// Which groups of extra regressors the guard fits and tests.

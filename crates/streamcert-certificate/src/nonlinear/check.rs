@@ -26,9 +26,9 @@
 //! [`NonlinearConfig::check_terms`]: super::NonlinearConfig::check_terms
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, WindowEstimate, linalg};
+use streamcert_regression::{InstrumentedWindows, WindowEstimate};
 
-use super::{NonlinearityTest, f_quantile};
+use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
 use crate::{CertifyError, NotCertified};
 
 /// The larger fit and its scratch.
@@ -96,30 +96,6 @@ pub(super) fn wald(
         rhs[i] = theta[first + i];
     }
     hotelling_wald(q, nu, alpha, (sub, rhs, work))
-}
-
-/// The Wald statistic `θ̂_Sᵀ Ω̂_SS⁻¹ θ̂_S` of `q` coefficients whose covariance `Ω̂_SS` is in
-/// `sub` (`q × q`, overwritten by its factor) and values in `rhs` (overwritten), against
-/// Hotelling's quantile `ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)`; `None` when `Ω̂_SS` is not
-/// positive definite, `ν − q + 1 <= 0`, or a value is not finite. `work`: `q` values.
-pub(crate) fn hotelling_wald(
-    q: usize,
-    nu: f64,
-    alpha: f64,
-    (sub, rhs, work): (&mut [f64], &mut [f64], &mut [f64]),
-) -> Option<NonlinearityTest> {
-    if !linalg::cholesky_in_place(&mut sub[..q * q], q) {
-        return None;
-    }
-    work[..q].copy_from_slice(&rhs[..q]);
-    linalg::cholesky_solve_in_place(&sub[..q * q], q, &mut rhs[..q]);
-    let quad: f64 = work[..q].iter().zip(&rhs[..q]).map(|(a, b)| a * b).sum();
-    let (qf, d2) = (q as f64, nu - q as f64 + 1.0);
-    if !(quad.is_finite() && d2 > 0.0) {
-        return None;
-    }
-    let threshold = nu * qf / d2 * f_quantile(qf, d2, alpha);
-    threshold.is_finite().then_some(NonlinearityTest { statistic: quad, threshold })
 }
 
 impl LackOfFit {
@@ -234,7 +210,7 @@ impl LackOfFit {
             && self.order == fresh.order
             && self.lags.len() == fresh.lags.len()
             && self.lags.iter().all(|v| v.is_finite())
-            && super::same_windows(&self.windows, &fresh.windows)
+            && crate::look::same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && [
                 (self.z.len(), fresh.z.len()),
@@ -284,7 +260,7 @@ impl super::NonlinearState {
             && self.library == fresh.library
             && self.horizon == fresh.horizon
             && self.gain == fresh.gain
-            && super::same_windows(&self.windows, &fresh.windows)
+            && crate::look::same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && self.latest.len() == fresh.latest.len()
             && [(&self.check, &fresh.check), (&self.order, &fresh.order)].iter().all(|p| match p {

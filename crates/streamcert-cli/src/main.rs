@@ -5,7 +5,6 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use streamcert_certificate::Sig;
 use streamcert_cli::{CliError, certify, compose, config, network, simulate};
 use streamcert_dynamics::Coupling;
 use streamcert_experiments::Experiment;
@@ -74,12 +73,16 @@ enum Command {
     /// writes), one certifier per subsystem, the network composed with the coupling bounds at
     /// every epoch. One output row per epoch: network rate, certified, gate, critical coupling
     /// scale, the limiting subsystem and coupling, the subsystems not certified and why, and
-    /// each local certificate. A summary goes to stderr.
+    /// each local certificate. A summary goes to stderr (or to --summary FILE as JSON).
     Network {
         #[command(flatten)]
         io: Stream,
         #[command(flatten)]
         persist: Persist,
+        /// Write the summary as JSON to FILE instead of text on stderr (process 0 of a run
+        /// over several processes).
+        #[arg(long)]
+        summary: Option<PathBuf>,
         #[command(flatten)]
         cluster: ClusterArgs,
         #[command(flatten)]
@@ -306,7 +309,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             }
             Ok(verdict(require.require_certified, s.certified_at_end(&cfg.certifier)))
         }
-        Command::Network { io, persist, cluster, require, plot } => {
+        Command::Network { io, persist, summary, cluster, require, plot } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
                 print!("{}", network::EXAMPLE_CONFIG);
@@ -384,16 +387,14 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 }
             };
             out.flush().map_err(|e| CliError::io("writing output", e))?;
-            eprintln!("{}", network::verdict_line(&cfg.network, &s));
-            eprintln!(
-                "summary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} ({})",
-                s.rows,
-                s.replayed,
-                s.epochs,
-                s.certified,
-                s.open,
-                s.first_open.map_or("never opened".into(), |t| format!("first at t = {}", Sig(t))),
-            );
+            match summary {
+                Some(file) => {
+                    let v = network::summary_json(&cfg.network, &s);
+                    std::fs::write(&file, format!("{v}\n"))
+                        .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
+                }
+                None => eprintln!("{}", network::summary_text(&cfg.network, &s)),
+            }
             Ok(verdict(require.require_certified, s.open_at_end))
         }
         Command::Compose { rates, gains, gains_format, method, json } => {

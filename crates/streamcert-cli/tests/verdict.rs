@@ -257,11 +257,23 @@ fn the_network_verdict_agrees_with_the_gate_at_the_last_epoch() {
         let out = run(&["network", "--config", path, "--require-certified"], input.as_bytes());
         let stderr = text(&out.stderr);
         let verdict = stderr.lines().next().expect("a verdict line");
+        // `--summary FILE`: the same verdict, and whether the gate is open at the end.
+        let json = tmp("network-verdict.json");
+        let quiet = run(
+            &["network", "--config", path, "--summary", json.to_str().expect("utf8")],
+            input.as_bytes(),
+        );
+        assert!(quiet.status.success() && quiet.stderr.is_empty(), "{}", text(&quiet.stderr));
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&json).expect("summary")).expect("json");
+        assert_eq!(v["verdict"].as_str(), Some(verdict));
         let rows = text(&out.stdout);
         let header: Vec<&str> = rows.lines().next().expect("header").split(',').collect();
         let last: Vec<&str> = rows.lines().last().expect("rows").split(',').collect();
         let open = last[header.iter().position(|&h| h == "open").expect("open")] == "1";
         assert_eq!(verdict.starts_with("verdict: network CERTIFIED"), open, "{verdict}");
+        assert_eq!(v["certified_at_end"].as_bool(), Some(open), "{v}");
+        assert_eq!(v["risk"].as_f64(), Some(0.01), "{v}");
         assert!(verdict.contains("risk delta = 0.01"), "{verdict}");
         assert_eq!(verdict.contains("the reason that held longest"), !open, "{verdict}");
         assert_eq!(out.status.code(), Some(if open { 0 } else { 6 }), "{verdict}");

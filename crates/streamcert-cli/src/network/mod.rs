@@ -24,7 +24,7 @@ pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse};
 pub use distributed::{Cluster, Reopen, SiteReport, run_timely};
 use input::Rows;
 use output::EpochWriter;
-pub use verdict::verdict_line;
+pub use verdict::{summary_json, summary_text, verdict_line};
 
 use crate::CliError;
 use crate::output::Format;

@@ -2,6 +2,7 @@
 //! the end, at which risk, and, when it is closed, the reason that held longest and the one
 //! at the end.
 
+use serde_json::json;
 use streamcert_certificate::Sig;
 use streamcert_network::{EpochReport, NetworkConfig, NotCertifiedLocal};
 
@@ -120,4 +121,46 @@ pub fn verdict_line(cfg: &NetworkConfig, s: &NetSummary) -> String {
             )
         }
     }
+}
+
+/// The summary as text (stderr): the verdict line, then the counts.
+#[must_use]
+pub fn summary_text(cfg: &NetworkConfig, s: &NetSummary) -> String {
+    format!(
+        "{}\nsummary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} \
+         ({})",
+        verdict_line(cfg, s),
+        s.rows,
+        s.replayed,
+        s.epochs,
+        s.certified,
+        s.open,
+        s.first_open.map_or("never opened".into(), |t| format!("first at t = {}", Sig(t))),
+    )
+}
+
+/// The summary as the JSON object `network --summary FILE` writes: the verdict line first,
+/// whether the gate is open at the last epoch, the run-level risk (`null` in the paper-only
+/// mode), the counts, since when the gate is open, the last network rate, the epochs per
+/// reason kind, and the reason at the end.
+#[must_use]
+pub fn summary_json(cfg: &NetworkConfig, s: &NetSummary) -> serde_json::Value {
+    let reasons: serde_json::Map<String, serde_json::Value> =
+        s.reasons.iter().map(|(k, n)| (k.clone(), json!(n))).collect();
+    json!({
+        "verdict": verdict_line(cfg, s),
+        "certified_at_end": s.open_at_end,
+        "risk": cfg.total_risk(),
+        "subsystems": cfg.subsystems.len(),
+        "rows": s.rows,
+        "replayed": s.replayed,
+        "epochs": s.epochs,
+        "certified_epochs": s.certified,
+        "open_epochs": s.open,
+        "first_open": s.first_open,
+        "open_since": s.open_since.filter(|_| s.open_at_end),
+        "last_rate": s.last_rate,
+        "reasons": reasons,
+        "reason_at_end": s.last_reason,
+    })
 }

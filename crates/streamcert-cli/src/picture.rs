@@ -32,6 +32,13 @@ struct Row {
     values: [f64; 8],
 }
 
+impl Row {
+    /// Whether this row is a break ([`Trace::break_lines`]).
+    fn is_break(&self) -> bool {
+        self.values.iter().all(|v| v.is_nan())
+    }
+}
+
 impl Trace {
     /// The most rows kept.
     pub const CAPACITY: usize = 8192;
@@ -49,13 +56,20 @@ impl Trace {
         }
         if self.rows.len() == Self::CAPACITY {
             let mut i = 0;
-            self.rows.retain(|_| {
+            self.rows.retain(|r| {
                 i += 1;
-                i % 2 == 1
+                i % 2 == 1 || r.is_break()
             });
             self.stride *= 2;
         }
         self.rows.push(Row { t, values });
+    }
+
+    /// A break in every line at `t` (a row of NaN, kept through the thinning): drawn before
+    /// the first row after a gap, so that no line joins the samples across it (a gate open
+    /// before a gap would otherwise be drawn as open through it).
+    fn break_lines(&mut self, t: f64) {
+        self.rows.push(Row { t, values: [f64::NAN; 8] });
     }
 
     /// One `certify` row.
@@ -65,6 +79,7 @@ impl Trace {
         let code = cal.reason.map_or(0.0, |r| f64::from(r.code()));
         if matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })) {
             self.gaps.push(ev.t);
+            self.break_lines(ev.t);
         }
         self.keep(
             ev.t,
@@ -183,4 +198,37 @@ fn draw(fig: &Figure, path: &Path) -> Result<(), CliError> {
     };
     streamcert_plot::init_fonts().map_err(fail)?;
     save_as(fig, path).map_err(fail)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A gap breaks every line, also after the thinning has halved the rows many times: the
+    /// gate open before the gap is never joined to the samples after it.
+    #[test]
+    fn a_gap_breaks_every_line_through_the_thinning() {
+        let mut trace = Trace::new();
+        let open = |on: bool| {
+            let g = f64::from(u8::from(on));
+            [1.0, 0.5, 1.5, 0.2, g, g, 0.01, if on { 0.0 } else { 4.0 }]
+        };
+        for k in 0..50_000u32 {
+            let t = f64::from(k) * 0.01;
+            if k == 30_001 {
+                trace.break_lines(t + 100.0);
+            }
+            let t = if k > 30_000 { t + 100.0 } else { t };
+            trace.keep(t, open(k <= 30_000));
+        }
+        assert!(trace.rows.len() <= Trace::CAPACITY + 1, "{}", trace.rows.len());
+        assert!(trace.stride > 1, "the thinning ran");
+        for k in 0..8 {
+            let line = trace.line(k);
+            let at = line.iter().position(|&(_, v)| v.is_nan()).expect("a break");
+            // The break lies between the last row before the gap and the first after it.
+            assert!(line[at - 1].0 <= 300.0 && line[at + 1].0 > 400.0, "line {k}");
+            assert_eq!(line.iter().filter(|&&(_, v)| v.is_nan()).count(), 1, "line {k}");
+        }
+    }
 }

@@ -14,6 +14,7 @@ use streamcert::regression::{
 mod coefficients;
 mod estimators;
 mod side_by_side;
+mod units;
 mod window_range;
 
 type Sample = (f64, Vec<f64>, Vec<f64>);

@@ -63,15 +63,42 @@ fn exchanger(text: &str) -> Result<String> {
 /// The same three-column record with `offset` added to its third column (0: the values as
 /// recorded; 273.15: °C to K), the header kept.
 fn add_to_third_column(text: &str, offset: f64, name: &str) -> Result<String> {
+    map_third_column(text, |th| th + offset, name)
+}
+
+/// `text` (`t,q,temperature`) with `f` applied to the third column.
+fn map_third_column(text: &str, f: impl Fn(f64) -> f64, name: &str) -> Result<String> {
     let mut lines = text.lines();
     let mut out = format!("{}\n", lines.next().context("no header")?);
     for (i, line) in lines.enumerate() {
-        let f: Vec<&str> = line.split(',').collect();
-        let [t, q, th] = f[..] else { bail!("{name} line {}: 3 fields expected", i + 2) };
+        let fields: Vec<&str> = line.split(',').collect();
+        let [t, q, th] = fields[..] else { bail!("{name} line {}: 3 fields expected", i + 2) };
         let th: f64 = th.trim().parse().with_context(|| format!("line {}", i + 2))?;
-        let _ = writeln!(out, "{},{},{}", t.trim(), q.trim(), th + offset);
+        let _ = writeln!(out, "{},{},{}", t.trim(), q.trim(), f(th));
     }
     Ok(out)
+}
+
+/// The same record in mK: the calibrated gate at every row (the fits' ridge is in the units
+/// as logged, so certificates agree to about 10⁻⁶ only; the instruments' strength is
+/// measured equilibrated, so the unit refuses no fit): `(rows whose certificate is present in
+/// one run only, the largest relative difference where both are)`, or an error naming the
+/// first row whose gate differs.
+fn millikelvin_check(config: &str, csv: &str, celsius: &Certified) -> Result<(usize, f64)> {
+    let mk = map_third_column(csv, |th| (th + 273.15) * 1000.0, "exchanger")?;
+    let mk = certify_text(config, &mk, "exchanger (mK)")?;
+    let (mut presence, mut worst) = (0usize, 0.0f64);
+    for (c, k) in celsius.rows.iter().zip(&mk.rows) {
+        if c.get("calibrated_open") != k.get("calibrated_open") {
+            bail!("°C and mK differ at t = {:?}: calibrated_open", c.get("t"));
+        }
+        match (number(c, "cert_calibrated"), number(k, "cert_calibrated")) {
+            (Some(a), Some(b)) => worst = worst.max((a - b).abs() / (1.0 + a.abs())),
+            (None, None) => {}
+            _ => presence += 1,
+        }
+    }
+    Ok((presence, worst))
 }
 
 /// `"uEst","uVal","yEst","yVal","Ts"` (the estimation record: pump and level voltages,
@@ -235,6 +262,11 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
                 units,
                 "The heat exchanger in °C and in K (the temperature plus 273.15): the same gates at every one of {} rows, certificates equal to {worst:.1e} relative (the check fails above 1e-9).\n",
                 affine.rows.len()
+            );
+            let (presence, mk_worst) = millikelvin_check(&config, &csv, &affine)?;
+            let _ = writeln!(
+                units,
+                "In mK ((the temperature plus 273.15) × 1000, excursions of about 7000): the same calibrated gate at every row (the check fails otherwise); certificates equal to {mk_worst:.1e} relative where both runs have one, and present in one run only at {presence} rows (the fits' ridge `λ` is in the units as logged; the instruments' strength is measured equilibrated, in no unit).\n"
             );
         }
     }

@@ -64,7 +64,7 @@
 //! amortised, no allocation (for the default five windows about 98 block passes per block;
 //! for four 75, 165 with every window at the shortest window's pace and 217 before the
 //! phases were aligned).
-//! On the default `p = m = 1` step the guard costs about 240 ns per sample (the step without
+//! On the default `p = m = 1` step the guard costs about 250 ns per sample (the step without
 //! it, BENCHMARKS.md), a third of the step; a split statistic kept up to date per block
 //! instead of recomputed is the open way to cheaper.
 //! Pace and closing delay, measured (`cargo xtask validity --only-change 200`, dt = 0.01,

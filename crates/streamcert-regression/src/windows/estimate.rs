@@ -21,7 +21,8 @@ pub struct WindowEstimate {
     /// Long-run covariance of the score, `p² × p²` row-major: for a unit `v`, the variance of
     /// `vᵀ(Θ̂ − Θ)T v` is estimated by `vec(vvᵀ)ᵀ Ω̂ vec(vvᵀ) <= λ_max(Ω̂)`.
     pub score_cov: Vec<f64>,
-    /// Pivot ratio of the LU factorisation of `A = N H⁻¹ Nᵀ + λI` (instrument strength).
+    /// Pivot ratio of the LU factorisation of `A = N H⁻¹ Nᵀ + λI` equilibrated to a unit
+    /// diagonal (instrument strength, in no unit).
     pub pivot_ratio: f64,
     /// Effective number of blocks `(Σ_j w_j)² / Σ_j w_j²`, `w_j = Σ_{q in block j} ‖g_q‖²`:
     /// the Welch–Satterthwaite degrees of freedom of `Ω̂` when the blocks carry unequal weight
@@ -31,7 +32,8 @@ pub struct WindowEstimate {
     /// ([`InstrumentedWindows::with_batch`]; `B` when `b = 1`).
     #[serde(default)]
     pub batches: usize,
-    // Scratch: Cholesky factor of H + λI, Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
+    // Scratch: Cholesky factor of H + λI (then the equilibrated A's LU factor, for the pivot
+    // ratio), Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
     // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
     hfac: Vec<f64>,
     pub(super) q: Vec<f64>,
@@ -172,8 +174,9 @@ impl InstrumentedWindows {
     /// pace, never per sample.
     ///
     /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns,
-    /// `H + λI` is not positive definite, `A` is singular to working precision (pivot ratio at
-    /// most `min_pivot_ratio`), or a value is not finite.
+    /// `H + λI` is not positive definite, `A` is singular to working precision (the pivot
+    /// ratio of `A` equilibrated to a unit diagonal at most `min_pivot_ratio`, the same in any
+    /// units of the regressors), or a value is not finite.
     pub fn estimate(
         &self,
         w: usize,
@@ -278,9 +281,29 @@ impl InstrumentedWindows {
                 out.lu[i * d + j] = v;
             }
         }
-        let ratio = linalg::lu_in_place(&mut out.lu, d, &mut out.piv);
+        // The instruments' strength is the pivot ratio of A equilibrated, `S A S` with
+        // `S = diag(A)^(−1/2)` (factored in the free Cholesky buffer, `d <= k`): in no unit, so
+        // that an output logged in mK instead of K (its powers in the guards' fits then span
+        // twelve more decades) is not refused for its unit. The solve factors A itself.
+        for i in 0..d {
+            let a = out.lu[i * d + i];
+            if !(a > 0.0 && a.is_finite()) {
+                out.pivot_ratio = 0.0;
+                return false;
+            }
+            out.row[i] = 1.0 / a.sqrt();
+        }
+        for i in 0..d {
+            for j in 0..d {
+                out.hfac[i * d + j] = out.lu[i * d + j] * out.row[i] * out.row[j];
+            }
+        }
+        let ratio = linalg::lu_in_place(&mut out.hfac[..d * d], d, &mut out.piv);
         out.pivot_ratio = ratio;
         if !(ratio > min_pivot_ratio) {
+            return false;
+        }
+        if !(linalg::lu_in_place(&mut out.lu, d, &mut out.piv) > 0.0) {
             return false;
         }
         // Θ̂ row i: (Cw_i Qᵀ... ) — θ_i = (Cw_i Q̃) A⁻¹ with Q̃ = (H + λI)⁻¹Nᵀ, so

@@ -15,6 +15,7 @@ use crate::common::{markdown, median, progress, write};
 
 mod cells;
 mod change;
+mod held;
 use cells::{Cell, near_margin_cells, power_cells};
 
 const DELTA: f64 = 0.01;
@@ -39,6 +40,8 @@ struct RunResult {
     /// Of those, samples whose reason is the hidden-dynamics guard's.
     order_closed: usize,
     samples: usize,
+    /// Samples whose calibrated gate was closed for weak instruments (the fit refused).
+    weak: usize,
 }
 
 fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
@@ -48,15 +51,15 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
     let mut papers = PAPER_C.map(|c| Certifier::new(cell.config(Some(c))));
     let mut out = RunResult { max_ratio: f64::NEG_INFINITY, ..RunResult::default() };
     let mut seen = vec![0u64; cal.calibrated_looks().len()];
-    let (p, (y0, u0)) = (cell.observed, cell.offset);
+    let (p, (y0, u0), (sy, su)) = (cell.observed, cell.offset, cell.scale);
     let (mut y, mut u) = (vec![0.0; p], vec![0.0; traj.input(0).len()]);
     for i in 0..traj.len() {
         let t = traj.t[i];
         for (o, &v) in y.iter_mut().zip(&traj.output(i)[..p]) {
-            *o = v + y0;
+            *o = sy * (v + y0);
         }
         for (o, &v) in u.iter_mut().zip(traj.input(i)) {
-            *o = v + u0;
+            *o = su * (v + u0);
         }
         let (y, u) = (&y[..], &u[..]);
         let ev = cal.push(t, y, u)?;
@@ -64,6 +67,8 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
             out.calibrated_open = Some(t);
         }
         out.samples += 1;
+        out.weak +=
+            usize::from(matches!(ev.calibrated.reason, Some(NotCertified::WeakInstruments)));
         out.order_closed += usize::from(matches!(
             ev.calibrated.reason,
             Some(NotCertified::HiddenDynamics { .. } | NotCertified::OrderUntested { .. })
@@ -130,6 +135,14 @@ fn guard_share(results: &[RunResult]) -> String {
     let order: usize = results.iter().map(|r| r.order_closed).sum();
     let samples = results.iter().map(|r| r.samples).sum::<usize>().max(1) as f64;
     format!("{:.2} % / {:.2} %", 100.0 * closed as f64 / samples, 100.0 * order as f64 / samples)
+}
+
+/// The share of samples whose calibrated gate was closed for weak instruments (a refused
+/// fit).
+fn refusal_share(results: &[RunResult]) -> String {
+    let weak: usize = results.iter().map(|r| r.weak).sum();
+    let samples = results.iter().map(|r| r.samples).sum::<usize>().max(1) as f64;
+    format!("{:.1} %", 100.0 * weak as f64 / samples)
 }
 
 /// Two-sided 95 % Clopper–Pearson interval for `k` events in `n` runs.
@@ -203,6 +216,20 @@ pub(crate) fn change_only(runs: usize, out: &Path) -> Result<()> {
     let s = change::table(runs, &bar)?;
     bar.finish_and_clear();
     write(&out.join("CHANGE.md"), &s)
+}
+
+/// The held-input and units families alone, `runs` per unsafe cell, into `HELD.md`.
+pub(crate) fn held_only(runs: usize, out: &Path) -> Result<()> {
+    let power_runs = (runs / 5).max(50);
+    let bar = progress(held::work(runs, power_runs), "held inputs and units");
+    let s = held::tables(runs, power_runs, &bar)?;
+    bar.finish_and_clear();
+    write(
+        &out.join("HELD.md"),
+        &format!(
+            "# Held inputs and units\n\nProduced by `cargo xtask validity --only-held {runs}`.\n\n{s}"
+        ),
+    )
 }
 
 /// Run the study (`runs` per near-margin cell, `runs / 5` per power cell, at least 50);

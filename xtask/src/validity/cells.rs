@@ -19,6 +19,9 @@ pub(super) struct Cell {
     pub(super) batch: usize,
     /// Constant offsets `(y₀, u₀)` added to every output and input (an operating point).
     pub(super) offset: (f64, f64),
+    /// Positive factors `(s_y, s_u)` multiplying every logged output and input (the units of
+    /// the log); the candidate gain is scaled by `s_u / s_y` so that the loop is the same.
+    pub(super) scale: (f64, f64),
     /// Outputs the sensor sees: the first `observed` states (fewer than `n` hides states).
     pub(super) observed: usize,
     /// The true rate where it is not `−λ_max(sym(A + B K))` of the observed loop: a hidden
@@ -54,6 +57,7 @@ pub(super) fn plain(
         consecutive,
         batch: 1,
         offset: (0.0, 0.0),
+        scale: (1.0, 1.0),
         observed,
         truth: None,
         model: Model::Affine,
@@ -75,9 +79,10 @@ impl Cell {
             model: if self.before { Model::ThroughOrigin } else { self.model },
             ..RegressionConfig::new(p, m, self.window, H, 1e-4)
         };
+        let (sy, su) = self.scale;
         let mut cfg = CertifierConfig::new(
             reg,
-            self.gain.clone(),
+            self.gain.iter().map(|k| k * su / sy).collect(),
             c.unwrap_or(1.0),
             MARGIN,
             self.consecutive,
@@ -320,4 +325,95 @@ pub(super) fn power_cells() -> Vec<Cell> {
         cells.iter().filter(|c| compared.contains(&c.family.as_str())).map(filed).collect();
     cells.extend(more);
     cells
+}
+
+/// The hold times of the held-input family, in seconds: a PRBS of ±1 that switches at most
+/// every `hold` seconds (a step test at the longer holds).
+pub(super) const HOLDS: [f64; 4] = [0.2, 2.0, 10.0, 30.0];
+
+/// `ẏ = −y + u + w` explored in open loop (`K_e = 0`) by a PRBS of ±1 held `hold` seconds,
+/// process noise `σ`, 60 s at `dt = 0.02`: the loop of the identification-and-units issue.
+pub(super) fn held_scenario(hold: f64, sigma: f64) -> LinearScenario {
+    LinearScenario {
+        dither_hold: hold,
+        dt: 0.02,
+        steps: 3000,
+        ..scenario(1, vec![-1.0], 0.0, Process::Gaussian { sigma })
+    }
+}
+
+/// The candidate of true rate `rate` on [`held_scenario`]: `β* = 1 − K`.
+fn held_gain(rate: f64) -> Vec<f64> {
+    vec![1.0 - rate]
+}
+
+/// The held-input family's unsafe cells (`n_s = 1`, every opening false): each hold, process
+/// noise 0.1 and 1.5, candidates far from the exploring gain with true rates −0.5 and 0.04.
+pub(super) fn held_cells() -> Vec<Cell> {
+    let mut cells = Vec::new();
+    for hold in HOLDS {
+        for sigma in [0.1, 1.5] {
+            for rate in [-0.5, 0.04] {
+                cells.push(plain(
+                    format!("held {hold} s, σ = {sigma}"),
+                    held_scenario(hold, sigma),
+                    held_gain(rate),
+                    150,
+                    1,
+                ));
+            }
+        }
+    }
+    cells
+}
+
+/// The held-input family's contracting candidates (5× and 20× the margin, `n_s = 10`).
+pub(super) fn held_power_cells() -> Vec<Cell> {
+    let mut cells = Vec::new();
+    for hold in HOLDS {
+        for sigma in [0.1, 1.5] {
+            for multiple in [5.0, 20.0] {
+                cells.push(plain(
+                    format!("held {hold} s, σ = {sigma}, β* = {multiple}× margin"),
+                    held_scenario(hold, sigma),
+                    held_gain(multiple * MARGIN),
+                    150,
+                    10,
+                ));
+            }
+        }
+    }
+    cells
+}
+
+/// The scales of the units family: each of `y` and `u` multiplied by these, the other kept.
+pub(super) const SCALES: [f64; 5] = [1e-3, 1e-2, 1.0, 1e2, 1e3];
+
+/// `cell` logged in other units: `y` times each scale, then `u` times each (the unit scale
+/// once).
+pub(super) fn scaled(cell: &Cell) -> Vec<Cell> {
+    let mut out = Vec::new();
+    for (sy, su) in SCALES
+        .iter()
+        .map(|&s| (s, 1.0))
+        .chain(SCALES.iter().filter(|&&s| s != 1.0).map(|&s| (1.0, s)))
+    {
+        out.push(Cell {
+            family: format!("{}, y ×{sy:e}, u ×{su:e}", cell.family),
+            scale: (sy, su),
+            ..cell.clone()
+        });
+    }
+    out
+}
+
+/// The units family's two bases: the 5× power cell and the held-input unsafe cell (10 s,
+/// σ = 1.5, β* = −0.5).
+pub(super) fn units_bases() -> (Cell, Cell) {
+    let s = scenario(1, vec![0.5], -1.0, Process::Gaussian { sigma: 0.1 });
+    let gain = diagonal_candidate(&s, 5.0 * MARGIN);
+    let power = plain("scalar, β* = 5× margin".into(), s, gain, 150, 10);
+    let unsafe_cell =
+        plain("held 10 s, σ = 1.5".into(), held_scenario(10.0, 1.5), held_gain(-0.5), 150, 1);
+    (power, unsafe_cell)
 }

@@ -206,19 +206,42 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
             let k = dd * intervals;
             let mut nm = nalgebra::DMatrix::zeros(dd, k);
             let mut cw = nalgebra::DMatrix::zeros(2, k);
-            let mut hm = nalgebra::DMatrix::identity(k, k) * 1e-4;
+            let mut hm = nalgebra::DMatrix::zeros(k, k);
             for (j, (z, dy)) in window.iter().enumerate() {
                 let wv = inst(j);
                 nm += z * wv.transpose();
                 cw += dy * wv.transpose();
                 hm += &wv * wv.transpose();
             }
-            // Two-stage least squares: Q = H⁻¹Nᵀ, A = N Q + λI, Θ̂ = Cw Q A⁻¹, X = Q A⁻¹ T.
-            let q = hm.try_inverse().expect("invertible") * nm.transpose();
-            let ainv = (&nm * &q + nalgebra::DMatrix::identity(dd, dd) * 1e-4)
-                .try_inverse()
-                .expect("invertible");
+            // Two-stage least squares with the ridge relative to each diagonal entry:
+            // Q = (H + λ diag H)⁻¹Nᵀ, A = N Q + λ diag(N Q), Θ̂ = Cw Q A⁻¹, X = Q A⁻¹ T.
+            let lambda =
+                Calibration { instrument_intervals: 3, ..Calibration::new(0.01) }.fit_ridge();
+            let ridged = |m: &nalgebra::DMatrix<f64>| {
+                let mut m = m.clone();
+                for i in 0..m.nrows() {
+                    m[(i, i)] *= 1.0 + lambda;
+                }
+                m
+            };
+            let q = ridged(&hm).try_inverse().expect("invertible") * nm.transpose();
+            let a = ridged(&(&nm * &q));
+            let ainv = a.clone().try_inverse().expect("invertible");
             let theta = &cw * &q * &ainv;
+            // Block b's sums and its delete-one-block estimate (the second stage without the
+            // block, the first stage `Q` held): `(Cw − Cw_b) Q (A − N_b Q)⁻¹`.
+            let deleted = |b: usize| {
+                let (mut nb, mut cb) =
+                    (nalgebra::DMatrix::zeros(dd, k), nalgebra::DMatrix::zeros(2, k));
+                for j in b * H..(b + 1) * H {
+                    let (z, dy) = &window[j];
+                    let wv = inst(j);
+                    nb += z * wv.transpose();
+                    cb += dy * wv.transpose();
+                }
+                let rest = (&a - &nb * &q).try_inverse().expect("invertible");
+                (&cw - cb) * &q * rest
+            };
             let x = &q * &ainv * &t_mat;
             // The radius from the variance in batches of `batch` blocks at risk `risk`.
             let radius_in = |batch: usize, risk: f64| {
@@ -240,12 +263,11 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
                     let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
                     let mut weight = 0.0;
                     for j in b0 * H..b1 * H {
-                        let (z, dy) = &window[j];
-                        let r = dy - &theta * z;
-                        let g = x.transpose() * inst(j);
-                        weight += g.norm_squared();
-                        let u = &r * g.transpose();
-                        sum += (&u + u.transpose()) * 0.5;
+                        weight += (x.transpose() * inst(j)).norm_squared();
+                    }
+                    for b in b0..b1 {
+                        let change = (&theta - deleted(b)) * &t_mat;
+                        sum += (&change + change.transpose()) * 0.5;
                     }
                     let v = nalgebra::DVector::from_column_slice(sum.as_slice());
                     omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
@@ -256,7 +278,7 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
                 // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
                 let ess = weights.iter().sum::<f64>().powi(2)
                     / weights.iter().map(|w| w * w).sum::<f64>();
-                omega *= c(batch) * batches as f64 / (batches - dd) as f64;
+                omega *= c(batch);
                 let nu = ess.min(batches as f64) - dd as f64;
                 let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
                 // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.
@@ -279,15 +301,18 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
             } else {
                 radius_in(batch, risk)
             };
-            assert!((look.beta_hat - beta).abs() < 1e-7 * (1.0 + beta.abs()), "{look:?} vs {beta}");
-            assert!((look.radius - radius).abs() < 1e-7 * radius, "{look:?} vs {radius}");
+            // `10⁻⁶`: with `J = 3` and the intercept, `H` is singular but for the ridge
+            // (`Calibration::fit_ridge`, `10⁻⁸` relative), and both solves carry its condition.
+            assert!((look.beta_hat - beta).abs() < 1e-6 * (1.0 + beta.abs()), "{look:?} vs {beta}");
+            assert!((look.radius - radius).abs() < 1e-6 * radius, "{look:?} vs {radius}");
             checked += 1;
         }
     }
     // Window 150 looks at columns 150, 225, …; window 300 at 300, 450, …. With eight batches
     // in the short window, `ν = min(ESS, 8) − d` is not positive at some looks, which then
-    // give no certificate (and nothing to check).
-    assert!(checked >= if batch == 1 { 25 } else { 5 }, "checked {checked} looks");
+    // give no certificate (and nothing to check); the fits' pivot floor for `J = 3`
+    // (`Calibration::fit_ridge`) refuses a few early looks.
+    assert!(checked >= if batch == 1 { 15 } else { 5 }, "checked {checked} looks");
     if auto_share > 0.9 {
         // Measured: 4 of the 26 looks (of about 9 of the longer window; 30 batches against
         // 60 blocks cost the batched radius degrees of freedom where no sensor noise pays
@@ -457,4 +482,47 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
     let plain = Certifier::new(calibrated(1, vec![-0.54], 150, 1)).expect("valid");
     let text = plain.checkpoint().expect("serialises");
     assert!(!text.contains("\"batch\"") && !text.contains("batch_blocks"));
+}
+
+/// An input held over the whole run is a multiple of the intercept's span in every window:
+/// the data do not identify the input's gain. Before the calibrated fits' ridge was made
+/// relative, the absolute ridge estimated that gain as zero and the gate opened on the drift
+/// alone (the identification-and-units issue: a candidate of true rate −0.5 deployed in most
+/// runs); now every look is refused, the reason says the input has not moved, and a step
+/// test with a few moves over 60 s certifies no unsafe candidate (40 runs each; the family is
+/// `cargo xtask validity`'s held-input table at 2000 runs per cell).
+#[test]
+fn an_input_that_never_moves_is_refused_as_not_identifying_the_rate() {
+    let plant = |hold: f64| LinearScenario {
+        dither_hold: hold,
+        dt: 0.02,
+        steps: 3000,
+        ..scalar(-1.0, 0.0, Process::Gaussian { sigma: 0.1 }, 1.0)
+    };
+    // K = 1.5: β* = 1 − K = −0.5, far below the margin.
+    let cfg = calibrated(1, vec![1.5], 150, 1);
+    let data = plant(1e6).run(1).expect("data");
+    let mut cert = Certifier::new(cfg.clone()).expect("valid");
+    let mut last = None;
+    for i in 0..data.len() {
+        let v = cert.push(data.t[i], data.output(i), data.input(i)).expect("sample").calibrated;
+        assert!(!v.open, "opened at {}", data.t[i]);
+        last = v.reason;
+    }
+    let Some(reason @ NotCertified::WeaklyIdentified { moves, .. }) = last else {
+        panic!("reason at the end: {last:?}");
+    };
+    assert_eq!(moves, 0.0);
+    assert!(reason.to_string().contains("has not moved"), "{reason}");
+    assert_eq!(reason.kind(), "weakly_identified");
+    for hold in [2.0, 10.0, 30.0] {
+        for seed in 0..40 {
+            let data = plant(hold).run(seed).expect("data");
+            let mut cert = Certifier::new(cfg.clone()).expect("valid");
+            for i in 0..data.len() {
+                let v = cert.push(data.t[i], data.output(i), data.input(i)).expect("sample");
+                assert!(!v.calibrated.open, "hold {hold} s, seed {seed}: opened at {}", data.t[i]);
+            }
+        }
+    }
 }

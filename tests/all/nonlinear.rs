@@ -254,9 +254,16 @@ fn the_coefficient_covariance_equals_a_batch_recompute() {
         cw += DMatrix::from_element(1, 1, *dy) * wq.transpose();
         hm += &wq * wq.transpose();
     }
-    let hinv = (hm + DMatrix::identity(6, 6) * 1e-9).try_inverse().expect("invertible");
-    let a = &nm * &hinv * nm.transpose() + DMatrix::identity(3, 3) * 1e-9;
-    let ainv = a.try_inverse().expect("invertible");
+    // The ridge `λ = 10⁻⁹` relative to each diagonal entry.
+    let ridged = |mut m: DMatrix<f64>| {
+        for i in 0..m.nrows() {
+            m[(i, i)] *= 1.0 + 1e-9;
+        }
+        m
+    };
+    let hinv = ridged(hm).try_inverse().expect("invertible");
+    let a = ridged(&nm * &hinv * nm.transpose());
+    let ainv = a.clone().try_inverse().expect("invertible");
     let theta = &cw * &hinv * nm.transpose() * &ainv;
     for i in 0..3 {
         assert!((theta[i] - est.theta[i]).abs() < 1e-8 * (1.0 + theta[i].abs()));
@@ -269,12 +276,15 @@ fn the_coefficient_covariance_equals_a_batch_recompute() {
             bn += DVector::from_row_slice(z) * wq.transpose();
             bcw += DMatrix::from_element(1, 1, *dy) * wq.transpose();
         }
-        let r = bcw - &theta * bn;
-        let g = (r * &hinv * nm.transpose() * &ainv).transpose();
+        // The block's delete-one-block change (the second stage without it, the first
+        // stage held): Θ̂ − (Cw − Cw_b) Q (A − N_b Q)⁻¹, Q = (H + λ diag H)⁻¹ Nᵀ.
+        let q = &hinv * nm.transpose();
+        let rest = (&a - &bn * &q).try_inverse().expect("invertible");
+        let g = (&theta - (&cw - bcw) * &q * rest).transpose();
         omega += &g * g.transpose();
     }
     let hf = 2.0f64;
-    omega *= 3.0 * hf * hf / (2.0 * hf * hf + 1.0) * 20.0 / 17.0;
+    omega *= 3.0 * hf * hf / (2.0 * hf * hf + 1.0);
     for i in 0..9 {
         assert!(
             (omega[i] - cov[i]).abs() < 1e-8 * (1.0 + omega[i].abs()),

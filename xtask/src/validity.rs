@@ -40,7 +40,7 @@ struct RunResult {
     /// Of those, samples whose reason is the hidden-dynamics guard's.
     order_closed: usize,
     samples: usize,
-    /// Samples whose calibrated gate was closed for weak instruments (the fit refused).
+    /// Samples whose calibrated gate was closed because the data barely identify the rate.
     weak: usize,
 }
 
@@ -137,8 +137,8 @@ fn guard_share(results: &[RunResult]) -> String {
     format!("{:.2} % / {:.2} %", 100.0 * closed as f64 / samples, 100.0 * order as f64 / samples)
 }
 
-/// The share of samples whose calibrated gate was closed for weak instruments (a refused
-/// fit).
+/// The share of samples whose calibrated gate was closed because the data barely identify
+/// the candidate's rate.
 fn refusal_share(results: &[RunResult]) -> String {
     let weak: usize = results.iter().map(|r| r.weak).sum();
     let samples = results.iter().map(|r| r.samples).sum::<usize>().max(1) as f64;
@@ -240,7 +240,10 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let near = near_margin_cells();
     let power = power_cells();
     let bar = progress(
-        near.len() * runs + 2 * power.len() * power_runs + change::CELLS * change_runs,
+        near.len() * runs
+            + 2 * power.len() * power_runs
+            + change::CELLS * change_runs
+            + held::work(runs, power_runs),
         "validity",
     );
     let mut s = String::new();
@@ -366,10 +369,12 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
         )
     );
     s.push_str(
-        "`before`: the same runs with the calibrated certificate as it was when the safe-by-default and plant-data issues were filed (the model through the origin, no guards, no automatic batches, at least four windows with the risk split by length); the difference is what the defaults cost on each cell.\n\nThe rows \"model through the origin\" run the 5× cell's and the sensor-noise cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between such a row and the one above it is the price of the intercept on such a loop. The rows \"four windows split by length\" run the same runs with every default but the windows, as they were at filing (four, the longer windows the larger share of δ): the default's fifth window makes up for the level the intercept cannot use, and its equal split keeps the shortest window's share for the fast loops.\n\n",
+        "`before`: the same runs with the calibrated certificate's settings as they were when the safe-by-default and plant-data issues were filed (the model through the origin, no guards, no automatic batches, at least four windows with the risk split by length; the fits as today: the relative ridge, the delete-one-block variance); the difference is what the default settings cost on each cell.\n\nThe rows \"model through the origin\" run the 5× cell's and the sensor-noise cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between such a row and the one above it is the price of the intercept on such a loop. The rows \"four windows split by length\" run the same runs with every default but the windows, as they were at filing (four, the longer windows the larger share of δ): the default's fifth window makes up for the level the intercept cannot use, and its equal split keeps the shortest window's share for the fast loops.\n\n",
     );
     // Plant change.
     s.push_str(&change::table(change_runs, &bar)?);
+    // Held inputs and units.
+    s.push_str(&held::tables(runs, power_runs, &bar)?);
     bar.finish_and_clear();
     let _ = writeln!(
         s,

@@ -24,8 +24,9 @@
 //! ```text
 //! ρ_w = t_ν(1 − δ_{w,k}) · √σ²_max,         β_cal,w = β̂_w − ρ_w
 //! σ²_max = λ_max(Ω̂)   (p = 2: the smaller of that and the rank-one bound)
-//! Ω̂  = batch-means covariance of the scores vec(sym(R_q g_qᵀ)) over blocks of h columns
-//! ν   = min(B, (Σ_j w_j)² / Σ_j w_j²) − u,   w_j = Σ_{q in block j} ‖g_q‖²
+//! Ω̂  = batch-means covariance over blocks of h columns of each block's delete-one-block
+//!       change vec(sym((Θ̂ − Θ̂_(j)) T))   (the jackknife; exact for the default J = 1)
+//! ν   = min(B, (Σ_j w_j)² / Σ_j w_j²) − u,   w_j = tr(X_jᵀ H_j X_j)  (block j's weight)
 //! u   = p + m unknowns per output (+ 1: the affine model's intercept, regressor τ)
 //! ```
 //!
@@ -170,9 +171,25 @@
 //!   independent of the exploration signal. Heavy tails with finite variance are covered
 //!   through the central limit theorem over the blocks (measured for Laplace and
 //!   Student-t(3) in `cargo xtask validity`).
-//! * The exploration makes the instruments relevant (a dither held over more than `h`
-//!   samples); a weak instrument refuses the look (`pivot ratio`), it never certifies.
-//! * The ridge bias is negligible (`λ` far below the window's excitation).
+//! * The exploration makes the instruments relevant and identifies the rate (a dither held
+//!   over more than `h` samples, moving several times per window): a regressor that never
+//!   moved beyond the intercept in a window (a zero or collinear column: pivot ratio of the
+//!   equilibrated `A` below `max(min_excitation_ratio, 10³ λ)`), or a block that alone
+//!   identifies a direction, refuses the look
+//!   ([`NotCertified::WeaklyIdentified`](crate::NotCertified::WeaklyIdentified)); where the
+//!   information sits in a few blocks, the jackknife puts each block's leverage back into
+//!   the variance and the effective number of blocks (`ν`) falls. Measured on step tests
+//!   (inputs held 0.2 to 30 s) in VALIDITY.md's held-input table.
+//! * The fits' ridge is relative to each diagonal entry ([`Calibration::relative_ridge`],
+//!   `10⁻¹²`), so the verdict is the same in any units of `y` and `u` (VALIDITY.md's units
+//!   table; `tests/all/regression/units.rs`). An absolute ridge, as the calibrated fits had,
+//!   estimated a gain the window did not identify as zero and certified on the drift alone
+//!   (`cargo xtask validity --only-held 1000` on the fits as they were: a candidate of true
+//!   rate −0.5 deployed in 921 of 1000 step tests held 30 s at σ = 0.1). A proportional
+//!   feedback logged with a dither that did not move over a window makes `ΔY` an exact
+//!   combination of the regressors (zero-order-hold `∫u` against trapezoidal `∫y`); such a
+//!   window's residuals vanish and it is refused
+//!   ([`MIN_RESIDUAL_SHARE`](streamcert_regression::MIN_RESIDUAL_SHARE)).
 //! * The studentised instrumented estimate is close to Student's t at the window's `ν`: the
 //!   smallest accepted window ([`Calibration::min_window`]) keeps `B − u >= 2` (`u` the
 //!   unknowns per output: `p + m`, one more for the affine model's intercept), and
@@ -267,6 +284,7 @@ pub(crate) struct CalibratedVerdict {
 pub(crate) struct CalibratedState {
     cal: Calibration,
     horizon: usize,
+    /// The calibrated fits' ridge, relative to each diagonal entry ([`Calibration::relative_ridge`]).
     ridge: f64,
     min_pivot: f64,
     windows: InstrumentedWindows,
@@ -280,6 +298,10 @@ pub(crate) struct CalibratedState {
     until_look: Vec<usize>,
     looks: Vec<u64>,
     latest: Vec<Option<WindowLook>>,
+    /// Per window, the effective moves of its latest look when the data did not identify the
+    /// rate ([`NotCertified::WeaklyIdentified`]; `None` after a look that did, or before one).
+    #[serde(default)]
+    weak: Vec<Option<f64>>,
     est: WindowEstimate,
     /// The verdict of the latest looks (`None` until computed after construction, a reset or
     /// a restore).
@@ -369,13 +391,16 @@ impl CalibratedState {
         Ok(Self {
             cal,
             horizon: reg.horizon,
-            ridge: reg.ridge,
-            min_pivot: reg.min_excitation_ratio,
+            ridge: cal.fit_ridge(),
+            // Collinear regressors have a pivot ratio of about `2λ`: refused (see
+            // `Calibration::relative_ridge`).
+            min_pivot: reg.min_excitation_ratio.max(1e3 * cal.fit_ridge()),
             shares: cal.risk_split.shares(&lengths),
             until_look: vec![0; lengths.len()],
             look_cols: vec![0; lengths.len()],
             looks: vec![0; lengths.len()],
             latest: vec![None; lengths.len()],
+            weak: vec![None; lengths.len()],
             windows,
             tmat,
             seen: 0,
@@ -455,6 +480,7 @@ impl CalibratedState {
         self.seen = 0;
         self.until_look.fill(0);
         self.latest.fill(None);
+        self.weak.fill(None);
         self.regions.fill(Interval::EMPTY);
         if let Some(n) = &mut self.nonlinear {
             n.reset();

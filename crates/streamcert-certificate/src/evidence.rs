@@ -132,6 +132,22 @@ pub enum NotCertified {
         /// The window length.
         window: usize,
     },
+    /// Calibrated certificate: no window's data identify the candidate's closed-loop rate.
+    /// Either a regressor never moved beyond the intercept in the window (an input held over
+    /// the whole window is a multiple of the intercept's `τ`: the fit is singular), one block
+    /// alone identifies a direction of the coefficients (deleting it leaves the fit
+    /// singular), or the blocks that carry the information in the candidate's direction are
+    /// too few for a bound (`moves` at most the unknowns per output).
+    WeaklyIdentified {
+        /// The window length (the longest window that looked).
+        window: usize,
+        /// The effective number of blocks of `h` columns that carry the information on the
+        /// rate in the candidate's direction (`(Σ_j w_j)² / Σ_j w_j²` over the window's
+        /// delete-one-block weights; 0 where the fit is singular): for a step test, about
+        /// the number of the input's moves the window holds times the blocks each move's
+        /// transient spans.
+        moves: f64,
+    },
 }
 
 impl NotCertified {
@@ -146,6 +162,7 @@ impl NotCertified {
             N::PlantChanged { beta_hat, newest_upper, .. } => {
                 [beta_hat.to_bits(), newest_upper.to_bits(), 0]
             }
+            N::WeaklyIdentified { moves, .. } => [moves.to_bits(), 0, 0],
             N::VaryingDynamics { statistic, threshold, .. }
             | N::HiddenDynamics { statistic, threshold, .. }
             | N::LibraryMisfit { statistic, threshold, .. } => {
@@ -175,7 +192,7 @@ impl NotCertified {
 
     /// Every reason's name (the `reason` tag of its serde form) in the order of
     /// [`code`](Self::code), from code 1.
-    pub const KINDS: [&'static str; 18] = [
+    pub const KINDS: [&'static str; 19] = [
         "warming_up",
         "insufficient_excitation",
         "weak_instruments",
@@ -194,6 +211,7 @@ impl NotCertified {
         "no_nonlinear_model",
         "library_misfit",
         "library_untested",
+        "weakly_identified",
     ];
 
     /// A small stable integer per kind of reason, from 1 (0 is left for "certified" in
@@ -219,6 +237,7 @@ impl NotCertified {
             Self::NoNonlinearModel => 16,
             Self::LibraryMisfit { .. } => 17,
             Self::LibraryUntested { .. } => 18,
+            Self::WeaklyIdentified { .. } => 19,
         }
     }
 
@@ -298,6 +317,17 @@ impl std::fmt::Display for NotCertified {
                     "window {window}: feature library not yet checked (no lack-of-fit estimate)"
                 )
             }
+            Self::WeaklyIdentified { window, moves } if *moves <= 0.0 => write!(
+                f,
+                "the data do not identify the rate: an input or output has not moved beyond \
+                 its level in window {window} (hold it less long, or move it more often)"
+            ),
+            Self::WeaklyIdentified { window, moves } => write!(
+                f,
+                "the input has barely moved in window {window}: {} effective moves carry the \
+                 rate, too few for a bound (move it more often)",
+                Fixed::<1>(*moves)
+            ),
         }
     }
 }

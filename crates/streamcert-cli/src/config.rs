@@ -108,6 +108,8 @@ struct CalibrationSection {
     guard_risk: Option<f64>,
     #[serde(default)]
     risk_split: Option<RiskSplit>,
+    #[serde(default)]
+    relative_ridge: Option<f64>,
 }
 
 fn default_true() -> bool {
@@ -137,6 +139,7 @@ impl Default for CalibrationSection {
             change_risk: None,
             guard_risk: None,
             risk_split: None,
+            relative_ridge: None,
         }
     }
 }
@@ -160,6 +163,7 @@ impl CalibrationSection {
             change_risk: self.change_risk.or(d.change_risk),
             guard_risk: self.guard_risk.or(d.guard_risk),
             risk_split: self.risk_split.unwrap_or(d.risk_split),
+            relative_ridge: self.relative_ridge.unwrap_or(d.relative_ridge),
             ..d
         }
     }

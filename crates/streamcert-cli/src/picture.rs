@@ -155,12 +155,12 @@ impl Trace {
             "code",
         )
         .line(
-            "1 warming up, 4 below margin, 5 accumulating, 10 rate dropped, 11 varying dynamics, 12 hidden dynamics, 13/14 untested, 15 plant changed",
+            "1 warming up, 4 below margin, 5 accumulating, 10 rate dropped, 11 varying dynamics, 12 hidden dynamics, 13/14 untested, 15 plant changed, 19 not identified",
             self.line(7),
             RED_,
         );
         why.vlines.clone_from(&self.gaps);
-        why.y_range = Some((0.0, 18.0));
+        why.y_range = Some((0.0, 19.0));
         let fig =
             Figure { panels: vec![rate, gates, eps, why], rows: 4, cols: 1, size: (1100, 1300) };
         draw(&fig, path)

@@ -302,3 +302,26 @@ fn the_network_verdict_agrees_with_the_gate_at_the_last_epoch() {
     assert_eq!(paper_b.len(), local_b.len());
     assert_ne!(paper_b, local_b, "the Gaussian certificates compose, not the calibrated ones");
 }
+
+/// A step test whose input never moves (held at one level for the whole record): the verdict
+/// is "not certified" and names why, in words and by kind, with the default configuration.
+#[test]
+fn an_input_that_never_moves_is_named_in_the_verdict() {
+    let cfg = config("held");
+    let mut csv = String::from("t,y_b,u_b\n");
+    let (mut y, dt) = (0.0f64, 0.02);
+    for i in 0..3000u32 {
+        let t = f64::from(i) * dt;
+        csv.push_str(&format!("{t},{y},1\n"));
+        // ẏ = −y + u + w with a deterministic, irregular disturbance.
+        let w = (f64::from(i.wrapping_mul(2_654_435_761) % 1000) / 1000.0 - 0.5) * 0.4;
+        y += dt * (-y + 1.0) + w * dt.sqrt();
+    }
+    let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], csv.as_bytes());
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    let verdict = err.lines().find(|l| l.starts_with("verdict:")).expect("verdict line");
+    assert!(verdict.starts_with("verdict: NOT CERTIFIED"), "{verdict}");
+    assert!(verdict.contains("[weakly_identified]"), "{verdict}");
+    assert!(verdict.contains("the input moved too rarely"), "{verdict}");
+}

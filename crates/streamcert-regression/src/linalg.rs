@@ -139,6 +139,29 @@ pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     }
 }
 
+/// Solve `Aᵀ x = b` in place with the factors of [`lu_in_place`] (`P A = L U`):
+/// `Uᵀ z = b`, `Lᵀ w = z`, `x = Pᵀ w`. The same pivots and factors as
+/// [`lu_solve_in_place`], for the transposed system.
+pub fn lu_solve_transpose_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
+    for i in 0..n {
+        let mut s = b[i];
+        for k in 0..i {
+            s -= lu[k * n + i] * b[k];
+        }
+        b[i] = s / lu[i * n + i];
+    }
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= lu[k * n + i] * b[k];
+        }
+        b[i] = s;
+    }
+    for k in (0..n).rev() {
+        b.swap(k, piv[k]);
+    }
+}
+
 mod eigen;
 pub(crate) mod lanes;
 mod outer;
@@ -188,6 +211,25 @@ mod tests {
     }
 
     proptest! {
+        #[test]
+        fn transposed_lu_solve_equals_dense(
+            n in 1usize..8,
+            a in prop::collection::vec(-3.0f64..3.0, 64),
+            b in prop::collection::vec(-3.0f64..3.0, 8),
+        ) {
+            // Diagonally loaded so that the matrix is well conditioned.
+            let mut m: Vec<f64> = (0..n * n).map(|i| a[i] + if i / n == i % n { 8.0 } else { 0.0 }).collect();
+            let dense = DMatrix::from_row_slice(n, n, &m);
+            let mut piv = vec![0; n];
+            prop_assert!(lu_in_place(&mut m, n, &mut piv) > 0.0);
+            let mut x = b[..n].to_vec();
+            lu_solve_transpose_in_place(&m, n, &piv, &mut x);
+            let want = dense.transpose().lu().solve(&nalgebra::DVector::from_column_slice(&b[..n])).expect("regular");
+            for i in 0..n {
+                prop_assert!((x[i] - want[i]).abs() < 1e-10, "{} vs {}", x[i], want[i]);
+            }
+        }
+
         #[test]
         fn eigen_extremes_on_random_symmetric(a in (1usize..24).prop_flat_map(sym)) {
             let n = (a.len() as f64).sqrt() as usize;

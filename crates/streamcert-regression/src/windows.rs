@@ -43,7 +43,7 @@ mod coefficients;
 mod estimate;
 mod region;
 
-pub use estimate::WindowEstimate;
+pub use estimate::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, WindowEstimate};
 
 use crate::{Interval, RegressionError};
 

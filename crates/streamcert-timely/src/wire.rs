@@ -28,6 +28,7 @@ enum ReasonDef {
     NoNonlinearModel,
     LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
     LibraryUntested { window: usize },
+    WeaklyIdentified { window: usize, moves: f64 },
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]

@@ -52,3 +52,66 @@ fn a_regressor_in_other_units_changes_neither_the_strength_nor_the_estimate() {
         assert!(compared > 100, "scale {scale}: {compared} estimates compared");
     }
 }
+
+/// One row's calibrated verdict: the gate, the certificate and the reason's kind.
+type Row = (bool, Option<f64>, Option<&'static str>);
+
+/// G5's subsystem B (Experiment 2, run 1) under the default calibrated certificate, every
+/// guard on: `(open, certificate, reason kind)` of the calibrated verdict at every row, with
+/// `y` logged times `sy` and `u` times `su` (the gain scaled by `su / sy`: the same loop).
+fn g5_verdicts(sy: f64, su: f64) -> Vec<Row> {
+    use std::sync::OnceLock;
+    use streamcert::certificate::{Calibration, Certifier, CertifierConfig};
+    use streamcert::dynamics::Coupling;
+    use streamcert::experiments::{Experiment, G5Dataset};
+    use streamcert::regression::{InputIntegral, RegressionConfig};
+    static DATA: OnceLock<streamcert::dynamics::Trajectory> = OnceLock::new();
+    let data = DATA.get_or_init(|| {
+        G5Dataset { coupling: Coupling::Cascade, ..G5Dataset::defaults(Experiment::Two) }
+            .run_seeded(1)
+            .expect("data")
+    });
+    let k4 = Experiment::Two.setting().k4;
+    let reg = RegressionConfig {
+        input_integral: InputIntegral::ZeroOrderHold,
+        ..RegressionConfig::new(1, 1, 150, 5, 1e-4)
+    };
+    let mut cfg = CertifierConfig::new(reg, vec![k4 * su / sy], 0.1, 0.1, 10);
+    cfg.calibration = Some(Calibration::new(0.01));
+    let mut cert = Certifier::new(cfg).expect("valid");
+    (0..data.len())
+        .map(|j| {
+            let (y, u) = (data.output(j)[1] * sy, data.input(j)[1] * su);
+            let v = cert.push(data.t[j], &[y], &[u]).expect("sample").calibrated;
+            (v.open, v.value, v.reason.map(|r| r.kind()))
+        })
+        .collect()
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
+
+    /// The calibrated fits are in no unit (the identification-and-units issue): any positive
+    /// scaling of `y` and `u` from `10⁻⁶` to `10⁶`, the gain scaled with them, gives the same
+    /// gate and the same reason at every row of a G5 run, and the same certificate to `10⁻⁹`
+    /// relative. The base run opens its gate (the comparison covers open and closed rows).
+    #[test]
+    fn every_gate_of_a_g5_run_is_the_same_in_any_units(ly in -6.0f64..6.0, lu in -6.0f64..6.0) {
+        use std::sync::OnceLock;
+        static BASE: OnceLock<Vec<Row>> = OnceLock::new();
+        let base = BASE.get_or_init(|| g5_verdicts(1.0, 1.0));
+        proptest::prop_assert!(base.iter().any(|v| v.0) && base.iter().any(|v| !v.0));
+        let scaled = g5_verdicts(10f64.powf(ly), 10f64.powf(lu));
+        for (row, (a, b)) in base.iter().zip(&scaled).enumerate() {
+            proptest::prop_assert_eq!(a.0, b.0, "gate at row {}", row);
+            proptest::prop_assert_eq!(a.2, b.2, "reason at row {}", row);
+            match (a.1, b.1) {
+                (Some(x), Some(y)) => proptest::prop_assert!(
+                    (x - y).abs() <= 1e-9 * x.abs().max(y.abs()).max(1e-3),
+                    "certificate at row {}: {} against {}", row, x, y
+                ),
+                (x, y) => proptest::prop_assert_eq!(x.is_some(), y.is_some(), "row {}", row),
+            }
+        }
+    }
+}

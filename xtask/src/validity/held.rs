@@ -47,7 +47,7 @@ const UNSAFE_HEADER: [&str; 7] = [
     "95 % CP upper",
     "≤ 2δ",
     "guard closed: all / hidden dynamics",
-    "weak instruments",
+    "weakly identified",
 ];
 const POWER_HEADER: [&str; 6] = [
     "cell",
@@ -55,7 +55,7 @@ const POWER_HEADER: [&str; 6] = [
     "calibrated certified",
     "median time [s]",
     "guard closed: all / hidden dynamics",
-    "weak instruments",
+    "weakly identified",
 ];
 
 /// The two families' tables: `runs` per unsafe cell, `power_runs` per contracting one.

@@ -57,6 +57,8 @@ impl CalibratedState {
             && self.look_cols.iter().all(|&c| c <= self.seen)
             && self.looks.len() == fresh.looks.len()
             && self.latest.len() == fresh.latest.len()
+            && self.weak.len() == fresh.weak.len()
+            && self.weak.iter().flatten().all(|m| *m >= 0.0)
             && self.est.matches(&fresh.est)
             && self.sym.len() == fresh.sym.len()
             && self.eig_work.len() == fresh.eig_work.len()

@@ -151,6 +151,22 @@ pub struct Calibration {
     /// fixed split is valid (the union bound); it decides which loops are certified sooner.
     #[serde(default, skip_serializing_if = "RiskSplit::is_equal")]
     pub risk_split: RiskSplit,
+    /// The ridge of every calibrated fit *relative to each diagonal entry* (default `1e-12`;
+    /// `[0, 1e-3]`): the fits solve `Q = (H + λ diag H)⁻¹ Nᵀ` and `A = N Q + λ diag(N Q)`
+    /// ([`InstrumentedWindows::estimate`](streamcert_regression::InstrumentedWindows::estimate)),
+    /// so that an output or input logged in other units gives the same estimate, radius and
+    /// gate (to rounding), and a regressor that never moved in a window (a zero diagonal)
+    /// gets no ridge and is refused instead of being estimated as zero. The regression's
+    /// absolute `ridge` applies to the paper's certificates only. It guards rounding (the
+    /// affine model's repeated `τ` instruments for `J >= 2` make `H` singular); it is not a
+    /// prior. A fit stands only where its equilibrated pivot ratio exceeds both the
+    /// regression's `min_excitation_ratio` and `10³ λ`: exactly collinear regressors (an
+    /// input held over the whole window is a multiple of the intercept's `τ`) have a pivot
+    /// ratio of about `2λ`, which the ridge alone lifts from zero. With
+    /// `instrument_intervals >= 2` the fits use at least `10⁻⁸`
+    /// ([`fit_ridge`](Self::fit_ridge)).
+    #[serde(default = "default_relative_ridge")]
+    pub relative_ridge: f64,
 }
 
 /// How the calibrated certificate splits its risk `δ` across its `W` windows `M_w`; window
@@ -210,6 +226,10 @@ fn is_default_batch(b: &usize) -> bool {
     *b == 1
 }
 
+fn default_relative_ridge() -> f64 {
+    1e-12
+}
+
 fn default_look_spacing() -> f64 {
     0.5
 }
@@ -240,6 +260,22 @@ impl Calibration {
             change_risk: None,
             guard_risk: None,
             risk_split: RiskSplit::Equal,
+            relative_ridge: default_relative_ridge(),
+        }
+    }
+
+    /// The relative ridge the calibrated fits use: [`relative_ridge`](Self::relative_ridge),
+    /// at least `10⁻⁸` for `instrument_intervals >= 2`. There the affine model's instrument
+    /// repeats the column span `τ` once per interval, so `H` is singular but for the ridge;
+    /// at `10⁻¹²` its condition number (about `10¹²`) left the estimate with errors of
+    /// `10⁻⁵` relative (measured against a nalgebra recompute in `tests/all/calibrated.rs`).
+    /// A fit then stands only where its pivot ratio exceeds `10⁻⁵`.
+    #[must_use]
+    pub fn fit_ridge(&self) -> f64 {
+        if self.instrument_intervals >= 2 {
+            self.relative_ridge.max(1e-8)
+        } else {
+            self.relative_ridge
         }
     }
 
@@ -357,6 +393,12 @@ impl Calibration {
                      at or below 0 does not mean the loop contracts (use a small positive margin, \
                      for example 0.05)"
                 ),
+            );
+        }
+        if !(0.0..=1e-3).contains(&self.relative_ridge) {
+            return bad(
+                "calibration.relative_ridge",
+                format!("must lie in [0, 1e-3], got {}", self.relative_ridge),
             );
         }
         if let Some(n) = self.windows {

@@ -30,6 +30,18 @@ impl CalibratedState {
         }
         let p = self.sym.len().isqrt();
         let rate = self.rate(w, 0);
+        // A look that the data do not identify: the fit refused (a regressor that never
+        // moved beyond the intercept, a block that alone identifies a direction), or too few
+        // effective moves for a bound (`ν <= 0`).
+        self.weak[w] = match rate {
+            None if self.windows.is_full(w) => Some(if self.est.pivot_ratio > self.min_pivot {
+                self.est.effective_blocks
+            } else {
+                0.0
+            }),
+            Some((_, _, nu)) if !(nu > 0.0) => Some(self.est.effective_blocks.max(0.0)),
+            _ => None,
+        };
         let Some((beta_hat, variance, nu)) = rate else {
             self.latest[w] = None;
             if let Some(c) = &mut self.coupling {
@@ -204,10 +216,17 @@ impl CalibratedState {
         });
         let w0 = self.windows.window(0);
         let columns = self.windows.columns(0);
+        // The longest window whose latest look the data did not identify names the reason.
+        let weak = (0..self.weak.len()).rev().find_map(|w| {
+            self.weak[w].map(|moves| NotCertified::WeaklyIdentified {
+                window: self.windows.window(w),
+                moves,
+            })
+        });
         let warming = if columns < w0 {
             NotCertified::WarmingUp { columns, needed: w0 }
         } else {
-            NotCertified::WeakInstruments
+            weak.unwrap_or(NotCertified::WeakInstruments)
         };
         let blocked = if best.is_some() {
             None

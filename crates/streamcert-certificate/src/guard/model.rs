@@ -150,7 +150,9 @@ impl ModelGuard {
             groups,
             alpha,
             windows,
-            est: WindowEstimate::with_regressors(p, dd, intervals),
+            // The tested coefficients' direction (ones) in standardised coefficients: the
+            // weights behind `ν` are then the same in any units of the outputs.
+            est: WindowEstimate::with_regressors(p, dd, intervals).standardised(),
             lags: vec![0.0; if groups.order { horizon * p } else { 0 }],
             pushed: 0,
             latest: vec![None; lengths.len()],
@@ -243,7 +245,8 @@ impl ModelGuard {
         self.dir.fill(0.0);
         self.dir[d * p..].fill(1.0);
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
+        let ok = windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov);
+        if !ok {
             return;
         }
         let nu = self.est.effective_blocks.min(self.est.batches as f64) - dd as f64;

@@ -279,6 +279,9 @@ pub(crate) fn reason_words(kind: &str) -> String {
         "order_untested" | "linearity_untested" => "the guards have not tested the window yet",
         "plant_changed" => "the plant changed (change guard)",
         "skipped_sample" => "a bad sample was skipped",
+        "weakly_identified" => {
+            "the data barely identify the rate: the input moved too rarely in the windows"
+        }
         other => other,
     };
     format!("{words} [{kind}]")

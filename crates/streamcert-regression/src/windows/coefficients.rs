@@ -2,17 +2,20 @@
 //! or a certificate over a region of states, needs), after an estimate or fused with it.
 
 use super::batch::{Batches, overlap_factor};
-use super::estimate::{block_weight, q_ainv};
+use super::estimate::{
+    JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, block_weight,
+};
 use super::{InstrumentedWindows, Layout, WindowEstimate};
 
 impl InstrumentedWindows {
     /// The batch-means covariance of the coefficients, after a ready
     /// [`estimate`](Self::estimate) of the same window `w` (which leaves the factors in
-    /// `out`): with `r_j = Cw_j − Θ̂ N_j` (one row per output) and the block influence
-    /// `G_j = r_j Q A⁻¹` (`p × d`, so that `Σ_j G_j = Θ̂ − Θ` up to the ridge),
+    /// `out`): with `r_j = Cw_j − Θ̂ N_j` (one row per output) and block `j`'s
+    /// delete-one-block change `G_j = r_j Q A⁻¹ (I − L_j)⁻ᵀ = Θ̂ − Θ̂_(j)` (`p × d`, exact for
+    /// `J = 1`; `L_j = A⁻¹ Qᵀ N_jᵀ`, see [`estimate`](Self::estimate)),
     ///
     /// ```text
-    /// Ω_θ = c_h · B/(B − d) · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
+    /// Ω_θ = c_h · Σ_j vec(G_j) vec(G_j)ᵀ        ((p d) × (p d), row-major)
     /// ```
     ///
     /// with the same factors (and the same batches, see [`with_batch`](Self::with_batch)) as
@@ -20,7 +23,9 @@ impl InstrumentedWindows {
     /// direction `T` (`d × p`), the score covariance of `estimate` is the image of `Ω_θ`
     /// under `vec(G) ↦ vec(sym(G T))`; for `p = 1` the variance of `(Θ̂ − Θ) T` is
     /// `Tᵀ Ω_θ T`, for every `T` at once (what a certificate over a region of states needs).
-    /// `false` (and `cov` untouched) when `out` holds no ready estimate. `O(B (p k d + p² d²))`.
+    /// `false` (and `cov` untouched) when `out` holds no ready estimate, or when a block alone
+    /// identifies a direction (`out.leverage_pivot` at most [`MIN_LEVERAGE_PIVOT`]).
+    /// `O(B (p k d + d² k + d³ + p² d²))`.
     ///
     /// # Panics
     /// If `cov` is shorter than `(p d)²`.
@@ -34,7 +39,7 @@ impl InstrumentedWindows {
             return false;
         }
         self.influence_pass::<false>(w, out, cov);
-        true
+        out.leverage_pivot > MIN_LEVERAGE_PIVOT
     }
 
     /// [`estimate`](Self::estimate) and [`coefficient_covariance`](Self::coefficient_covariance)
@@ -64,7 +69,8 @@ impl InstrumentedWindows {
         out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
         out.score_cov.fill(0.0);
         let n = self.layout().p * self.layout().d;
-        out.ready = out.theta.iter().chain(&cov[..n * n]).all(|v| v.is_finite());
+        out.ready = out.leverage_pivot > MIN_LEVERAGE_PIVOT
+            && out.theta.iter().chain(&cov[..n * n]).all(|v| v.is_finite());
         out.ready
     }
 
@@ -104,18 +110,25 @@ impl InstrumentedWindows {
         let n = p * d;
         let cov = &mut cov[..n * n];
         cov.fill(0.0);
-        // Q A⁻¹ (k × d), once: column a of A⁻¹ is the solve of the unit vector e_a (A is
-        // symmetric, so row and column agree).
-        for a in 0..d {
-            let e = &mut out.g[..d];
-            e.fill(0.0);
-            e[a] = 1.0;
-            q_ainv(&out.lu, &out.piv, &out.q, d, k, e, |b, v| out.qa[b * d + a] = v);
-        }
         let blocks = self.windows[w].min(self.block_len);
         let stride = lay.stride();
         let (older, newer) = self.window_blocks(w);
-        let (theta, qa, x) = (&out.theta[..p * d], &out.qa[..k * d], &out.x[..p * k]);
+        let jack = Jackknife {
+            theta: &out.theta[..p * d],
+            qa: &out.qa[..k * d],
+            root: &out.diag[..d],
+            p,
+            d,
+            k,
+        };
+        let mut scratch = JackScratch {
+            lu: &mut out.jack[..d * d],
+            piv: &mut out.jack_piv[..d],
+            g: &mut out.gj[..n],
+            residual: 0.0,
+            raw: 0.0,
+        };
+        let x = &out.x[..p * k];
         // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
         // estimate; `stride >= p d` values), its weight in `batch_w`.
         let batch = self.batch;
@@ -123,26 +136,14 @@ impl InstrumentedWindows {
         let acc = &mut out.sums[..if batch > 1 { n } else { 0 }];
         acc.fill(0.0);
         let (mut sum_w, mut sum_w2, mut batch_w) = (0.0, 0.0, 0.0);
+        let mut least = 1.0f64;
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
-            for i in 0..p {
-                let th = &theta[i * d..(i + 1) * d];
-                let g = &mut out.g[i * d..(i + 1) * d];
-                g.fill(0.0);
-                for b in 0..k {
-                    // r_b = Cw_{j,i,b} − θ_i · N_{j,·,b}, then g += r_b · (Q A⁻¹)_b.
-                    let mut r = bcw[i * k + b];
-                    for a in 0..d {
-                        r -= th[a] * bn[a * k + b];
-                    }
-                    for (ga, &m) in g.iter_mut().zip(&qa[b * d..(b + 1) * d]) {
-                        *ga += r * m;
-                    }
-                }
-            }
-            // The block's weight, as `estimate` computes it.
+            // The block's delete-one-block change of `Θ̂` (the rows `g_{j,i}`).
+            least = least.min(jack.block(bn, bcw, &mut scratch));
+            // The block's weight, as `estimate` computes it on the undeleted direction.
             let weight = if WEIGHTS { block_weight(bh, x, k) } else { 0.0 };
-            let g = &out.g[..n];
+            let g = &scratch.g[..n];
             if batch == 1 {
                 for a in 0..n {
                     for b in a..n {
@@ -173,13 +174,18 @@ impl InstrumentedWindows {
                 batch_w = 0.0;
             }
         }
+        out.leverage_pivot = least;
+        if !(scratch.residual > MIN_RESIDUAL_SHARE * scratch.raw) {
+            // An exact identity (see `MIN_RESIDUAL_SHARE`): nothing is identified.
+            out.leverage_pivot = 0.0;
+        }
         for a in 0..n {
             for b in 0..a {
                 cov[a * n + b] = cov[b * n + a];
             }
         }
-        let batches = blocks.div_ceil(batch);
-        let scale = overlap_factor(batch, self.horizon) * batches as f64 / (batches - d) as f64;
+        // The delete-one-block changes already carry each block's leverage: no `B/(B − d)`.
+        let scale = overlap_factor(batch, self.horizon);
         for v in cov.iter_mut() {
             *v *= scale;
         }

@@ -21,8 +21,8 @@ pub struct WindowEstimate {
     /// Long-run covariance of the score, `p² × p²` row-major: for a unit `v`, the variance of
     /// `vᵀ(Θ̂ − Θ)T v` is estimated by `vec(vvᵀ)ᵀ Ω̂ vec(vvᵀ) <= λ_max(Ω̂)`.
     pub score_cov: Vec<f64>,
-    /// Pivot ratio of the LU factorisation of `A = N H⁻¹ Nᵀ + λI` equilibrated to a unit
-    /// diagonal (instrument strength, in no unit).
+    /// Pivot ratio of the LU factorisation of `A = N Q + λ diag(N Q)` equilibrated to a
+    /// unit diagonal (instrument strength, in no unit).
     pub pivot_ratio: f64,
     /// Effective number of blocks `(Σ_j w_j)² / Σ_j w_j²`, `w_j = Σ_{q in block j} ‖g_q‖²`:
     /// the Welch–Satterthwaite degrees of freedom of `Ω̂` when the blocks carry unequal weight
@@ -32,15 +32,15 @@ pub struct WindowEstimate {
     /// ([`InstrumentedWindows::with_batch`]; `B` when `b = 1`).
     #[serde(default)]
     pub batches: usize,
-    // Scratch: Cholesky factor of H + λI (then the equilibrated A's LU factor, for the pivot
-    // ratio), Q = (H + λI)⁻¹ Nᵀ (k × d, stored as d rows of k),
+    // Scratch: Cholesky factor of H + λ diag H (then the equilibrated A's LU factor, for the pivot
+    // ratio), Q = (H + λ diag H)⁻¹ Nᵀ (k × d, stored as d rows of k),
     // the LU factor of A and its pivots, X (p rows of k), one block's score sum.
     hfac: Vec<f64>,
     pub(super) q: Vec<f64>,
     pub(super) lu: Vec<f64>,
     pub(super) piv: Vec<usize>,
     pub(super) x: Vec<f64>,
-    row: Vec<f64>,
+    pub(super) row: Vec<f64>,
     block: Vec<f64>,
     pub(super) sums: Vec<f64>,
     // One block's coefficient influence (p × d), and `Q A⁻¹` (k rows of d), for
@@ -49,6 +49,29 @@ pub struct WindowEstimate {
     pub(super) g: Vec<f64>,
     #[serde(default)]
     pub(super) qa: Vec<f64>,
+    /// The smallest pivot ratio over the window's blocks of `I − L_j`, `L_j = A⁻¹ Qᵀ N_jᵀ`
+    /// (block `j`'s leverage on the coefficients): 1 when no block has leverage, 0 when one
+    /// block alone identifies a direction of `Θ` (deleting it leaves the fit singular).
+    #[serde(default)]
+    pub leverage_pivot: f64,
+    // Scratch: the LU factor of `I − L_j` and its pivots, one block's influence rows (p × d).
+    #[serde(default)]
+    pub(super) jack: Vec<f64>,
+    #[serde(default)]
+    pub(super) jack_piv: Vec<usize>,
+    #[serde(default)]
+    pub(super) gj: Vec<f64>,
+    /// Read the candidate directions `T` in standardised coefficients (default `false`): row
+    /// `a` of `T` multiplied by `√A_aa`, the scale of regressor `a`'s instrumented column, so
+    /// that `X = Q A⁻¹ diag(√A) T` weighs the blocks the same in any units of the regressors.
+    /// For a direction that is not a rate (the model guards' tested coefficients, ones on
+    /// regressors of different units); a rate direction `[I; K]` is already in the
+    /// regressors' units.
+    #[serde(default)]
+    pub standardised: bool,
+    // Scratch: `√A_aa` of the latest solve (d values).
+    #[serde(default)]
+    pub(super) diag: Vec<f64>,
 }
 
 impl WindowEstimate {
@@ -75,6 +98,12 @@ impl WindowEstimate {
             sums: vec![0.0; Layout { p, d, k }.stride()],
             g: vec![0.0; p * d],
             qa: vec![0.0; k * d],
+            leverage_pivot: 0.0,
+            jack: vec![0.0; d * d],
+            jack_piv: vec![0; d],
+            gj: vec![0.0; p * d],
+            standardised: false,
+            diag: vec![0.0; d],
         }
     }
 
@@ -83,6 +112,13 @@ impl WindowEstimate {
     #[must_use]
     pub fn with_regressors(outputs: usize, regressors: usize, intervals: usize) -> Self {
         Self::new(outputs, regressors.saturating_sub(outputs), intervals)
+    }
+
+    /// This estimate with [`standardised`](Self::standardised) directions.
+    #[must_use]
+    pub fn standardised(mut self) -> Self {
+        self.standardised = true;
+        self
     }
 
     /// `true` when every buffer has the length of `other`'s (a restored state's check).
@@ -100,6 +136,10 @@ impl WindowEstimate {
             && self.sums.len() == other.sums.len()
             && self.g.len() == other.g.len()
             && self.qa.len() == other.qa.len()
+            && self.jack.len() == other.jack.len()
+            && self.jack_piv.len() == other.jack_piv.len()
+            && self.gj.len() == other.gj.len()
+            && self.diag.len() == other.diag.len()
     }
 }
 
@@ -142,41 +182,170 @@ pub(super) fn q_ainv(
     }
 }
 
-impl InstrumentedWindows {
-    /// Solve window `w` with ridge `λ` for the candidate directions `t` (`d × p` row-major,
-    /// `T = [I_p; K]`) into `out` (built with this structure's `p`, `m`, `J`):
+/// A block whose leverage on the coefficients reaches 1 within this pivot ratio of
+/// `I − L_j` (see [`Jackknife::block`]) identifies a direction of `Θ` alone: the window is
+/// not ready (its delete-one-block variance is unbounded).
+pub const MIN_LEVERAGE_PIVOT: f64 = 1e-9;
+
+/// The delete-one-block change of a window's two-stage least-squares estimate, from block
+/// sums alone.
+pub(super) struct Jackknife<'a> {
+    /// `Θ̂`, `p × d`.
+    pub(super) theta: &'a [f64],
+    /// `Q A⁻¹`, `k × d`.
+    pub(super) qa: &'a [f64],
+    /// `√A_aa` (`d` values): `I − L_j` is factored equilibrated, `S (I − L_j) S⁻¹` with
+    /// `S = diag(√A_aa)`, so that its pivot ratio is in no unit.
+    pub(super) root: &'a [f64],
+    pub(super) p: usize,
+    pub(super) d: usize,
+    pub(super) k: usize,
+}
+
+/// Scratch and sums for [`Jackknife::block`].
+pub(super) struct JackScratch<'a> {
+    /// The LU factor of `I − L_j` (`d × d`) and its pivots.
+    pub(super) lu: &'a mut [f64],
+    pub(super) piv: &'a mut [usize],
+    /// The block's delete-one-block influence rows, `p × d`.
+    pub(super) g: &'a mut [f64],
+    /// `Σ_j ‖r_j‖²` and `Σ_j ‖Cw_j‖²` over the blocks so far (an exact fit's test).
+    pub(super) residual: f64,
+    pub(super) raw: f64,
+}
+
+/// A window whose residual moments `Σ_j ‖Cw_j − Θ̂ N_j‖²` are at most this share of its raw
+/// moments `Σ_j ‖Cw_j‖²` is an exact identity, not a noisy fit: a proportional feedback law
+/// logged with a dither that did not move over the window makes `∫u` (zero-order hold) the
+/// feedback gain times the left Riemann sum of `y`, which differs from the trapezoidal `∫y`
+/// by `dt/2 · ΔY`, so `ΔY` is an exact combination of the regressors and the variance is
+/// zero (measured on the scalar loop of `tests/all/affine.rs`: such windows' shares are
+/// `10⁻¹⁰` to `10⁻¹³`, noisy fits' `10⁻²` to 1). Such a window does not identify the rate
+/// and is refused; a plant whose residuals are below `10⁻⁴` of its signal is refused with
+/// it.
+pub const MIN_RESIDUAL_SHARE: f64 = 1e-8;
+
+impl Jackknife<'_> {
+    /// Block `j`'s sums `N_j` (`bn`, `d × k`) and `Cw_j` (`bcw`, `p × k`): with the residual
+    /// scores `r_{j,i} = Cw_{j,i} − θ̂_i N_j` and the block's leverage
+    /// `L_j = A⁻¹ Qᵀ N_jᵀ` (`d × d`),
     ///
     /// ```text
-    /// Q = (H + λI)⁻¹ Nᵀ,   A = N Q + λI,   Θ̂ = Cw Q A⁻¹         (two-stage least squares)
-    /// X = Q A⁻¹ T,   R_q = ΔY_q − Θ̂ Z_q,   g_q = Xᵀ W_q
-    /// u_q = vec(sym(R_q g_qᵀ))        (p² values; Σ_q over the errors is vec(sym ΔJ_cl))
-    /// S_j = Σ_{q in block j} u_q      (the window's B blocks of h columns)
-    /// Ω̂  = c_h · B/(B − d) · Σ_j S_j S_jᵀ,   c_h = 3h² / (2h² + 1)
+    /// g_{j,i} = (I − L_j)⁻¹ A⁻¹ Qᵀ r_{j,i}            (into s.g, row i)
     /// ```
     ///
-    /// With `J = 1` this is the instrumental-variables estimator `Θ̂ = Cw N⁻¹` (up to the
-    /// ridge). Batch means: a block sum is a sum of `h` consecutive scores, so `Ω̂` is positive
+    /// `g_{j,i}` is `θ̂_i − θ̂_{(j),i}`, the change of output `i`'s coefficients when block
+    /// `j` is deleted from the second stage (exact for `J = 1`, where the estimate is
+    /// `Cw N⁻¹`: Sherman–Morrison–Woodbury on `N − N_j`; the first stage `H` held for
+    /// `J >= 2`); without the factor `(I − L_j)⁻¹` it is the first-order influence, which a
+    /// block that carries most of the information in a direction shrinks toward zero (its
+    /// residual is fitted away). Adds `‖r_j‖²` and `‖Cw_j‖²` to `s.residual` and `s.raw`.
+    /// Returns the pivot ratio of `I − L_j` equilibrated (0 when it is singular: the block
+    /// alone identifies a direction, and `s.g` is meaningless).
+    #[inline(always)]
+    pub(super) fn block(&self, bn: &[f64], bcw: &[f64], s: &mut JackScratch<'_>) -> f64 {
+        let (p, d, k) = (self.p, self.d, self.k);
+        let qa = self.qa;
+        for a in 0..d {
+            for b in 0..d {
+                let mut v = 0.0;
+                for c in 0..k {
+                    v += qa[c * d + a] * bn[b * k + c];
+                }
+                // Equilibrated: S L_j S⁻¹.
+                let v = v * self.root[a] / self.root[b];
+                s.lu[a * d + b] = if a == b { 1.0 - v } else { -v };
+            }
+        }
+        for i in 0..p {
+            let th = &self.theta[i * d..(i + 1) * d];
+            let g = &mut s.g[i * d..(i + 1) * d];
+            g.fill(0.0);
+            for b in 0..k {
+                let raw = bcw[i * k + b];
+                let mut r = raw;
+                for a in 0..d {
+                    r -= th[a] * bn[a * k + b];
+                }
+                s.residual += r * r;
+                s.raw += raw * raw;
+                for (ga, &m) in g.iter_mut().zip(&qa[b * d..(b + 1) * d]) {
+                    *ga += r * m;
+                }
+            }
+        }
+        let ratio = linalg::lu_in_place(s.lu, d, s.piv);
+        if !(ratio > 0.0) {
+            return 0.0;
+        }
+        // (I − L_j)⁻¹ = S⁻¹ (I − S L_j S⁻¹)⁻¹ S.
+        for i in 0..p {
+            let g = &mut s.g[i * d..(i + 1) * d];
+            for (ga, &r) in g.iter_mut().zip(self.root) {
+                *ga *= r;
+            }
+            linalg::lu_solve_in_place(s.lu, d, s.piv, g);
+            for (ga, &r) in g.iter_mut().zip(self.root) {
+                *ga /= r;
+            }
+        }
+        ratio
+    }
+}
+
+impl InstrumentedWindows {
+    /// Solve window `w` with the ridge `λ` *relative to each diagonal entry* for the
+    /// candidate directions `t` (`d × p` row-major, `T = [I_p; K]`) into `out` (built with
+    /// this structure's `p`, `m`, `J`):
+    ///
+    /// ```text
+    /// Q = (H + λ diag H)⁻¹ Nᵀ,   A = N Q + λ diag(N Q),   Θ̂ = Cw Q A⁻¹     (two-stage LS)
+    /// r_j = Cw_j − Θ̂ N_j               (block j's residual scores, p × k)
+    /// L_j = A⁻¹ Qᵀ N_jᵀ                 (block j's leverage on the coefficients, d × d)
+    /// G_j = r_j Q A⁻¹ (I − L_j)⁻ᵀ        (Θ̂ − Θ̂_(j): the change when block j is deleted)
+    /// S_j = vec(sym(G_j T))             (p² values, for the window's B blocks of h columns)
+    /// Ω̂  = c_h · Σ_j S_j S_jᵀ,   c_h = 3h² / (2h² + 1)
+    /// ```
+    ///
+    /// With `J = 1` this is the instrumental-variables estimator `Θ̂ = Cw N⁻¹`, and `G_j` is
+    /// exactly `Θ̂ − Θ̂_(j)` with `Θ̂_(j) = (Cw − Cw_j)(N − N_j)⁻¹` (for `J >= 2` the first
+    /// stage `H` is held). The delete-one-block jackknife: without the factor `(I − L_j)⁻¹`
+    /// (the first-order influence, the variance as it was) a block that carries most of the
+    /// information in a direction has its residual fitted away, and where an input moved in a
+    /// few blocks only (a step test) the variance understated the spread many times over;
+    /// with it the leverage is put back, and a block whose leverage reaches 1 (it alone
+    /// identifies a direction) refuses the fit. `I − L_j` is factored equilibrated,
+    /// `diag(√A) (I − L_j) diag(√A)⁻¹`, so its pivot ratio ([`MIN_LEVERAGE_PIVOT`]) is in no
+    /// unit. The jackknife carries the fitted directions' price, so no `B/(B − d)`. Batch
+    /// means: a block sum is a sum of `h` consecutive scores, so `Ω̂` is positive
     /// semi-definite by construction and the blocks are nearly independent. Neighbouring
     /// blocks still share the overlap of their columns: for white process noise the column
     /// errors have the triangular autocorrelation `1 − |l|/h`, a block's variance is then
     /// `h² − (h² − 1)/3` and the long-run variance per block `h²` (in units of one column's),
     /// hence `c_h`. White sensor noise makes neighbouring blocks negatively correlated (a sample
-    /// enters `ΔY_q` and `ΔY_{q+h}` with opposite signs), so there `Ω̂` is conservative.
-    /// `B/(B − d)` makes up for the `d` fitted directions. With
-    /// [`with_batch`](InstrumentedWindows::with_batch)`(b)`, `b > 1`, the block sums are first
-    /// summed over batches of `b` consecutive blocks (the oldest batch holds the remainder
-    /// `r = B mod b` and is weighted by `c_{r,h}/c_{b,h}`), `B` is the number of batches
-    /// `⌈B/b⌉` and `c_h` becomes `c_{b,h} = 3bh²/(3bh² − h² + 1)`; the effective number is
-    /// then over batch weights. (A Bartlett weight ½ on neighbouring
-    /// blocks, exact in expectation and less conservative under sensor noise, raised the
-    /// false-opening rate of the study's scalar cell at `M = 150` to 16 in 1000: not used.) Cost `O(n (k d + p²) + B p⁴ + k³)`:
-    /// the calibrated certificate calls it at its looks and its change guard at the guard's
-    /// pace, never per sample.
+    /// enters `ΔY_q` and `ΔY_{q+h}` with opposite signs), so there `Ω̂` is conservative. With
+    /// [`with_batch`](InstrumentedWindows::with_batch)`(b)`, `b > 1`, the blocks' changes are
+    /// first summed over batches of `b` consecutive blocks (the oldest batch holds the
+    /// remainder `r = B mod b` and is weighted by `c_{r,h}/c_{b,h}`), `B` is the number of
+    /// batches `⌈B/b⌉` and `c_h` becomes `c_{b,h} = 3bh²/(3bh² − h² + 1)`; the effective
+    /// number is then over batch weights, `w_j = tr(Xᵀ H_j X)`. A window whose residual
+    /// moments vanish ([`MIN_RESIDUAL_SHARE`]: an exact identity, not a noisy fit) is not
+    /// ready. (A Bartlett weight ½ on
+    /// neighbouring blocks, exact in expectation and less conservative under sensor noise,
+    /// raised the false-opening rate of the study's scalar cell at `M = 150` to 16 in 1000:
+    /// not used.) Cost `O(n (k d + p²) + B (d² k + d³ + p⁴) + k³)`: the calibrated certificate
+    /// calls it at its looks and its change guard at the guard's pace, never per sample.
+    ///
+    /// The ridge `λ` is relative to each diagonal entry: a regressor in other units scales
+    /// its rows and columns and its ridge alike, so the estimate, its covariance and every
+    /// refusal are in no unit; a regressor whose instrumented column is zero in the window
+    /// (an input that never moved from the working origin) gets no ridge and is refused.
     ///
     /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns,
-    /// `H + λI` is not positive definite, `A` is singular to working precision (the pivot
+    /// `H + λ diag H` is not positive definite, `A` is singular to working precision (the pivot
     /// ratio of `A` equilibrated to a unit diagonal at most `min_pivot_ratio`, the same in any
-    /// units of the regressors), or a value is not finite.
+    /// units of the regressors), a block alone identifies a direction (the equilibrated
+    /// pivot ratio of `I − L_j` at most [`MIN_LEVERAGE_PIVOT`]), or a value is not finite.
     pub fn estimate(
         &self,
         w: usize,
@@ -216,25 +385,27 @@ impl InstrumentedWindows {
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(span, out, 1, 2, 2),
-            (1, 3, 3) => self.block_scores(span, out, 1, 3, 3),
-            (1, 4, 4) => self.block_scores(span, out, 1, 4, 4),
-            (1, 5, 5) => self.block_scores(span, out, 1, 5, 5),
-            (1, 6, 6) => self.block_scores(span, out, 1, 6, 6),
-            _ => self.block_scores(span, out, p, d, k),
+            (1, 2, 2) => self.block_scores(span, t, out, 1, 2, 2),
+            (1, 3, 3) => self.block_scores(span, t, out, 1, 3, 3),
+            (1, 4, 4) => self.block_scores(span, t, out, 1, 4, 4),
+            (1, 5, 5) => self.block_scores(span, t, out, 1, 5, 5),
+            (1, 6, 6) => self.block_scores(span, t, out, 1, 6, 6),
+            _ => self.block_scores(span, t, out, p, d, k),
         };
-        out.effective_blocks = if sum_w2 > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        out.effective_blocks =
+            if sum_w2 > 0.0 && out.leverage_pivot > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
+        // The delete-one-block changes already carry each block's leverage: no `B/(B − d)`.
         let overlap = overlap_factor(self.batch, self.horizon);
-        let scale = overlap * out.batches as f64 / (out.batches - d) as f64;
         for v in &mut out.score_cov {
-            *v *= scale;
+            *v *= overlap;
         }
-        out.ready = out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+        out.ready = out.leverage_pivot > MIN_LEVERAGE_PIVOT
+            && out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
     }
 
     /// The two-stage least-squares solve of [`estimate`](Self::estimate) on the blocks `span`
     /// selects, up to `X = Q A⁻¹ T` (into `out`; `out.ready` left `false`): `false` when the
-    /// span has too few batches, `H + λI` is not positive definite or `A` is singular to
+    /// span has too few batches, `H + λ diag H` is not positive definite or `A` is singular to
     /// working precision.
     pub(super) fn solve_span(
         &self,
@@ -248,6 +419,7 @@ impl InstrumentedWindows {
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let blocks = span.0.saturating_sub(span.1);
         out.ready = false;
+        (out.pivot_ratio, out.effective_blocks, out.leverage_pivot) = (0.0, 0.0, 0.0);
         out.columns = blocks * self.horizon;
         let batches = blocks.div_ceil(self.batch);
         out.batches = batches;
@@ -257,10 +429,14 @@ impl InstrumentedWindows {
         self.span_sums(span, &mut out.sums);
         let (nm, rest) = out.sums.split_at(lay.cw());
         let (cw, hm) = rest.split_at(p * k);
-        // Q = (H + λI)⁻¹ Nᵀ: row i of Q stored as column i of Nᵀ solved against H.
+        // Q = (H + λ diag H)⁻¹ Nᵀ: row i of Q stored as column i of Nᵀ solved against H.
+        // The ridge relative to each diagonal entry, `H + λ diag(H)`: a regressor in other
+        // units scales its rows and columns of `H` and its ridge alike, so the estimate is in
+        // no unit; an instrument that never moved (a zero diagonal) gets no ridge, and the
+        // factorisation refuses it.
         for i in 0..k {
             for j in 0..k {
-                out.hfac[i * k + j] = hm[i * k + j] + if i == j { ridge } else { 0.0 };
+                out.hfac[i * k + j] = hm[i * k + j] * if i == j { 1.0 + ridge } else { 1.0 };
             }
         }
         if !linalg::cholesky_in_place(&mut out.hfac, k) {
@@ -271,14 +447,15 @@ impl InstrumentedWindows {
             qi.copy_from_slice(&nm[i * k..(i + 1) * k]);
             linalg::cholesky_solve_in_place(&out.hfac, k, qi);
         }
-        // A = N Q + λI (d × d, symmetric): A[i][j] = N_i · Q_j.
+        // A = N Q + λ diag(N Q) (d × d, symmetric): A[i][j] = N_i · Q_j, the ridge relative
+        // as for `H`.
         for i in 0..d {
             for j in 0..d {
-                let mut v = if i == j { ridge } else { 0.0 };
+                let mut v = 0.0;
                 for a in 0..k {
                     v += nm[i * k + a] * out.q[j * k + a];
                 }
-                out.lu[i * d + j] = v;
+                out.lu[i * d + j] = if i == j { v * (1.0 + ridge) } else { v };
             }
         }
         // The instruments' strength is the pivot ratio of A equilibrated, `S A S` with
@@ -292,6 +469,7 @@ impl InstrumentedWindows {
                 return false;
             }
             out.row[i] = 1.0 / a.sqrt();
+            out.diag[i] = a.sqrt();
         }
         for i in 0..d {
             for j in 0..d {
@@ -306,8 +484,8 @@ impl InstrumentedWindows {
         if !(linalg::lu_in_place(&mut out.lu, d, &mut out.piv) > 0.0) {
             return false;
         }
-        // Θ̂ row i: (Cw_i Qᵀ... ) — θ_i = (Cw_i Q̃) A⁻¹ with Q̃ = (H + λI)⁻¹Nᵀ, so
-        // θ_iᵀ = A⁻¹ (N (H + λI)⁻¹ Cw_iᵀ) since A is symmetric: r_a = Q_a · Cw_i.
+        // Θ̂ row i: (Cw_i Qᵀ... ) — θ_i = (Cw_i Q̃) A⁻¹ with Q̃ = (H + λ diag H)⁻¹Nᵀ, so
+        // θ_iᵀ = A⁻¹ (N (H + λ diag H)⁻¹ Cw_iᵀ) since A is symmetric: r_a = Q_a · Cw_i.
         for i in 0..p {
             let row = &mut out.row[..d];
             for a in 0..d {
@@ -320,25 +498,37 @@ impl InstrumentedWindows {
             linalg::lu_solve_in_place(&out.lu, d, &out.piv, row);
             out.theta[i * d..(i + 1) * d].copy_from_slice(row);
         }
+        // Q A⁻¹ (k × d): column a of A⁻¹ is the solve of the unit vector e_a (A is
+        // symmetric, so row and column agree).
+        for a in 0..d {
+            let e = &mut out.row[..d];
+            e.fill(0.0);
+            e[a] = 1.0;
+            q_ainv(&out.lu, &out.piv, &out.q, d, k, e, |b, v| out.qa[b * d + a] = v);
+        }
         // X = Q A⁻¹ T (k × p), stored as p rows of k: column j is Qᵀ-combination of A⁻¹ T_j.
         for j in 0..p {
             let row = &mut out.row[..d];
             for a in 0..d {
-                row[a] = t[a * p + j];
+                row[a] = t[a * p + j] * if out.standardised { out.diag[a] } else { 1.0 };
             }
             q_ainv(&out.lu, &out.piv, &out.q, d, k, row, |b, v| out.x[j * k + b] = v);
         }
         true
     }
 
-    /// The block sums of the scores of window `w`, `S_j = sym((Cw_j − Θ̂ N_j) X)`, added as
-    /// `Σ_j vec(S_j) vec(S_j)ᵀ` into `out.score_cov`, and `(Σ_j w_j, Σ_j w_j²)` for the
-    /// weights `w_j = tr(Xᵀ H_j X)`, from each block's sums (oldest first). The dimensions are
-    /// passed in so that the call site for `p = m = 1`, `J = 1` gets unrolled code.
+    /// The block sums of the scores of window `w`, each block's delete-one-block change of
+    /// `sym(Θ̂ T)` ([`Jackknife::block`]), added as `Σ_j vec(S_j) vec(S_j)ᵀ` into
+    /// `out.score_cov`, and `(Σ_j w_j, Σ_j w_j²)` for the weights `w_j = tr(X_jᵀ H_j X_j)`,
+    /// from each block's sums (oldest first); `out.leverage_pivot` the smallest pivot ratio of
+    /// `I − L_j`. The dimensions are passed in so that the call site for `p = m = 1`, `J = 1`
+    /// gets unrolled code.
     #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
     fn block_scores(
         &self,
         span: (usize, usize),
+        t: &[f64],
         out: &mut WindowEstimate,
         p: usize,
         d: usize,
@@ -348,9 +538,25 @@ impl InstrumentedWindows {
         let pp = p * p;
         let score_cov = &mut out.score_cov[..pp * pp];
         score_cov.fill(0.0);
-        let (theta, x) = (&out.theta[..p * d], &out.x[..p * k]);
-        let (row, block) = (&mut out.row[..k], &mut out.block[..pp]);
+        let jack = Jackknife {
+            theta: &out.theta[..p * d],
+            qa: &out.qa[..k * d],
+            root: &out.diag[..d],
+            p,
+            d,
+            k,
+        };
+        let mut scratch = JackScratch {
+            lu: &mut out.jack[..d * d],
+            piv: &mut out.jack_piv[..d],
+            g: &mut out.gj[..p * d],
+            residual: 0.0,
+            raw: 0.0,
+        };
+        let x = &out.x[..p * k];
+        let block = &mut out.block[..pp];
         let (mut sum_w, mut sum_w2, mut cov) = (0.0, 0.0, 0.0);
+        let mut least = 1.0f64;
         let (older, newer) = self.span_blocks(span);
         let stride = lay.stride();
         // Batches of `b > 1` blocks: the batch's score sum in `g` (p d >= p² values, free
@@ -362,21 +568,13 @@ impl InstrumentedWindows {
         let mut batch_w = 0.0;
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
+            least = least.min(jack.block(bn, bcw, &mut scratch));
+            let g = &scratch.g;
             for i in 0..p {
-                // r = Cw_j,i − θ_i N_j (k values), then r · X_col.
-                let th = &theta[i * d..(i + 1) * d];
-                for b in 0..k {
-                    let mut v = bcw[i * k + b];
-                    for a in 0..d {
-                        v -= th[a] * bn[a * k + b];
-                    }
-                    row[b] = v;
-                }
                 for jj in 0..p {
-                    let xj = &x[jj * k..(jj + 1) * k];
                     let mut v = 0.0;
-                    for b in 0..k {
-                        v += row[b] * xj[b];
+                    for a in 0..d {
+                        v += g[i * d + a] * t[a * p + jj];
                     }
                     block[i * p + jj] = v;
                 }
@@ -420,6 +618,11 @@ impl InstrumentedWindows {
                 acc.fill(0.0);
                 batch_w = 0.0;
             }
+        }
+        out.leverage_pivot = least;
+        if !(scratch.residual > MIN_RESIDUAL_SHARE * scratch.raw) {
+            // An exact identity (see `MIN_RESIDUAL_SHARE`): nothing is identified.
+            out.leverage_pivot = 0.0;
         }
         if batch == 1 && pp == 1 {
             score_cov[0] = cov;

@@ -266,7 +266,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
             let (presence, mk_worst) = millikelvin_check(&config, &csv, &affine)?;
             let _ = writeln!(
                 units,
-                "In mK ((the temperature plus 273.15) × 1000, excursions of about 7000): the same calibrated gate at every row (the check fails otherwise); certificates equal to {mk_worst:.1e} relative where both runs have one, and present in one run only at {presence} rows (the fits' ridge `λ` is in the units as logged; the instruments' strength is measured equilibrated, in no unit).\n"
+                "In mK ((the temperature plus 273.15) × 1000, excursions of about 7000): the same calibrated gate at every row (the check fails otherwise); certificates equal to {mk_worst:.1e} relative where both runs have one, and present in one run only at {presence} rows (every calibrated fit is in no unit: its ridge is relative to each diagonal entry and its refusals are judged equilibrated).\n"
             );
         }
     }

@@ -61,7 +61,7 @@ fn options() -> Options {
 }
 
 fn read(c: &mut Criterion) {
-    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let text = g5_like_csv();
     let mut group = c.benchmark_group("cli_read");
     group.throughput(Throughput::Elements(ROWS as u64));
@@ -107,7 +107,7 @@ fn read(c: &mut Criterion) {
 }
 
 fn write(c: &mut Criterion) {
-    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let mut cert = Certifier::new(cfg.certifier.clone()).expect("valid");
     let text = g5_like_csv();
     let mut reader = SampleReader::new(text.as_bytes(), "bench", &cfg.columns).expect("header");
@@ -174,7 +174,7 @@ fn write(c: &mut Criterion) {
 }
 
 fn whole_run(c: &mut Criterion) {
-    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let text = g5_like_csv();
     let mut group = c.benchmark_group("cli_certify");
     group.throughput(Throughput::Elements(ROWS as u64));

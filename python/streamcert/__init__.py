@@ -9,9 +9,12 @@ Decide, from logged or live plant data, whether a feedback controller may be dep
 - ``NetworkCertifier(config)``: many subsystems composed at every epoch;
 - ``simulate_g5(experiment, seed)``: the paper's benchmark as arrays.
 
-The defaults are the command line's: the calibrated certificate with its guards (hidden
-dynamics, nonlinearity, plant change) at risk ``delta = 0.01`` over the run. The paper's two
-certificates alone (no stated risk) are a mode asked for by name:
+The candidate gain and the margin are yours to give (there is no default for them:
+``certify(t, y, u)`` alone raises ``ConfigError`` naming them), for example
+``certify(t, y, u, {"controller": {"gain": [[-1.5]]}, "certificate": {"margin": 0.05}})``.
+Everything else defaults to the command line's: the calibrated certificate with its guards
+(hidden dynamics, nonlinearity, plant change) at risk ``delta = 0.01`` over the run. The
+paper's two certificates alone (no stated risk) are a mode asked for by name:
 ``Config(calibration={"enabled": False})``.
 """
 
@@ -35,8 +38,13 @@ from ._network import NetworkCertifier
 
 __version__: str = _native.VERSION
 
-#: ``streamcert certify --print-config``: the default configuration, commented.
+#: ``streamcert certify --print-config``: the configuration template, commented; its five
+#: required keys (columns, gain, margin) read ``"REQUIRED"`` and are refused until set.
 DEFAULT_CONFIG: str = _native.DEFAULT_CONFIG
+#: The template with the required keys set for node b of G5 (``simulate_g5``'s ``y[:, 1]``,
+#: ``u[:, 1]`` as columns ``y_b``, ``u_b``; the paper's gain ``[[-4.0]]``, margin 0.05): the
+#: project's examples' configuration, not a default.
+G5_NODE_B_CONFIG: str = _native.G5_NODE_B_CONFIG
 #: ``streamcert network --print-config``: an example network configuration, commented.
 NETWORK_EXAMPLE_CONFIG: str = _native.NETWORK_EXAMPLE_CONFIG
 Evidence = _native.Evidence

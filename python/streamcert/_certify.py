@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import json
-from typing import Any, Optional
+from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from . import _native
 from ._arrays import samples
 from ._config import Config, resolve
+from ._errors import ConfigError
 
 #: The gates, in the CSV's order.
 GATES = tuple(_native.GATES)
@@ -147,21 +148,53 @@ def _unpickle(data: bytes, toml: str) -> Certifier:
     return Certifier.restore(data, Config.from_toml_str(toml))
 
 
-def certify(t: Any, y: Any, u: Any, config: Any = None) -> CertifyResult:
+def _labels(x: Any) -> Optional[list[str]]:
+    """A pandas DataFrame's column names or a named Series' name; ``None`` otherwise."""
+    columns = getattr(x, "columns", None)
+    if columns is not None and hasattr(x, "to_numpy"):
+        return [str(c) for c in columns]
+    name = getattr(x, "name", None)
+    if name is not None and hasattr(x, "to_numpy") and not isinstance(x, np.ndarray):
+        return [str(name)]
+    return None
+
+
+def certify(
+    t: Any, y: Any, u: Any, config: Any = None, *, names: Optional[Mapping[str, Any]] = None
+) -> CertifyResult:
     """Certify whole arrays: ``streamcert certify`` on the same data, as numbers.
 
     ``t`` (n) in seconds, strictly increasing; ``y`` of shape (n, p) or (n,); ``u`` of shape
-    (n, m) or (n,); ``config`` a ``Config``, a dict of sections, a TOML path, or ``None`` for
-    the command line's defaults (the calibrated certificate with its guards). Integer and
-    float32 arrays are converted to float64; see ``streamcert._arrays`` for what is refused.
-    The verdict is ``result.verdict``; every evidence column is ``result[name]``.
+    (n, m) or (n,); ``config`` a ``Config``, a dict of sections or a TOML path, giving at
+    least the candidate gain and the margin (``{"controller": {"gain": [[-1.5]]},
+    "certificate": {"margin": 0.05}}``; without them ``ConfigError`` names them). Every other
+    key defaults to the command line's (the calibrated certificate with its guards).
+    Integer and float32 arrays are converted to float64; see ``streamcert._arrays`` for what
+    is refused. The verdict is ``result.verdict``; every evidence column is ``result[name]``.
+
+    The names the verdict and the region columns use: ``names`` (``{"outputs": [...],
+    "inputs": [...], "time": ...}``, each optional; a string is one column), else a pandas
+    Series' name or a DataFrame's columns, else the configuration's ``columns``.
     """
     cfg = resolve(config)
+    given = dict(names or {})
+    unknown = set(given) - {"outputs", "inputs", "time"}
+    if unknown:
+        raise ConfigError(f"names: unknown key(s) {sorted(unknown)}; use outputs, inputs, time")
+    for key in ("outputs", "inputs"):
+        if isinstance(given.get(key), str):
+            given[key] = [given[key]]
+    rename = {
+        "outputs": given.get("outputs", _labels(y)),
+        "inputs": given.get("inputs", _labels(u)),
+        "time": given.get("time", (_labels(t) or [None])[0]),
+    }
+    current = {"outputs": cfg.outputs, "inputs": cfg.inputs, "time": cfg.time}
+    if any(v is not None and v != current[k] for k, v in rename.items()):
+        cfg = cfg.with_names(**rename)
     t_arr = np.asarray(t)
     if t_arr.ndim == 1 and t_arr.shape[0] == 0:
         from ._errors import ShapeError
 
         raise ShapeError("no samples: an empty input cannot be certified")
     return Certifier(cfg).update_many(t, y, u)
-
-

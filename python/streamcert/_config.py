@@ -25,24 +25,48 @@ def _plain(x: Any) -> Any:
     return x
 
 
+def _names(prefix: str, n: int) -> list[str]:
+    return [prefix] if n == 1 else [f"{prefix}{i + 1}" for i in range(n)]
+
+
+def _with_column_names(merged: dict[str, Any]) -> None:
+    """Name the columns the caller left unnamed after the gain's shape (``y``, ``u``, or
+    ``y1..yp``, ``u1..um``; time ``t``): arrays carry no headers, so only the gain and the
+    margin are the caller's to give."""
+    controller = merged.get("controller")
+    gain = controller.get("gain") if isinstance(controller, Mapping) else None
+    rows = gain if isinstance(gain, list) and gain else [[0.0]]
+    m = len(rows)
+    p = len(rows[0]) if isinstance(rows[0], list) and rows[0] else 1
+    given = merged.get("columns")
+    columns = dict(given) if isinstance(given, Mapping) else {}
+    columns.setdefault("time", "t")
+    columns.setdefault("outputs", _names("y", p))
+    columns.setdefault("inputs", _names("u", m))
+    merged["columns"] = columns
+
+
 class Config:
     """A validated ``certify`` configuration.
 
-    Built from keyword arguments or a dict of sections laid over the command line's defaults
+    Built from keyword arguments or a dict of sections laid over the command line's template
     (``streamcert certify --print-config``), or from a TOML file read exactly as the command
-    line reads it. Sections merge key by key, so ``Config()`` is the default: the calibrated
-    certificate with its three guards (risk ``delta = 0.01`` over the run), the zero-order
-    hold, the affine model, margin 0.05 held for 10 samples, one output ``y_b``, one input
-    ``u_b`` and the candidate gain ``K = [[-4.0]]``. Every refusal is a ``ConfigError`` with
-    the command line's message.
+    line reads it. The candidate gain ``controller.gain`` and the ``certificate.margin`` are
+    required (a ``ConfigError`` names whichever is missing); the columns are named ``y``,
+    ``u`` (``y1..yp``, ``u1..um``) unless given, and ``certify`` uses a pandas Series' or
+    DataFrame's own names. Sections merge key by key, so every other key takes the command
+    line's default: the calibrated certificate with its three guards (risk ``delta = 0.01``
+    over the run), the zero-order hold, the affine model, the gate held for 10 samples.
+    Every refusal is a ``ConfigError`` with the command line's message.
 
     The paper-only mode (its two certificates, no stated risk) is asked for by name:
     ``Config(calibration={"enabled": False})``; ``paper_only`` then says so.
 
     Examples
     --------
-    >>> cfg = Config(controller={"gain": [[-2.5]]}, regression={"window": 200})
-    >>> cfg2 = Config({"certificate": {"margin": 0.1}})
+    >>> cfg = Config(controller={"gain": [[-2.5]]}, certificate={"margin": 0.05},
+    ...              regression={"window": 200})
+    >>> cfg2 = Config({"controller": {"gain": [[-2.5]]}, "certificate": {"margin": 0.1}})
     >>> cfg3 = Config.from_toml("plant.toml")
     """
 
@@ -52,6 +76,7 @@ class Config:
         merged: dict[str, Any] = dict(_plain(sections or {}))
         for k, v in kwargs.items():
             merged[k] = _plain(v)
+        _with_column_names(merged)
         self._native = _native.Config.from_json(json.dumps(merged, allow_nan=True))
 
     @classmethod
@@ -88,6 +113,25 @@ class Config:
         return self._native.inputs
 
     @property
+    def time(self) -> str:
+        """The time column's name."""
+        return self._native.time
+
+    def with_names(
+        self,
+        outputs: Optional[list[str]] = None,
+        inputs: Optional[list[str]] = None,
+        time: Optional[str] = None,
+    ) -> "Config":
+        """This configuration with its columns renamed (``None`` keeps a name): the names
+        the verdict, the evidence's region columns and the checkpoint use."""
+        return Config._wrap(self._native.with_columns(
+            None if time is None else str(time),
+            None if outputs is None else [str(v) for v in outputs],
+            None if inputs is None else [str(v) for v in inputs],
+        ))
+
+    @property
     def paper_only(self) -> bool:
         """``True`` in the paper-only mode: the verdict then carries no stated risk."""
         return self._native.paper_only
@@ -106,8 +150,8 @@ class Config:
 
 
 def resolve(config: Any) -> Config:
-    """``config`` as a ``Config``: ``None`` is the default, a mapping is laid over it, a path
-    is a TOML file."""
+    """``config`` as a ``Config``: a mapping is laid over the template, a path is a TOML file;
+    ``None`` is refused naming the required keys (the gain and the margin)."""
     if config is None:
         return Config()
     if isinstance(config, Config):

@@ -6,6 +6,7 @@ import numpy as np
 import numpy.typing as npt
 
 DEFAULT_CONFIG: str
+G5_NODE_B_CONFIG: str
 NETWORK_EXAMPLE_CONFIG: str
 EVIDENCE_COLUMNS: list[str]
 FLOAT_COLUMNS: list[str]
@@ -18,6 +19,9 @@ class Config:
     def from_toml(text: str, name: str = ...) -> Config: ...
     @staticmethod
     def from_json(json: str) -> Config: ...
+    def with_columns(
+        self, time: str | None = ..., outputs: list[str] | None = ..., inputs: list[str] | None = ...
+    ) -> Config: ...
     @property
     def toml(self) -> str: ...
     @property

@@ -81,7 +81,10 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
     let path = |name: &str| out.join(name);
     let s = |p: &Path| p.to_str().map(str::to_string).context("utf-8 path");
     // The configuration and data every case starts from.
-    let (_, _, config) = run(&bin, &["certify", "--print-config"], b"")?;
+    let (_, _, template) = run(&bin, &["certify", "--print-config"], b"")?;
+    // The printed template with G5 node b's required keys set (what `g5_node_b` writes).
+    anyhow::ensure!(template == streamcert_cli::config::DEFAULT_CONFIG, "--print-config");
+    let config = streamcert_cli::config::g5_node_b();
     let cfg_path = path("config.toml");
     std::fs::write(&cfg_path, &config)?;
     let cfg = s(&cfg_path)?;
@@ -325,6 +328,13 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
         "a required key missing (`margin`)",
         run(&bin, &["certify", "--config", &s(&no_margin_cfg)?], b"")?,
     );
+    let template_cfg = path("template.toml");
+    std::fs::write(&template_cfg, &template)?;
+    record(
+        &mut rows,
+        "the printed template unedited (no gain, margin or columns chosen)",
+        run(&bin, &["certify", "--config", &s(&template_cfg)?], b"")?,
+    );
     let bad_last =
         format!("{}\n{}\n", lines[..900].join("\n"), replace_field(lines[900], 3, "NaN"));
     record(
@@ -336,7 +346,7 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
     let mut text = String::new();
     let _ = writeln!(
         text,
-        "# Reliability: bad inputs and what the user sees\n\nProduced by `cargo xtask reliability` (target/reliability/RELIABILITY.md; a copy is committed at the top level). Each case runs the release `streamcert` binary on data from `streamcert simulate g5 --experiment 1 --seed 1` and the default configuration (`certify --print-config`), edited as the case says. Exit codes: 0 success, 2 configuration, 3 input data, 4 I/O, 5 checkpoint. The message is the first line on standard error (for runs that succeed, the verdict line; for a TOML error, with the lines that say what is wrong)."
+        "# Reliability: bad inputs and what the user sees\n\nProduced by `cargo xtask reliability` (target/reliability/RELIABILITY.md; a copy is committed at the top level). Each case runs the release `streamcert` binary on data from `streamcert simulate g5 --experiment 1 --seed 1` and the printed configuration (`certify --print-config`) with node b's required keys set (time `t`, output `y_b`, input `u_b`, gain [[-4.0]], margin 0.05), edited as the case says. Exit codes: 0 success, 2 configuration, 3 input data, 4 I/O, 5 checkpoint. The message is the first line on standard error (for runs that succeed, the verdict line; for a TOML error, with the lines that say what is wrong)."
     );
     let _ = writeln!(text, "\n{}", markdown(&["case", "exit", "message"], &rows));
     write(&out.join("RELIABILITY.md"), &text)?;

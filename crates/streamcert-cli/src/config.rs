@@ -301,26 +301,143 @@ pub struct Config {
     pub certifier: CertifierConfig,
 }
 
-/// What a configuration must name, added to serde's "missing field" message.
-const REQUIRED: &str = "A configuration must give [columns] time, outputs and inputs, \
-     [controller] gain and [certificate] margin; every other key has a default \
-     (`streamcert certify --print-config` writes them all, each with its reason).";
+/// [`DEFAULT_CONFIG`] with the required keys set for node b of the G5 benchmark as
+/// `streamcert simulate g5` writes it (time `t`, output `y_b`, input `u_b`, the paper's gain
+/// `K = [[-4.0]]` and margin 0.05): the configuration of the project's examples, tests and
+/// benchmarks. Not a default: a user's plant needs its own.
+#[must_use]
+pub fn g5_node_b() -> String {
+    DEFAULT_CONFIG
+        .replacen("time = \"REQUIRED\"", "time = \"t\"", 1)
+        .replacen("outputs = [\"REQUIRED\"]", "outputs = [\"y_b\"]", 1)
+        .replacen("inputs = [\"REQUIRED\"]", "inputs = [\"u_b\"]", 1)
+        .replacen("gain = \"REQUIRED\"", "gain = [[-4.0]]", 1)
+        .replacen("margin = \"REQUIRED\"", "margin = 0.05", 1)
+}
+
+/// The value `--print-config` writes for each key the user must choose: a file that keeps it
+/// (or omits the key) is refused, naming the key.
+pub const REQUIRED_VALUE: &str = "REQUIRED";
+
+/// The keys a configuration must set, `(section, key, what it is)`: they describe the user's
+/// plant and controller, so none has a default.
+pub const REQUIRED_KEYS: [(&str, &str, &str); 5] = [
+    (
+        "columns",
+        "time",
+        "the time column's header (seconds, strictly increasing), for example \"t\"",
+    ),
+    ("columns", "outputs", "the measured outputs' headers, for example [\"level\"]"),
+    ("columns", "inputs", "the applied inputs' headers, for example [\"pump\"]"),
+    (
+        "controller",
+        "gain",
+        "the candidate gain K to certify, m rows of p values (u = K y), for example [[-1.5]]",
+    ),
+    ("certificate", "margin", "the rate (1/s) the loop must contract at, > 0, for example 0.05"),
+];
+
+/// The required keys that `table` leaves unset (absent, or [`REQUIRED_VALUE`] anywhere in
+/// the value), as `section.key`, in [`REQUIRED_KEYS`]' order.
+#[must_use]
+pub fn unset_required(table: &toml::Table) -> Vec<String> {
+    fn placeholder(v: &toml::Value) -> bool {
+        match v {
+            toml::Value::String(s) => s == REQUIRED_VALUE,
+            toml::Value::Array(a) => a.iter().any(placeholder),
+            _ => false,
+        }
+    }
+    REQUIRED_KEYS
+        .iter()
+        .filter(|(section, key, _)| {
+            table
+                .get(*section)
+                .and_then(toml::Value::as_table)
+                .and_then(|t| t.get(*key))
+                .is_none_or(placeholder)
+        })
+        .map(|(section, key, _)| format!("{section}.{key}"))
+        .collect()
+}
+
+/// The refusal for unset required keys: each named with what it is.
+fn required_message(unset: &[String]) -> String {
+    let lines: Vec<String> = REQUIRED_KEYS
+        .iter()
+        .filter(|(s, k, _)| unset.contains(&format!("{s}.{k}")))
+        .map(|(s, k, what)| format!("  {s}.{k}: {what}"))
+        .collect();
+    format!(
+        "required {} not set: {} (they describe your plant and controller, so none has a \
+         default; `streamcert certify --print-config` marks them \"{REQUIRED_VALUE}\"):\n{}",
+        if unset.len() == 1 { "key" } else { "keys" },
+        unset.join(", "),
+        lines.join("\n")
+    )
+}
+
+/// How a TOML error names where it is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ErrorPlace {
+    /// The file's line and column with the line quoted: for a file the user wrote.
+    Lines,
+    /// The key's path (`certificate.margn`): for a text built from the user's mapping (a
+    /// Python dict), whose lines the user never saw.
+    KeyPaths,
+}
+
+/// The dotted path of the key whose value or name starts at byte `at` of `text` (the last
+/// `[section]` header before it, then the key on that line).
+fn key_path_at(text: &str, at: usize) -> Option<String> {
+    let before = text.get(..at)?;
+    let line_start = before.rfind('\n').map_or(0, |i| i + 1);
+    let line = text[line_start..].lines().next()?;
+    let key = line.split('=').next()?.trim();
+    let section = before[..line_start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('[') && l.ends_with(']'))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    Some(match section {
+        Some(s) if !key.is_empty() && !key.starts_with('[') => format!("{s}.{key}"),
+        Some(s) => s,
+        None => key.to_string(),
+    })
+}
+
+/// `e` as a message placed by `place`.
+fn toml_message(e: &toml::de::Error, text: &str, place: ErrorPlace) -> String {
+    match (place, e.span().and_then(|span| key_path_at(text, span.start))) {
+        (ErrorPlace::KeyPaths, Some(path)) => format!("`{path}`: {}", e.message().trim_end()),
+        (ErrorPlace::KeyPaths, None) => e.message().trim_end().to_string(),
+        (ErrorPlace::Lines, _) => e.to_string(),
+    }
+}
 
 /// Parse and validate a configuration text; `path` names it in errors.
 ///
 /// # Errors
-/// [`CliError::Config`] for a TOML error, an unknown key, a wrong `K` shape or an invalid
-/// parameter.
+/// [`CliError::Config`] for a TOML error, a required key unset ([`REQUIRED_KEYS`], named in
+/// the message), an unknown key, a wrong `K` shape or an invalid parameter.
 pub fn parse(text: &str, path: &str) -> Result<Config, CliError> {
+    parse_placed(text, path, ErrorPlace::Lines)
+}
+
+/// [`parse`], with TOML errors placed by `place`.
+///
+/// # Errors
+/// As [`parse`].
+pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config, CliError> {
     let bad = |message: String| CliError::Config { path: path.to_string(), message };
-    let f: File = toml::from_str(text).map_err(|e| {
-        let message = e.to_string();
-        if message.contains("missing field") {
-            bad(format!("{}\n{REQUIRED}", message.trim_end()))
-        } else {
-            bad(message)
-        }
-    })?;
+    let table: toml::Table =
+        toml::from_str(text).map_err(|e| bad(toml_message(&e, text, place)))?;
+    let unset = unset_required(&table);
+    if !unset.is_empty() {
+        return Err(bad(required_message(&unset)));
+    }
+    let f: File = toml::from_str(text).map_err(|e| bad(toml_message(&e, text, place)))?;
     let (p, m) = (f.columns.outputs.len(), f.columns.inputs.len());
     if p == 0 || m == 0 {
         return Err(bad(

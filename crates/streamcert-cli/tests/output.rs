@@ -83,7 +83,7 @@ fn reason(r: Option<NotCertified>) -> String {
 #[test]
 fn csv_rows_read_back_to_the_library_evidence() {
     // With the calibrated and nonlinear certificates, so their columns carry numbers too.
-    let text = config::DEFAULT_CONFIG.replace("enabled = false", "enabled = true");
+    let text = config::g5_node_b().replace("enabled = false", "enabled = true");
     let cfg = config::parse(&text, "calibrated").expect("configuration");
     assert!(cfg.certifier.nonlinear.is_some());
     let input = plant_csv(6000);
@@ -152,7 +152,7 @@ fn csv_rows_read_back_to_the_library_evidence() {
 
 #[test]
 fn json_lines_read_back_to_the_library_evidence() {
-    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let input = plant_csv(1500);
     let want = library(&cfg, &input);
     let mut out = Vec::new();
@@ -177,7 +177,7 @@ fn json_lines_read_back_to_the_library_evidence() {
 fn the_reader_thread_changes_nothing_but_speed() {
     // A file input is read by a second thread in batches of 1024 rows; a live one on the
     // certifying thread. Bad rows spread over several batches, under both policies.
-    let cfg = config::parse(config::DEFAULT_CONFIG, "default").expect("default configuration");
+    let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let mut lines: Vec<String> = plant_csv(5000).lines().map(String::from).collect();
     for (k, bad) in [(700, "x"), (1024, "nan"), (1025, ""), (2049, "1e999"), (4000, "-inf")] {
         let mut f: Vec<String> = lines[k].split(',').map(String::from).collect();

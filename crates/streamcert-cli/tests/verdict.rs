@@ -26,6 +26,8 @@ fn require_certified_sets_the_exit_status_from_the_verdict() {
         let certified = v["certified_at_end"].as_bool().expect("bool");
         let verdict = v["verdict"].as_str().expect("verdict");
         assert_eq!(verdict.starts_with("verdict: CERTIFIED"), certified, "{verdict}");
+        // Either way it names the candidate it judged: the gain and the margin.
+        assert!(verdict.contains("for K = [[-4]] at the margin 0.05 /s"), "{verdict}");
         // A certified verdict states the assumption its risk rests on.
         assert_eq!(verdict.contains("the risk assumes dynamics linear"), certified, "{verdict}");
         assert_eq!(out.status.code(), Some(if certified { 0 } else { 6 }), "{verdict}");
@@ -46,6 +48,8 @@ fn require_certified_sets_the_exit_status_from_the_verdict() {
     );
     let open_at_end =
         text(&out.stdout).lines().last().expect("rows").split(',').nth(8) == Some("1");
+    let verdict = text(&out.stderr);
+    assert!(verdict.contains("NO STATED RISK) for K = [[-4]] at the margin 0.05 /s"), "{verdict}");
     assert_eq!(out.status.code(), Some(if open_at_end { 0 } else { 6 }));
     seen[usize::from(open_at_end)] = true;
     assert!(seen[0] && seen[1], "both outcomes exercised: {seen:?}");

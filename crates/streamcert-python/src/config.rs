@@ -1,7 +1,7 @@
 //! Configurations from a TOML text or from a JSON object (a Python dict or keyword
 //! arguments), read by the command line's own parser.
 
-use streamcert_cli::config::{self, Config, DEFAULT_CONFIG};
+use streamcert_cli::config::{self, Config, DEFAULT_CONFIG, ErrorPlace};
 use streamcert_cli::network::{self, NetConfig};
 
 use crate::Error;
@@ -26,9 +26,9 @@ pub fn from_toml(text: &str, name: &str) -> Result<ConfigText, Error> {
 }
 
 /// A `certify` configuration from a JSON object of sections (`{"calibration": {"delta":
-/// 0.05}, ...}`) laid over the command line's defaults (`certify --print-config`): sections
-/// merge key by key, any other value replaces the default. So an empty object is the
-/// default configuration, with the calibrated certificate and its guards.
+/// 0.05}, ...}`) laid over the command line's template (`certify --print-config`): sections
+/// merge key by key, any other value replaces the template's. The required keys (the
+/// columns, the gain, the margin) must be given: an empty object is refused naming them.
 ///
 /// # Errors
 /// [`Error::Config`] for a value TOML cannot hold (`null`) and for everything the command
@@ -38,8 +38,49 @@ pub fn from_json_over_defaults(json: &str) -> Result<ConfigText, Error> {
     let mut table: toml::Table = toml::from_str(DEFAULT_CONFIG)
         .map_err(|e| Error::Config(format!("the default configuration: {e}")))?;
     merge(&mut table, user);
-    let text = toml::to_string(&table).map_err(|e| Error::Config(e.to_string()))?;
-    from_toml(&text, "configuration")
+    from_table(&table)
+}
+
+/// A configuration from a table built from the caller's mapping: errors name key paths.
+fn from_table(table: &toml::Table) -> Result<ConfigText, Error> {
+    let text = toml::to_string(table).map_err(|e| Error::Config(e.to_string()))?;
+    let config = config::parse_placed(&text, "configuration", ErrorPlace::KeyPaths)?;
+    Ok(ConfigText { config, text })
+}
+
+/// `cfg` with its `[columns]` names replaced where given (`None` keeps a name): the names
+/// the verdict, the region columns and a checkpoint use, for arrays that carry their own
+/// (a pandas Series' name).
+///
+/// # Errors
+/// [`Error::Config`] as the command line refuses the renamed file (a name given twice, a
+/// count that does not match the gain's shape).
+pub fn with_columns(
+    cfg: &ConfigText,
+    time: Option<String>,
+    outputs: Option<Vec<String>>,
+    inputs: Option<Vec<String>>,
+) -> Result<ConfigText, Error> {
+    let mut table: toml::Table =
+        toml::from_str(&cfg.text).map_err(|e| Error::Config(e.to_string()))?;
+    let columns = table
+        .entry("columns")
+        .or_insert_with(|| toml::Value::Table(toml::Table::new()))
+        .as_table_mut()
+        .ok_or_else(|| Error::Config("[columns] is not a section".into()))?;
+    let list = |names: Vec<String>| {
+        toml::Value::Array(names.into_iter().map(toml::Value::String).collect())
+    };
+    if let Some(t) = time {
+        columns.insert("time".into(), toml::Value::String(t));
+    }
+    if let Some(o) = outputs {
+        columns.insert("outputs".into(), list(o));
+    }
+    if let Some(i) = inputs {
+        columns.insert("inputs".into(), list(i));
+    }
+    from_table(&table)
 }
 
 /// A `network` configuration from its TOML text, exactly as `streamcert network --config`

@@ -17,6 +17,18 @@ fn node_b(d: &G5Run) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     (d.t.clone(), y, u)
 }
 
+/// Node b's required keys (columns `t`, `y_b`, `u_b`, the gain `[[-4.0]]`, `margin`) with
+/// `window` columns in the regression (`None`: the default).
+fn node_b_config(window: Option<usize>, margin: f64) -> streamcert_python::config::ConfigText {
+    let regression =
+        window.map_or(String::new(), |w| format!(r#", "regression": {{"window": {w}}}"#));
+    from_json_over_defaults(&format!(
+        r#"{{"columns": {{"time": "t", "outputs": ["y_b"], "inputs": ["u_b"]}},
+            "controller": {{"gain": [[-4.0]]}}, "certificate": {{"margin": {margin}}}{regression}}}"#
+    ))
+    .unwrap()
+}
+
 fn csv_of(t: &[f64], y: &[f64], u: &[f64]) -> String {
     let mut s = String::from("t,y_b,u_b\n");
     for k in 0..t.len() {
@@ -40,7 +52,7 @@ fn opts() -> Options {
 #[test]
 fn columns_equal_the_command_lines_csv_bit_for_bit() {
     let (t, y, u) = node_b(&g5(900));
-    let cfg = from_json_over_defaults(r#"{"regression": {"window": 100}}"#).unwrap();
+    let cfg = node_b_config(Some(100), 0.05);
     let mut out = Vec::new();
     let summary =
         certify::run(&cfg.config, csv_of(&t, &y, &u).as_bytes(), "g5", &mut out, &opts()).unwrap();
@@ -100,7 +112,7 @@ fn split_csv(line: &str) -> Vec<&str> {
 #[test]
 fn a_checkpoint_after_any_sample_resumes_to_the_uninterrupted_run() {
     let (t, y, u) = node_b(&g5(400));
-    let cfg = from_json_over_defaults(r#"{"regression": {"window": 60}}"#).unwrap().config;
+    let cfg = node_b_config(Some(60), 0.05).config;
     let mut whole = Run::new(cfg.clone()).unwrap();
     let mut expected = whole.columns(t.len());
     whole.push_block(&t, &y, &u, &mut expected).unwrap();
@@ -129,7 +141,7 @@ fn a_checkpoint_after_any_sample_resumes_to_the_uninterrupted_run() {
 #[test]
 fn a_refused_block_absorbs_nothing_and_names_row_and_column() {
     let (t, y, mut u) = node_b(&g5(50));
-    let cfg = from_json_over_defaults("{}").unwrap().config;
+    let cfg = node_b_config(None, 0.05).config;
     let mut run = Run::new(cfg).unwrap();
     let mut cols = run.columns(0);
     run.push_block(&t[..10], &y[..10], &u[..10], &mut cols).unwrap();
@@ -163,8 +175,8 @@ fn a_refused_block_absorbs_nothing_and_names_row_and_column() {
 #[test]
 fn a_checkpoint_of_another_configuration_or_damaged_is_refused() {
     let (t, y, u) = node_b(&g5(30));
-    let cfg = from_json_over_defaults("{}").unwrap().config;
-    let other = from_json_over_defaults(r#"{"certificate": {"margin": 0.1}}"#).unwrap().config;
+    let cfg = node_b_config(None, 0.05).config;
+    let other = node_b_config(None, 0.1).config;
     let mut run = Run::new(cfg.clone()).unwrap();
     let mut cols = run.columns(0);
     run.push_block(&t, &y, &u, &mut cols).unwrap();
@@ -180,7 +192,7 @@ fn a_checkpoint_of_another_configuration_or_damaged_is_refused() {
 #[test]
 fn a_long_block_on_two_threads_equals_the_samples_one_by_one() {
     let (t, y, u) = node_b(&g5(40_000));
-    let cfg = from_json_over_defaults("{}").unwrap().config;
+    let cfg = node_b_config(None, 0.05).config;
     let mut whole = Run::new(cfg.clone()).unwrap();
     let mut got = whole.columns(t.len());
     whole.push_block(&t, &y, &u, &mut got).unwrap();
@@ -192,4 +204,28 @@ fn a_long_block_on_two_threads_equals_the_samples_one_by_one() {
     }
     assert_eq!(format!("{got:?}"), format!("{expected:?}"));
     assert_eq!(whole.summary(), single.summary());
+}
+
+/// A mapping without the gain or the margin is refused naming them; a misspelt key is named
+/// by its path, not by a line of a TOML text the caller never saw.
+#[test]
+fn mappings_are_refused_by_key_path() {
+    let err = from_json_over_defaults("{}").unwrap_err().to_string();
+    assert!(err.contains("controller.gain") && err.contains("certificate.margin"), "{err}");
+    let err = from_json_over_defaults(
+        r#"{"columns": {"time": "t", "outputs": ["y"], "inputs": ["u"]},
+            "controller": {"gain": [[-4.0]]}, "certificate": {"margin": 0.05, "margn": 1}}"#,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("`certificate.margn`") && err.contains("unknown field"), "{err}");
+    assert!(!err.contains("line"), "{err}");
+    let err = from_json_over_defaults(
+        r#"{"columns": {"time": "t", "outputs": ["y"], "inputs": ["u"]},
+            "controller": {"gain": [[-4.0]]}, "certificate": {"margin": 0.05},
+            "regression": {"window": "long"}}"#,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("`regression.window`"), "{err}");
 }

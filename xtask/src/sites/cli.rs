@@ -8,9 +8,9 @@ use anyhow::Result;
 
 use super::Rows;
 
-/// The same study through binaries: the `streamcert` of commit c302992 (`old`: process 0
-/// reads the wide file and ships the samples) against this commit's (each process reads its
-/// own columns), 2 processes each, and this commit's one-process run; seconds of wall clock,
+/// The same study through binaries: a raw-sample `streamcert` (`old`: process 0 reads the
+/// wide file and ships the samples) against this build's (each process reads its own
+/// columns), 2 processes each, and this build's one-process run; seconds of wall clock,
 /// and whether the old binary wrote this build's epoch rows.
 pub(super) fn throughput(
     old: &Path,
@@ -144,7 +144,7 @@ pub(super) fn throughput(
         "one process on 2 workers",
     )?;
     // This build's two processes and its one process on 2 workers must agree; the old
-    // binary's rows agree only while the local certificates are those of c302992.
+    // binary's rows agree only while the local certificates are the old binary's.
     let a = std::fs::read(out.join("old.toml.out.csv"))?;
     let b = std::fs::read(out.join("new.toml.out.csv"))?;
     let c = std::fs::read(out.join("workers.out.csv"))?;

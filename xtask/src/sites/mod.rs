@@ -7,7 +7,7 @@
 //!
 //! * **Bytes.** What crossed process boundaries (the bincode size of every message a process
 //!   other than 0 sent to the composer, as timely serialises it), per epoch, against what the
-//!   raw-sample path of commit c302992 sent for the same rows: process 0 read every row and
+//!   raw-sample path (the one sites replaced) sent for the same rows: process 0 read every row and
 //!   shipped each sample of a subsystem owned by another process as `Sample { row, line,
 //!   index, t, values }` (its bincode size, measured here on a struct of the same fields).
 //! * **Throughput.** Samples per second over 2 processes against the one-process
@@ -35,7 +35,7 @@ mod cli;
 const SIGMA: f64 = 0.05;
 const EPOCH: f64 = 1.0;
 
-/// The raw-sample message of the path this replaces (commit c302992), field for field.
+/// The raw-sample message of the path sites replaced, field for field.
 #[derive(Serialize)]
 struct OldSample {
     row: u64,
@@ -245,7 +245,8 @@ pub(crate) struct Options {
     /// Seconds of data of the throughput study.
     #[arg(long, default_value_t = 30.0)]
     throughput_seconds: f64,
-    /// A `streamcert` binary of commit c302992 (the raw-sample path): also compare the two
+    /// A `streamcert` binary of the raw-sample path (process 0 reads and ships every sample,
+    /// as before sites; built from the project's history): also compare the two
     /// binaries on the throughput study's samples written as CSV.
     #[arg(long)]
     old_binary: Option<PathBuf>,
@@ -284,7 +285,7 @@ pub(crate) fn run(o: &Options) -> Result<()> {
         "Produced by `cargo xtask sites --subsystems {subsystems} --processes {processes} \
          --rate {rate} --seconds {seconds} --throughput-subsystems {throughput_subsystems} \
          --throughput-seconds {throughput_seconds}{}`.\n",
-        if old_binary.is_some() { " --old-binary <c302992's streamcert>" } else { "" }
+        if old_binary.is_some() { " --old-binary <the raw-sample binary>" } else { "" }
     )?;
     writeln!(md, "### Bytes across process boundaries\n")?;
     writeln!(
@@ -300,13 +301,13 @@ pub(crate) fn run(o: &Options) -> Result<()> {
         &["path", "messages per epoch", "bytes per epoch", "ratio to raw samples"],
         &[
             vec![
-                "raw samples (commit c302992: process 0 reads and ships every sample)".into(),
+                "raw samples (process 0 reads and ships every sample)".into(),
                 per(crossing),
                 per(old_bytes),
                 "1".into(),
             ],
             vec![
-                "sites (this commit: only snapshots and marks cross)".into(),
+                "sites (only snapshots and marks cross)".into(),
                 per(m.messages),
                 per(m.bytes),
                 format!("1/{:.0}", old_bytes as f64 / m.bytes.max(1) as f64),
@@ -342,30 +343,25 @@ pub(crate) fn run(o: &Options) -> Result<()> {
              processes on localhost, or one; this build's runs wrote the same epoch rows, \
              {}):\n",
             if same {
-                "and so did c302992's"
+                "and so did the raw-sample binary's"
             } else {
-                "c302992's differ: its calibrated local certificates predate the later \
-                 changes of the default (see VALIDITY.md)"
+                "the raw-sample binary's differ: its calibrated local certificates predate \
+                 later changes of the default (see VALIDITY.md)"
             }
         )?;
         md.push_str(&markdown(
-            &["path", "seconds", "samples per second", "ratio to c302992"],
+            &["path", "seconds", "samples per second", "ratio to the raw-sample binary"],
             &[
                 timing(
-                    "c302992: process 0 reads the wide file and ships the samples",
+                    "the raw-sample binary: process 0 reads the wide file and ships the samples",
                     old_s,
                     samples,
                     None,
                 ),
+                timing("sites: each process reads its own columns", new_s, samples, Some(old_s)),
+                timing("sites, one process (no timely)", one_s, samples, Some(old_s)),
                 timing(
-                    "this commit: each process reads its own columns",
-                    new_s,
-                    samples,
-                    Some(old_s),
-                ),
-                timing("this commit, one process (no timely)", one_s, samples, Some(old_s)),
-                timing(
-                    "this commit, one process on 2 timely workers (`--workers 2`)",
+                    "sites, one process on 2 timely workers (`--workers 2`)",
                     workers_s,
                     samples,
                     Some(old_s),

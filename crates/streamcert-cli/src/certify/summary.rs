@@ -164,16 +164,18 @@ impl Summary {
         self.calibrated_reasons.iter().max_by_key(|(_, n)| *n).map(|(k, _)| k.as_str())
     }
 
-    /// The verdict line: the calibrated verdict at the end of the input (certified since
-    /// when, at which risk, over which region; or not, with the reason that held longest), or,
-    /// without a calibration, that the paper's gates carry no stated risk.
+    /// The verdict line: the candidate it judged (the gain and the margin), then the calibrated
+    /// verdict at the end of the input (certified since when, at which risk, over which
+    /// region; or not, with the reason that held longest), or, without a calibration, that the
+    /// paper's gates carry no stated risk.
     #[must_use]
     pub fn verdict_line(&self, cfg: &CertifierConfig, outputs: &[String]) -> String {
+        let candidate = candidate(cfg);
         let Some(cal) = &cfg.calibration else {
             return format!(
-                "verdict (paper-only mode, NO STATED RISK): the Gaussian gate is {} at the end; \
-                 the paper's gates carry no bound on the chance of a false deployment (enable \
-                 [calibration] for one)",
+                "verdict (paper-only mode, NO STATED RISK) {candidate}: the Gaussian gate is \
+                 {} at the end; the paper's gates carry no bound on the chance of a false \
+                 deployment (enable [calibration] for one)",
                 self.gauss_since
                     .map_or_else(|| "closed".into(), |t| format!("open since {}", when(Some(t))))
             );
@@ -196,7 +198,7 @@ impl Summary {
                     "the nonlinearity guard is off"
                 };
                 format!(
-                    "verdict: CERTIFIED from {} to the end (calibrated certificate, risk \
+                    "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate, risk \
                      delta = {} over the run), over the region {}; the risk assumes dynamics \
                      linear over that region ({scope})",
                     when(Some(since)),
@@ -205,8 +207,8 @@ impl Summary {
                 )
             }
             None => format!(
-                "verdict: NOT CERTIFIED at the end (calibrated certificate, risk delta = {}); \
-                 the reason that held longest: {}{}",
+                "verdict: NOT CERTIFIED {candidate} at the end (calibrated certificate, risk \
+                 delta = {}); the reason that held longest: {}{}",
                 Sig(cal.delta),
                 self.longest_reason().map_or_else(|| "none (no rows)".into(), reason_words),
                 self.calibrated_last_reason
@@ -328,4 +330,18 @@ impl Summary {
             "warning": self.units_warning(cfg),
         })
     }
+}
+
+/// The candidate a verdict judges, as its line names it: `for K = [[-4]] at the margin
+/// 0.05 /s` (rows of `K` are its inputs, `m × p`).
+fn candidate(cfg: &CertifierConfig) -> String {
+    let rows: Vec<String> = cfg
+        .gain
+        .chunks(cfg.regression.outputs.max(1))
+        .map(|row| {
+            let row: Vec<String> = row.iter().map(|k| Sig(*k).to_string()).collect();
+            format!("[{}]", row.join(", "))
+        })
+        .collect();
+    format!("for K = [{}] at the margin {} /s", rows.join(", "), Sig(cfg.margin))
 }

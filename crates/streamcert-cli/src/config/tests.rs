@@ -2,35 +2,37 @@
 
 use super::*;
 
+/// The printed configuration with G5 node b's required keys set.
+fn base() -> String {
+    g5_node_b()
+}
+
 #[test]
 fn default_config_parses() {
-    let c = parse(DEFAULT_CONFIG, "default").unwrap();
+    let c = parse(&base(), "default").unwrap();
     assert_eq!(c.certifier.gain, vec![-4.0]);
     assert!(c.certifier.ambiguity.is_some());
 }
 
 #[test]
 fn bad_configs_are_refused() {
-    let unknown = DEFAULT_CONFIG.replace("margin = 0.05", "margin = 0.05\nmargn = 1");
+    let unknown = base().replace("margin = 0.05", "margin = 0.05\nmargn = 1");
     assert!(parse(&unknown, "x").unwrap_err().to_string().contains("margn"));
-    let shape = DEFAULT_CONFIG.replace("gain = [[-4.0]]", "gain = [[-4.0, 1.0]]");
+    let shape = base().replace("gain = [[-4.0]]", "gain = [[-4.0, 1.0]]");
     assert!(parse(&shape, "x").unwrap_err().to_string().contains("m × p"));
-    let invalid = DEFAULT_CONFIG.replace("conservatism = 0.1", "conservatism = -1.0");
+    let invalid = base().replace("conservatism = 0.1", "conservatism = -1.0");
     assert!(parse(&invalid, "x").unwrap_err().to_string().contains("conservatism"));
-    let risk = DEFAULT_CONFIG.replace("delta = 0.01 ", "delta = 1.5 ");
+    let risk = base().replace("delta = 0.01 ", "delta = 1.5 ");
     assert!(parse(&risk, "x").unwrap_err().to_string().contains("delta"));
 }
 
 #[test]
 fn keys_with_documented_defaults_may_be_omitted() {
-    let full = parse(DEFAULT_CONFIG, "default").unwrap();
-    let start = DEFAULT_CONFIG.find("[ambiguity]").unwrap();
-    let end = DEFAULT_CONFIG.find("[calibration]").unwrap();
-    let short = format!(
-        "{}[ambiguity]\nenabled = true\n\n{}",
-        &DEFAULT_CONFIG[..start],
-        &DEFAULT_CONFIG[end..]
-    );
+    let full = parse(&base(), "default").unwrap();
+    let text = base();
+    let start = text.find("[ambiguity]").unwrap();
+    let end = text.find("[calibration]").unwrap();
+    let short = format!("{}[ambiguity]\nenabled = true\n\n{}", &text[..start], &text[end..]);
     let short = short.replace("window = 150 ", "# window = 150 ");
     let parsed = parse(&short, "short").unwrap();
     assert_eq!(parsed.certifier, full.certifier);
@@ -40,10 +42,10 @@ fn keys_with_documented_defaults_may_be_omitted() {
 fn calibration_section_selects_the_calibrated_certificate() {
     // The default is the calibrated certificate with every guard.
     assert_eq!(
-        parse(DEFAULT_CONFIG, "default").unwrap().certifier.calibration,
+        parse(&base(), "default").unwrap().certifier.calibration,
         Some(Calibration::new(0.01))
     );
-    let on = DEFAULT_CONFIG.replace("delta = 0.01 ", "delta = 0.05 ");
+    let on = base().replace("delta = 0.01 ", "delta = 0.05 ");
     let c = parse(&on, "x").unwrap();
     assert_eq!(c.certifier.calibration, Some(Calibration::new(0.05)));
     let tuned = on.replace("# windows = 5 ", "windows = 2 ");
@@ -76,7 +78,7 @@ fn calibration_section_selects_the_calibrated_certificate() {
 #[test]
 fn nonlinear_section_selects_the_nonlinear_certificate() {
     let nl = "enabled = false\nfeatures";
-    let both = DEFAULT_CONFIG.replace(nl, "enabled = true\nfeatures");
+    let both = base().replace(nl, "enabled = true\nfeatures");
     // Without a calibration (the paper-only mode) the nonlinear certificate is refused,
     // saying what to set.
     let paper = both.replace("enabled = true\ndelta = 0.01", "enabled = false\ndelta = 0.01");
@@ -103,7 +105,7 @@ fn nonlinear_section_selects_the_nonlinear_certificate() {
 #[test]
 fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold() {
     use streamcert_regression::InputIntegral;
-    let full = parse(DEFAULT_CONFIG, "default").unwrap().certifier;
+    let full = parse(&base(), "default").unwrap().certifier;
     let cal = full.calibration.expect("the calibrated certificate by default");
     assert!(cal.hidden_dynamics && cal.nonlinearity && cal.plant_change);
     assert_eq!(full.regression.input_integral, InputIntegral::ZeroOrderHold);
@@ -115,41 +117,41 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     assert_eq!(short.calibration, Some(cal));
     assert_eq!(short.regression.input_integral, InputIntegral::ZeroOrderHold);
     // Each guard and the calibration can be turned off by name only.
-    let off = DEFAULT_CONFIG
+    let off = base()
         .replace("# plant_change = true ", "plant_change = false ")
         .replace("# nonlinearity = true ", "nonlinearity = false ");
     let c = parse(&off, "x").unwrap().certifier.calibration.unwrap();
     assert!(!c.plant_change && !c.nonlinearity && c.hidden_dynamics);
     // The change guard's risk: δ unless stated.
     assert_eq!((cal.change_risk, cal.change_risk()), (None, cal.delta));
-    let risk = DEFAULT_CONFIG.replace("# change_risk = 0.01 ", "change_risk = 0.002 ");
+    let risk = base().replace("# change_risk = 0.01 ", "change_risk = 0.002 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.change_risk(), 0.002);
     // The model guards' risk: δ over the windows unless stated.
     assert_eq!((cal.guard_risk, cal.guard_risk(4)), (None, cal.delta / 4.0));
-    let risk = DEFAULT_CONFIG.replace("# guard_risk = 0.002 ", "guard_risk = 0.05 ");
+    let risk = base().replace("# guard_risk = 0.002 ", "guard_risk = 0.05 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.guard_risk(4), 0.05);
     // The risk split across windows: equal unless stated; a misspelt split is refused.
     assert_eq!(cal.risk_split, streamcert_certificate::RiskSplit::Equal);
-    let split = DEFAULT_CONFIG.replace("# risk_split = \"equal\" ", "risk_split = \"by_length\" ");
+    let split = base().replace("# risk_split = \"equal\" ", "risk_split = \"by_length\" ");
     let c = parse(&split, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.risk_split, streamcert_certificate::RiskSplit::ByLength);
     assert!(parse(&split.replace("by_length", "bylength"), "x").is_err());
     // The batched radius's share of the risk: 0.2 unless stated.
     assert_eq!(cal.auto_batch_risk, 0.2);
-    let share = DEFAULT_CONFIG.replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");
+    let share = base().replace("# auto_batch_risk = 0.2 ", "auto_batch_risk = 0.5 ");
     let c = parse(&share, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.auto_batch_risk, 0.5);
     // The automatic batches: about 30 per window unless stated; 0 turns them off; the key
     // of the fixed-size rule before (`auto_batch`) is refused, not silently ignored.
     assert_eq!(cal.auto_batches, 30);
-    let off = DEFAULT_CONFIG.replace("# auto_batches = 30 ", "auto_batches = 0 ");
+    let off = base().replace("# auto_batches = 30 ", "auto_batches = 0 ");
     assert_eq!(parse(&off, "x").unwrap().certifier.calibration.unwrap().auto_batches, 0);
-    let old = DEFAULT_CONFIG.replace("# auto_batches = 30 ", "auto_batch = 8 ");
+    let old = base().replace("# auto_batches = 30 ", "auto_batch = 8 ");
     let err = parse(&old, "x").unwrap_err().to_string();
     assert!(err.contains("unknown field `auto_batch`"), "{err}");
-    let paper = DEFAULT_CONFIG.replace("enabled = true\ndelta", "enabled = false\ndelta");
+    let paper = base().replace("enabled = true\ndelta", "enabled = false\ndelta");
     assert_eq!(parse(&paper, "x").unwrap().certifier.calibration, None);
 }
 
@@ -175,17 +177,49 @@ fn every_default_in_print_config_carries_its_reason() {
 fn only_the_required_keys_give_the_printed_configuration() {
     let minimal = "[columns]\ntime = \"t\"\noutputs = [\"y_b\"]\ninputs = [\"u_b\"]\n\
                    [controller]\ngain = [[-4.0]]\n[certificate]\nmargin = 0.05\n";
-    let full = parse(DEFAULT_CONFIG, "default").unwrap();
+    let full = parse(&base(), "default").unwrap();
     let parsed = parse(minimal, "minimal").unwrap();
     assert_eq!(parsed.certifier, full.certifier);
     assert_eq!(parsed.columns, full.columns);
-    for (drop, key) in [("margin = 0.05\n", "margin"), ("gain = [[-4.0]]\n", "gain")] {
+    for (drop, key) in
+        [("margin = 0.05\n", "certificate.margin"), ("gain = [[-4.0]]\n", "controller.gain")]
+    {
         let err = parse(&minimal.replace(drop, ""), "x").unwrap_err().to_string();
-        assert!(err.contains(&format!("missing field `{key}`")), "{err}");
-        assert!(err.contains("[certificate] margin"), "{err}");
+        assert!(err.contains("required key not set"), "{err}");
+        assert!(err.contains(key), "{err}");
         assert!(err.contains("--print-config"), "{err}");
     }
     // A key with a default set to another value is kept.
     let other = minimal.replace("margin = 0.05\n", "margin = 0.05\nconsecutive = 3\n");
     assert_eq!(parse(&other, "x").unwrap().certifier.consecutive, 3);
+}
+
+/// The printed template certifies nothing until the user's five choices are written: each
+/// unset key (left "REQUIRED", or absent) is named with what it is, and no other.
+#[test]
+fn the_template_is_refused_naming_every_required_key() {
+    let err = parse(DEFAULT_CONFIG, "plant.toml").unwrap_err().to_string();
+    for (section, key, what) in REQUIRED_KEYS {
+        assert!(err.contains(&format!("{section}.{key}: {what}")), "{err}");
+    }
+    assert!(err.contains("plant.toml"), "{err}");
+    let text = base();
+    for (line, key) in [
+        ("gain = [[-4.0]]", "controller.gain"),
+        ("margin = 0.05", "certificate.margin"),
+        ("outputs = [\"y_b\"]", "columns.outputs"),
+    ] {
+        for unset in [String::new(), line.split('=').next().unwrap().to_string() + "= \"REQUIRED\""]
+        {
+            let err = parse(&text.replacen(line, &unset, 1), "x").unwrap_err().to_string();
+            assert!(err.contains(key) && err.contains("required key not set"), "{err}");
+            let others = REQUIRED_KEYS.iter().filter(|(s, k, _)| format!("{s}.{k}") != key);
+            for (s, k, _) in others {
+                assert!(!err.contains(&format!("{s}.{k}:")), "{err}");
+            }
+        }
+    }
+    // A placeholder inside a list is unset too.
+    let partial = text.replacen("outputs = [\"y_b\"]", "outputs = [\"y_b\", \"REQUIRED\"]", 1);
+    assert!(parse(&partial, "x").unwrap_err().to_string().contains("columns.outputs"));
 }

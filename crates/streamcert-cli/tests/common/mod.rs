@@ -58,13 +58,15 @@ pub(crate) fn compose(rates: &std::path::Path, gains: &std::path::Path, extra: &
     run(&args, b"")
 }
 
-/// The printed default configuration, written to a file private to the calling test (tests
-/// run in parallel).
+/// The printed default configuration with G5 node b's required keys set
+/// (`config::g5_node_b`), written to a file private to the calling test (tests run in
+/// parallel).
 pub(crate) fn config(tag: &str) -> PathBuf {
     let out = run(&["certify", "--print-config"], b"");
     assert!(out.status.success());
+    assert_eq!(text(&out.stdout), streamcert_cli::config::DEFAULT_CONFIG);
     let path = tmp(&format!("config-{tag}.toml"));
-    std::fs::write(&path, &out.stdout).expect("write config");
+    std::fs::write(&path, streamcert_cli::config::g5_node_b()).expect("write config");
     path
 }
 

@@ -13,7 +13,7 @@ use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyTuple};
 
 use crate::Error;
-use crate::config::{ConfigText, from_json_over_defaults, from_toml};
+use crate::config::{ConfigText, from_json_over_defaults, from_toml, with_columns};
 
 /// The Python exception for `e`: `ConfigError`, `InputDataError` (with `row` and `column`),
 /// `ShapeError`, `CheckpointError` or `ComposeError` from `streamcert._errors`.
@@ -55,6 +55,20 @@ impl PyConfig {
     #[staticmethod]
     fn from_json(py: Python<'_>, json: &str) -> PyResult<Self> {
         from_json_over_defaults(json).map(|inner| Self { inner }).map_err(|e| to_py(py, e))
+    }
+
+    /// This configuration with its columns renamed (`None` keeps a name).
+    #[pyo3(signature = (time = None, outputs = None, inputs = None))]
+    fn with_columns(
+        &self,
+        py: Python<'_>,
+        time: Option<String>,
+        outputs: Option<Vec<String>>,
+        inputs: Option<Vec<String>>,
+    ) -> PyResult<Self> {
+        with_columns(&self.inner, time, outputs, inputs)
+            .map(|inner| Self { inner })
+            .map_err(|e| to_py(py, e))
     }
 
     /// The TOML text (what `certify --config` would read to get this configuration).
@@ -194,6 +208,7 @@ fn reason_kinds<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("DEFAULT_CONFIG", streamcert_cli::config::DEFAULT_CONFIG)?;
+    m.add("G5_NODE_B_CONFIG", streamcert_cli::config::g5_node_b())?;
     m.add("NETWORK_EXAMPLE_CONFIG", streamcert_cli::network::EXAMPLE_CONFIG)?;
     m.add("EVIDENCE_COLUMNS", streamcert_certificate::EVIDENCE_COLUMNS.to_vec())?;
     m.add("FLOAT_COLUMNS", crate::FLOAT_COLUMNS.to_vec())?;

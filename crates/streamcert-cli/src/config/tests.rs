@@ -223,3 +223,11 @@ fn the_template_is_refused_naming_every_required_key() {
     let partial = text.replacen("outputs = [\"y_b\"]", "outputs = [\"y_b\", \"REQUIRED\"]", 1);
     assert!(parse(&partial, "x").unwrap_err().to_string().contains("columns.outputs"));
 }
+
+/// The example configuration the README's commands use is `g5_node_b()`, byte for byte.
+#[test]
+fn the_committed_example_is_g5_node_b() {
+    let committed = include_str!("../../../../examples/data/g5_node_b.toml");
+    assert_eq!(committed, g5_node_b());
+    assert!(parse(committed, "g5_node_b.toml").is_ok());
+}

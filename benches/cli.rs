@@ -13,10 +13,10 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::certificate::{Certifier, Evidence};
-use streamcert_cli::certify::{self, BadRows, Options};
-use streamcert_cli::config;
-use streamcert_cli::input::{Sample, SampleReader};
-use streamcert_cli::output::{EvidenceWriter, Format};
+use streamcert_pipeline::certify::{self, BadRows, Options};
+use streamcert_pipeline::config;
+use streamcert_pipeline::input::{Sample, SampleReader};
+use streamcert_pipeline::output::{EvidenceWriter, Format};
 
 const ROWS: usize = 20_000;
 

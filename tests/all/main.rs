@@ -7,6 +7,7 @@ mod calibrated_config;
 mod certificate;
 mod change;
 mod compose;
+mod crate_graph;
 mod dynamics;
 mod network;
 mod network_coupling;

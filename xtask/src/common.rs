@@ -196,10 +196,10 @@ pub(crate) fn write(path: &Path, text: &str) -> Result<()> {
 }
 
 /// Write one subsystem's evidence through the command line's writer
-/// ([`EvidenceWriter`](streamcert_cli::output::EvidenceWriter)): the columns and number format
+/// ([`EvidenceWriter`](streamcert_pipeline::output::EvidenceWriter)): the columns and number format
 /// of `streamcert certify`.
 pub(crate) fn write_evidence(path: &Path, evidence: &[Evidence]) -> Result<()> {
-    use streamcert_cli::output::{EvidenceWriter, Format};
+    use streamcert_pipeline::output::{EvidenceWriter, Format};
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }

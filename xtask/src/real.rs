@@ -16,9 +16,9 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use sha2::{Digest, Sha256};
-use streamcert_cli::certify::{BadRows, Options, Summary, run as certify};
-use streamcert_cli::config::parse;
-use streamcert_cli::output::Format;
+use streamcert_pipeline::certify::{BadRows, Options, Summary, run as certify};
+use streamcert_pipeline::config::parse;
+use streamcert_pipeline::output::Format;
 
 use crate::common::{markdown, median, write};
 

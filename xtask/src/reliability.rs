@@ -83,8 +83,8 @@ pub(crate) fn run_all(out: &Path) -> Result<()> {
     // The configuration and data every case starts from.
     let (_, _, template) = run(&bin, &["certify", "--print-config"], b"")?;
     // The printed template with G5 node b's required keys set (what `g5_node_b` writes).
-    anyhow::ensure!(template == streamcert_cli::config::DEFAULT_CONFIG, "--print-config");
-    let config = streamcert_cli::config::g5_node_b();
+    anyhow::ensure!(template == streamcert_pipeline::config::DEFAULT_CONFIG, "--print-config");
+    let config = streamcert_pipeline::config::g5_node_b();
     let cfg_path = path("config.toml");
     std::fs::write(&cfg_path, &config)?;
     let cfg = s(&cfg_path)?;

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 
 use clap::{Parser, Subcommand, ValueEnum};
-use streamcert_cli::{CliError, certify, compose, config, network, simulate};
 use streamcert_dynamics::Coupling;
 use streamcert_experiments::Experiment;
+use streamcert_pipeline::{CliError, certify, compose, config, network, simulate};
 
 /// Decide from streaming sensor data whether a feedback controller may be deployed, and
 /// whether a coupled network of certified subsystems stays contracting.

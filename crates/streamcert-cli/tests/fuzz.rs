@@ -21,10 +21,10 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
-use streamcert_cli::certify::{BadRows, Format, Options, run};
-use streamcert_cli::compose::{self, GainsFormat, Method};
-use streamcert_cli::config::{Columns, parse};
-use streamcert_cli::input::{Sample, SampleReader};
+use streamcert_pipeline::certify::{BadRows, Format, Options, run};
+use streamcert_pipeline::compose::{self, GainsFormat, Method};
+use streamcert_pipeline::config::{Columns, parse};
+use streamcert_pipeline::input::{Sample, SampleReader};
 
 fn corpus(target: &str) -> Vec<Vec<u8>> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fuzz-corpus").join(target);
@@ -214,16 +214,16 @@ proptest! {
     fn network_configuration_never_panics(other in any::<usize>(), m in mutations()) {
         let seeds = corpus("network");
         let input = mutate(&seeds[1], &seeds[other % seeds.len()], &m);
-        let _ = streamcert_cli::network::parse(&String::from_utf8_lossy(&input), "fuzz.toml");
+        let _ = streamcert_pipeline::network::parse(&String::from_utf8_lossy(&input), "fuzz.toml");
     }
 
     #[test]
     fn network_long_input_never_panics(m in mutations()) {
         let seeds = corpus("network");
-        let cfg = streamcert_cli::network::parse(&String::from_utf8_lossy(&seeds[1]), "seed.toml")
+        let cfg = streamcert_pipeline::network::parse(&String::from_utf8_lossy(&seeds[1]), "seed.toml")
             .expect("the seed configuration is valid");
         let input = mutate(&seeds[0], &[], &m);
-        let opts = streamcert_cli::network::NetOptions {
+        let opts = streamcert_pipeline::network::NetOptions {
             format: Format::Csv,
             flush_each_row: false,
             checkpoint: None,
@@ -231,7 +231,7 @@ proptest! {
             resume: None,
             plot: None,
         };
-        let _ = streamcert_cli::network::run(&cfg, Cursor::new(input), "fuzz", std::io::sink(), &opts);
+        let _ = streamcert_pipeline::network::run(&cfg, Cursor::new(input), "fuzz", std::io::sink(), &opts);
     }
 
     #[test]

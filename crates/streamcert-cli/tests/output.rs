@@ -3,9 +3,9 @@
 //! absent value is an empty field (`null`), gates are 0/1 and reasons are their text.
 
 use streamcert_certificate::{CertificateKind, Certifier, Evidence, Interval, NotCertified};
-use streamcert_cli::certify::{self, BadRows, Options};
-use streamcert_cli::config;
-use streamcert_cli::output::Format;
+use streamcert_pipeline::certify::{self, BadRows, Options};
+use streamcert_pipeline::config;
+use streamcert_pipeline::output::Format;
 
 /// A scalar loop `ẏ = 0.5 y + u + w` under `u = −4 y + square-wave dither`, with a
 /// deterministic pseudo-random disturbance, as CSV with the default configuration's columns.

@@ -1,8 +1,8 @@
 //! Configurations from a TOML text or from a JSON object (a Python dict or keyword
 //! arguments), read by the command line's own parser.
 
-use streamcert_cli::config::{self, Config, DEFAULT_CONFIG, ErrorPlace};
-use streamcert_cli::network::{self, NetConfig};
+use streamcert_pipeline::config::{self, Config, DEFAULT_CONFIG, ErrorPlace};
+use streamcert_pipeline::network::{self, NetConfig};
 
 use crate::Error;
 

@@ -37,9 +37,9 @@ fn data_message(row: usize, column: Option<&str>, message: &str) -> String {
     }
 }
 
-impl From<streamcert_cli::CliError> for Error {
-    fn from(e: streamcert_cli::CliError) -> Self {
-        use streamcert_cli::CliError as C;
+impl From<streamcert_pipeline::CliError> for Error {
+    fn from(e: streamcert_pipeline::CliError) -> Self {
+        use streamcert_pipeline::CliError as C;
         match e {
             C::Config { .. } => Self::Config(e.to_string()),
             C::Checkpoint { .. } => Self::Checkpoint(e.to_string()),

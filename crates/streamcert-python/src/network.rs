@@ -1,7 +1,7 @@
 //! [`NetworkRun`]: the command line's `network` over samples passed in by subsystem.
 
-use streamcert_cli::network::NetConfig;
 use streamcert_network::{EpochReport, NetworkCertifier};
+use streamcert_pipeline::network::NetConfig;
 
 use crate::Error;
 

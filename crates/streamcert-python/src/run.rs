@@ -1,9 +1,9 @@
 //! [`Run`]: the command line's `certify` over arrays, one sample or one block at a time.
 
 use streamcert_certificate::{Certifier, Evidence, Interval};
-use streamcert_cli::certify::{self, Summary};
-use streamcert_cli::config::Config;
-use streamcert_cli::output::region_columns;
+use streamcert_pipeline::certify::{self, Summary};
+use streamcert_pipeline::config::Config;
+use streamcert_pipeline::output::region_columns;
 
 use crate::{Error, EvidenceColumns};
 

@@ -64,9 +64,9 @@ pub(crate) fn compose(rates: &std::path::Path, gains: &std::path::Path, extra: &
 pub(crate) fn config(tag: &str) -> PathBuf {
     let out = run(&["certify", "--print-config"], b"");
     assert!(out.status.success());
-    assert_eq!(text(&out.stdout), streamcert_cli::config::DEFAULT_CONFIG);
+    assert_eq!(text(&out.stdout), streamcert_pipeline::config::DEFAULT_CONFIG);
     let path = tmp(&format!("config-{tag}.toml"));
-    std::fs::write(&path, streamcert_cli::config::g5_node_b()).expect("write config");
+    std::fs::write(&path, streamcert_pipeline::config::g5_node_b()).expect("write config");
     path
 }
 

@@ -168,7 +168,7 @@ fn warning_gain(py: Python<'_>, beta_a: f64, beta_b: f64) -> PyResult<f64> {
 /// (`triplets`: `i,j,gamma` lines; otherwise a dense matrix).
 #[pyfunction]
 fn cli_compose_json(py: Python<'_>, rates: &str, gains: &str, triplets: bool) -> PyResult<String> {
-    use streamcert_cli::compose::{GainsFormat, Method, run};
+    use streamcert_pipeline::compose::{GainsFormat, Method, run};
     let format = if triplets { GainsFormat::Triplets } else { GainsFormat::Dense };
     run(rates, "rates", gains, "gains", format, Method::Auto, true).map_err(|e| to_py(py, e.into()))
 }
@@ -207,9 +207,9 @@ fn reason_kinds<'py>(py: Python<'py>) -> PyResult<Bound<'py, PyTuple>> {
 /// The extension module.
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add("DEFAULT_CONFIG", streamcert_cli::config::DEFAULT_CONFIG)?;
-    m.add("G5_NODE_B_CONFIG", streamcert_cli::config::g5_node_b())?;
-    m.add("NETWORK_EXAMPLE_CONFIG", streamcert_cli::network::EXAMPLE_CONFIG)?;
+    m.add("DEFAULT_CONFIG", streamcert_pipeline::config::DEFAULT_CONFIG)?;
+    m.add("G5_NODE_B_CONFIG", streamcert_pipeline::config::g5_node_b())?;
+    m.add("NETWORK_EXAMPLE_CONFIG", streamcert_pipeline::network::EXAMPLE_CONFIG)?;
     m.add("EVIDENCE_COLUMNS", streamcert_certificate::EVIDENCE_COLUMNS.to_vec())?;
     m.add("FLOAT_COLUMNS", crate::FLOAT_COLUMNS.to_vec())?;
     m.add("GATES", crate::GATES.to_vec())?;

@@ -12,7 +12,8 @@ mod csv_row;
 use csv_row::CsvRows;
 
 /// Output format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Format {
     /// Comma-separated values with a header (the evidence columns); an absent number is an
     /// empty field, a reason is quoted when it contains a comma.

@@ -7,7 +7,8 @@ use streamcert_compose::{DenseMethod, Network, SparseOptions, certify_sparse, ne
 use crate::CliError;
 
 /// How the gains file is laid out.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 #[serde(rename_all = "snake_case")]
 pub enum GainsFormat {
     /// `N` lines of `N` numbers: entry `(i, j)` is `γ_ij` (how `j` drives `i`); zero diagonal.
@@ -18,7 +19,8 @@ pub enum GainsFormat {
 }
 
 /// Which computation to use.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Method {
     /// Dense composition up to 2000 subsystems, sparse certificates above.
     Auto,

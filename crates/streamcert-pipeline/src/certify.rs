@@ -17,7 +17,8 @@ mod summary;
 use crate::output::{EvidenceWriter, region_columns};
 
 /// What to do with a malformed row.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum BadRows {
     /// Stop with the row's error (exit code 3). Default.
     Stop,

@@ -1,8 +1,11 @@
-//! # streamcert-cli
+//! # streamcert-pipeline
 //!
-//! The library behind the `streamcert` binary: configuration files, streaming CSV input with
-//! precise error locations, the `certify`, `compose` and `simulate` commands. The binary's
-//! `main` only parses arguments and maps errors to exit codes.
+//! The certify pipeline from a user's data to a verdict, beneath the `streamcert` command line
+//! (`streamcert-cli`, a thin caller), the Python package and `xtask`: configuration files and
+//! their defaults, streaming CSV input with precise error locations, per-sample evidence
+//! records, the summary and its verdict line, sealed checkpoints, the `certify`, `network`,
+//! `compose` and `simulate` commands, and the pictures' data. No crate depends on the command
+//! line's crate (tested).
 //!
 //! Exit codes: 0 success, 2 invalid command line or configuration (nothing was read),
 //! 3 malformed input data (stopping policy), 4 I/O failure, 5 checkpoint failure.

@@ -13,10 +13,10 @@ use criterion::{Criterion, Throughput, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::certificate::{Certifier, Evidence};
-use streamcert_pipeline::certify::{self, BadRows, Options};
+use streamcert_pipeline::certify::{self, Options};
 use streamcert_pipeline::config;
 use streamcert_pipeline::input::{Sample, SampleReader};
-use streamcert_pipeline::output::{EvidenceWriter, Format};
+use streamcert_pipeline::output::{EvidenceWriter, Flush, Format, Header};
 
 const ROWS: usize = 20_000;
 
@@ -49,15 +49,7 @@ fn g5_like_csv() -> String {
 }
 
 fn options() -> Options {
-    Options {
-        format: Format::Csv,
-        bad_rows: BadRows::Stop,
-        checkpoint: None,
-        checkpoint_every: None,
-        resume: None,
-        flush_each_row: false,
-        plot: None,
-    }
+    Options::default()
 }
 
 fn read(c: &mut Criterion) {
@@ -120,8 +112,14 @@ fn write(c: &mut Criterion) {
     group.throughput(Throughput::Elements(ROWS as u64));
     group.bench_function("evidence_writer_csv", |b| {
         b.iter(|| {
-            let mut w = EvidenceWriter::new(std::io::sink(), Format::Csv, true, false, Vec::new())
-                .expect("header");
+            let mut w = EvidenceWriter::new(
+                std::io::sink(),
+                Format::Csv,
+                Header::Write,
+                Flush::Buffered,
+                Vec::new(),
+            )
+            .expect("header");
             for e in &evidence {
                 w.write(e).expect("write");
             }
@@ -178,8 +176,10 @@ fn whole_run(c: &mut Criterion) {
     let text = g5_like_csv();
     let mut group = c.benchmark_group("cli_certify");
     group.throughput(Throughput::Elements(ROWS as u64));
-    for (name, flush_each_row) in [("file_two_threads", false), ("live_row_by_row", true)] {
-        let opts = Options { flush_each_row, ..options() };
+    for (name, flush) in
+        [("file_two_threads", Flush::Buffered), ("live_row_by_row", Flush::EachRow)]
+    {
+        let opts = Options { flush, ..options() };
         group.bench_function(name, |b| {
             b.iter(|| {
                 let mut out = std::io::sink();

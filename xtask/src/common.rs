@@ -199,13 +199,13 @@ pub(crate) fn write(path: &Path, text: &str) -> Result<()> {
 /// ([`EvidenceWriter`](streamcert_pipeline::output::EvidenceWriter)): the columns and number format
 /// of `streamcert certify`.
 pub(crate) fn write_evidence(path: &Path, evidence: &[Evidence]) -> Result<()> {
-    use streamcert_pipeline::output::{EvidenceWriter, Format};
+    use streamcert_pipeline::output::{EvidenceWriter, Flush, Format, Header};
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let file =
         std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut w = EvidenceWriter::new(file, Format::Csv, true, false, Vec::new())?;
+    let mut w = EvidenceWriter::new(file, Format::Csv, Header::Write, Flush::Buffered, Vec::new())?;
     for e in evidence {
         w.write(e)?;
     }

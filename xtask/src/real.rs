@@ -16,9 +16,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result, bail};
 use sha2::{Digest, Sha256};
-use streamcert_pipeline::certify::{BadRows, Options, Summary, run as certify};
+use streamcert_pipeline::certify::{Options, Summary, run as certify};
 use streamcert_pipeline::config::parse;
-use streamcert_pipeline::output::Format;
 
 use crate::common::{markdown, median, write};
 
@@ -131,15 +130,7 @@ struct Certified {
 
 fn certify_text(config: &str, csv: &str, name: &str) -> Result<Certified> {
     let cfg = parse(config, name)?;
-    let opts = Options {
-        format: Format::Csv,
-        bad_rows: BadRows::Stop,
-        checkpoint: None,
-        checkpoint_every: None,
-        resume: None,
-        flush_each_row: false,
-        plot: None,
-    };
+    let opts = Options::default();
     let mut out = Vec::new();
     let summary = certify(&cfg, Cursor::new(csv.as_bytes().to_vec()), name, &mut out, &opts)?;
     let text = String::from_utf8(out)?;

@@ -199,8 +199,12 @@ impl Stream {
     }
 
     /// Flush per row: asked for, or a live input.
-    fn flush(&self) -> bool {
-        self.flush_each_row || input_is_live(&self.input)
+    fn flush(&self) -> certify::Flush {
+        if self.flush_each_row || input_is_live(&self.input) {
+            certify::Flush::EachRow
+        } else {
+            certify::Flush::Buffered
+        }
     }
 }
 
@@ -288,7 +292,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 checkpoint,
                 checkpoint_every,
                 resume,
-                flush_each_row: io.flush(),
+                flush: io.flush(),
                 plot,
             };
             let mut out = open_output(&io.output)?;
@@ -321,7 +325,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             let mut out = open_output(&io.output)?;
             let opts = network::NetOptions {
                 format: io.format,
-                flush_each_row: io.flush(),
+                flush: io.flush(),
                 checkpoint,
                 checkpoint_every,
                 resume,
@@ -405,7 +409,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 &gains.display().to_string(),
                 gains_format,
                 method,
-                json,
+                if json { compose::Render::Json } else { compose::Render::Text },
             )?;
             print!("{text}");
             Ok(Outcome::Done)

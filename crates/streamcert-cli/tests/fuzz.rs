@@ -21,7 +21,7 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
-use streamcert_pipeline::certify::{BadRows, Format, Options, run};
+use streamcert_pipeline::certify::{BadRows, Flush, Format, Options, run};
 use streamcert_pipeline::compose::{self, GainsFormat, Method};
 use streamcert_pipeline::config::{Columns, parse};
 use streamcert_pipeline::input::{Sample, SampleReader};
@@ -93,7 +93,7 @@ fn options(resume: Option<PathBuf>) -> Options {
         checkpoint: None,
         checkpoint_every: None,
         resume,
-        flush_each_row: false,
+        flush: Flush::Buffered,
         plot: None,
     }
 }
@@ -225,7 +225,7 @@ proptest! {
         let input = mutate(&seeds[0], &[], &m);
         let opts = streamcert_pipeline::network::NetOptions {
             format: Format::Csv,
-            flush_each_row: false,
+            flush: Flush::Buffered,
             checkpoint: None,
             checkpoint_every: None,
             resume: None,
@@ -242,7 +242,7 @@ proptest! {
         let (rates, gains) = input.split_once("---").unwrap_or((&input, ""));
         let format = if triplets { GainsFormat::Triplets } else { GainsFormat::Dense };
         if rates.len() < 4096 && gains.len() < 4096 {
-            let _ = compose::run(rates, "rates", gains, "gains", format, Method::Auto, false);
+            let _ = compose::run(rates, "rates", gains, "gains", format, Method::Auto, compose::Render::Text);
         }
     }
 }

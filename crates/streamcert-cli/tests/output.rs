@@ -24,15 +24,7 @@ fn plant_csv(rows: usize) -> String {
 }
 
 fn options(format: Format) -> Options {
-    Options {
-        format,
-        bad_rows: BadRows::Stop,
-        checkpoint: None,
-        checkpoint_every: None,
-        resume: None,
-        flush_each_row: false,
-        plot: None,
-    }
+    Options { format, ..Options::default() }
 }
 
 /// The library's evidence for the same rows (the CSV's text parses to the same floats).
@@ -189,12 +181,12 @@ fn the_reader_thread_changes_nothing_but_speed() {
     let dir = std::env::temp_dir().join(format!("streamcert-output-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temporary directory");
     for bad_rows in [BadRows::Skip, BadRows::Stop] {
-        let outcome = |flush_each_row: bool| {
-            let checkpoint = dir.join(format!("{bad_rows:?}-{flush_each_row}.ckpt"));
+        let outcome = |flush: certify::Flush| {
+            let checkpoint = dir.join(format!("{bad_rows:?}-{flush:?}.ckpt"));
             let _ = std::fs::remove_file(&checkpoint);
             let opts = Options {
                 bad_rows,
-                flush_each_row,
+                flush,
                 checkpoint: Some(checkpoint.clone()),
                 checkpoint_every: Some(300),
                 ..options(Format::Csv)
@@ -204,7 +196,8 @@ fn the_reader_thread_changes_nothing_but_speed() {
             let saved = std::fs::read(&checkpoint).expect("a checkpoint was written");
             (r.map_err(|e| e.to_string()), out, saved)
         };
-        let (threaded, live) = (outcome(false), outcome(true));
+        let (threaded, live) =
+            (outcome(certify::Flush::Buffered), outcome(certify::Flush::EachRow));
         assert_eq!(threaded.0, live.0, "{bad_rows:?}");
         assert_eq!(threaded.1, live.1, "{bad_rows:?}");
         // The last checkpoint written (at the end, or the last periodic one before the error)

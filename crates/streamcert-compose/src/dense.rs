@@ -108,11 +108,21 @@ fn positive_vector(
     Some(v)
 }
 
-fn sym_extreme(m: &Mat<f64>, largest: bool) -> Result<f64, ComposeError> {
+/// Which end of a symmetric matrix's spectrum.
+#[derive(Clone, Copy)]
+enum End {
+    Smallest,
+    Largest,
+}
+
+fn sym_extreme(m: &Mat<f64>, end: End) -> Result<f64, ComposeError> {
     let ev = m
         .self_adjoint_eigenvalues(Side::Lower)
         .map_err(|e| ComposeError::Numerical(format!("{e:?}")))?;
-    Ok(if largest { ev[ev.len() - 1] } else { ev[0] })
+    Ok(match end {
+        End::Largest => ev[ev.len() - 1],
+        End::Smallest => ev[0],
+    })
 }
 
 /// Dense composition of `N` subsystems (see the crate docs for the formulas) with the default
@@ -313,7 +323,7 @@ fn eigendecomposition(net: &Network) -> Result<NetworkCertificate, ComposeError>
     // Symmetric bound.
     let sym =
         mat(n, |i, j| if i == j { -g[i * n + i] } else { -0.5 * (g[i * n + j] + g[j * n + i]) });
-    let symmetric_rate = sym_extreme(&sym, false)?;
+    let symmetric_rate = sym_extreme(&sym, End::Smallest)?;
 
     // Critical scale from the Perron root of D⁻¹ Γ_off.
     let beta = net.rates();
@@ -355,7 +365,7 @@ fn eigendecomposition(net: &Network) -> Result<NetworkCertificate, ComposeError>
     let sq: Vec<f64> = weights.iter().map(|x| x.sqrt()).collect();
     let weighted =
         mat(n, |i, j| 0.5 * (sq[i] * g[i * n + j] / sq[j] + sq[j] * g[j * n + i] / sq[i]));
-    let weighted_rate = -sym_extreme(&weighted, true)?;
+    let weighted_rate = -sym_extreme(&weighted, End::Largest)?;
     Ok(NetworkCertificate {
         rate: -alpha,
         weights,

@@ -9,7 +9,7 @@ use streamcert_certificate::{Certifier, Evidence, Interval, NotCertified};
 use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
-pub use crate::output::Format;
+pub use crate::output::{Flush, Format, Header};
 pub use summary::Summary;
 pub(crate) use summary::reason_words;
 
@@ -17,18 +17,20 @@ mod summary;
 use crate::output::{EvidenceWriter, region_columns};
 
 /// What to do with a malformed row.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum BadRows {
     /// Stop with the row's error (exit code 3). Default.
+    #[default]
     Stop,
     /// Report it on stderr, count it in the summary, and go on; the row never reaches the
     /// certifier, so the next integral spans the gap using the actual times.
     Skip,
 }
 
-/// Options of a run.
-#[derive(Debug, Clone)]
+/// Options of a run. The default: CSV, stop at a malformed row, no checkpoint, no resume,
+/// buffered output, no picture.
+#[derive(Debug, Clone, Default)]
 pub struct Options {
     /// Output format.
     pub format: Format,
@@ -41,9 +43,9 @@ pub struct Options {
     /// Continue from this checkpoint (the header is then not written again, so the outputs
     /// of a split run concatenate to the output of the whole run).
     pub resume: Option<PathBuf>,
-    /// Flush every row as soon as it is written (for a live input: a pipe or a terminal).
-    /// Otherwise the output is buffered and flushed at the end and at each checkpoint.
-    pub flush_each_row: bool,
+    /// When rows reach the output: [`Flush::EachRow`] for a live input (a pipe or a
+    /// terminal); buffered (the default) otherwise, flushed at the end and at each checkpoint.
+    pub flush: Flush,
     /// Draw a picture of the run into this `.png` or `.svg` file at the end.
     pub plot: Option<PathBuf>,
 }
@@ -181,9 +183,9 @@ impl Batch {
 }
 
 /// Certify a stream: one output row per accepted input row (flushed per row with
-/// [`Options::flush_each_row`]).
+/// [`Options::flush`]).
 ///
-/// A live input (`flush_each_row`) is read, certified and written row by row on the calling
+/// A live input ([`Flush::EachRow`]) is read, certified and written row by row on the calling
 /// thread, so every row is answered as soon as its line is complete. Otherwise a second
 /// thread reads, parses and certifies the input while this one formats and writes, in
 /// batches of 1024 rows; rows, errors, checkpoints and output are in input order either way,
@@ -223,8 +225,8 @@ pub fn run<R: Read + Send, W: Write>(
     let mut writer = EvidenceWriter::new(
         out,
         opts.format,
-        opts.resume.is_none(),
-        opts.flush_each_row,
+        Header::when_fresh(opts.resume.as_ref()),
+        opts.flush,
         region_columns(&channels),
     )
     .map_err(io)?;
@@ -239,7 +241,7 @@ pub fn run<R: Read + Send, W: Write>(
         None => Ok(()),
     };
     let mut step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
-    if opts.flush_each_row {
+    if opts.flush == Flush::EachRow {
         let mut s = Sample::default();
         let mut region = Vec::with_capacity(channels.len());
         while let Some(next) = reader.next_into(&mut s) {

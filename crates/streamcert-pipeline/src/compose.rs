@@ -111,6 +111,16 @@ pub fn gain_edges(
     }
 }
 
+/// How [`run`] renders its result.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Render {
+    /// Lines a person reads. Default.
+    #[default]
+    Text,
+    /// One JSON object (`compose --json`).
+    Json,
+}
+
 /// Run the composition and render the result (text or JSON).
 ///
 /// # Errors
@@ -123,7 +133,7 @@ pub fn run(
     gains_name: &str,
     format: GainsFormat,
     method: Method,
-    json_out: bool,
+    render: Render,
 ) -> Result<String, CliError> {
     let rates: Vec<f64> = numbers(rates_text, rates_name)?.concat();
     // A rate that is not finite is the rates file's error, not the gains file's.
@@ -175,7 +185,7 @@ pub fn run(
             json!({"rate_upper_bound": c.metzler_upper}),
         )
     };
-    if json_out {
+    if render == Render::Json {
         let v = json!({
             "subsystems": net.len(), "edges": net.edges(), "rate": rate, "contracting": rate > 0.0,
             "weights": weights, "symmetric_rate": symmetric, "critical_scale": critical,

@@ -12,14 +12,44 @@ mod csv_row;
 use csv_row::CsvRows;
 
 /// Output format.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Format {
     /// Comma-separated values with a header (the evidence columns); an absent number is an
-    /// empty field, a reason is quoted when it contains a comma.
+    /// empty field, a reason is quoted when it contains a comma. Default.
+    #[default]
     Csv,
     /// One JSON object per line, the same names; an absent number is `null`.
     Jsonl,
+}
+
+/// When written rows reach the output.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Flush {
+    /// Buffered, flushed at the end and at each checkpoint (a file). Default.
+    #[default]
+    Buffered,
+    /// Every row as soon as it is written (a live input: a pipe or a terminal).
+    EachRow,
+}
+
+/// Whether a CSV output starts with its header line.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub enum Header {
+    /// Write the header first. Default.
+    #[default]
+    Write,
+    /// No header: the output continues one that has it (a resumed run).
+    Omit,
+}
+
+impl Header {
+    /// [`Header::Write`] for a fresh run, [`Header::Omit`] when it resumes (its output
+    /// continues one that has the header).
+    #[must_use]
+    pub fn when_fresh<T>(resume: Option<&T>) -> Self {
+        if resume.is_none() { Self::Write } else { Self::Omit }
+    }
 }
 
 /// Encoded CSV rows are handed to `out` once this many bytes are buffered.
@@ -76,9 +106,9 @@ pub fn region_columns(channels: &[String]) -> Vec<String> {
 }
 
 impl<W: Write> EvidenceWriter<W> {
-    /// A writer in `format`; with `header`, the CSV header line is written first (JSON lines
-    /// have none). With `flush_each_row`, every row is flushed to `out` as soon as it is
-    /// written (a live feed); otherwise output is buffered and flushed by
+    /// A writer in `format`; with [`Header::Write`], the CSV header line is written first
+    /// (JSON lines have none). With [`Flush::EachRow`], every row is flushed to `out` as soon
+    /// as it is written (a live feed); otherwise output is buffered and flushed by
     /// [`flush`](Self::flush).
     ///
     /// # Errors
@@ -89,14 +119,15 @@ impl<W: Write> EvidenceWriter<W> {
     pub fn new(
         out: W,
         format: Format,
-        header: bool,
-        flush_each_row: bool,
+        header: Header,
+        flush: Flush,
         region_names: Vec<String>,
     ) -> std::io::Result<Self> {
+        let flush_each_row = flush == Flush::EachRow;
         let sink = match format {
             Format::Csv => {
                 let mut rows = Box::new(CsvRows::new(region_names.len()));
-                if header {
+                if header == Header::Write {
                     rows.header(
                         EVIDENCE_COLUMNS
                             .iter()

@@ -1,7 +1,7 @@
 //! The array-level core against the command line: the same numbers bit for bit, checkpoints
 //! that resume at every sample, blocks refused whole.
 
-use streamcert_pipeline::certify::{self, BadRows, Format, Options};
+use streamcert_pipeline::certify::{self, Options};
 use streamcert_python::config::from_json_over_defaults;
 use streamcert_python::simulate::{G5Run, simulate_g5};
 use streamcert_python::{Error, EvidenceColumns, FLOAT_COLUMNS, GATES, Run};
@@ -38,15 +38,7 @@ fn csv_of(t: &[f64], y: &[f64], u: &[f64]) -> String {
 }
 
 fn opts() -> Options {
-    Options {
-        format: Format::Csv,
-        bad_rows: BadRows::Stop,
-        checkpoint: None,
-        checkpoint_every: None,
-        resume: None,
-        flush_each_row: false,
-        plot: None,
-    }
+    Options::default()
 }
 
 #[test]

@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 use streamcert_network::NetworkError;
 use timely::dataflow::ProbeHandle;
 
-use crate::site::Pending;
+use crate::site::{Input, Pending};
 use crate::wire::Msg;
 use crate::worker::{MsgInput, describe};
 use crate::{Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, send};
@@ -91,7 +91,7 @@ where
         // A checkpoint when the range holds a multiple of the period.
         let due = self.sh.checkpoints.is_some_and(|e| (b - 1) / e * e >= a);
         if due {
-            self.site.seal_at(a, false);
+            self.site.seal_at(a, Input::Open);
             let state = Box::new(self.site.clone());
             if !ask(self.tx, |ack| Event::Site(state, ack)) {
                 return Some((line, Failure::Output("the checkpoint was not written".into())));
@@ -177,7 +177,7 @@ where
                 let at = *self.input.time();
                 if self.sh.checkpoints.is_some() && self.site.next_epoch().is_some() {
                     self.wait_composed_before(at);
-                    self.site.seal_at(at, true);
+                    self.site.seal_at(at, Input::Finished);
                     let state = Box::new(self.site.clone());
                     if !ask(self.tx, |ack| Event::Site(state, ack)) {
                         let why = "the checkpoint was not written".to_string();

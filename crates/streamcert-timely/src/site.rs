@@ -6,6 +6,15 @@ use streamcert_network::{Composer, LocalSnapshot, NetworkConfig, NetworkError};
 
 use crate::wire::WireSnapshot;
 
+/// Whether a site's input goes on past a sealed state.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Input {
+    /// More rows may come.
+    Open,
+    /// The input has ended: the state also holds every epoch after its clock.
+    Finished,
+}
+
 /// A sample waiting to be certified: its subsystem's position in the site, its row's order
 /// and line, its time and values.
 pub(crate) struct Pending {
@@ -230,10 +239,11 @@ impl SiteState {
         self.clock.due(cfg, t)
     }
 
-    /// Mark the state as holding the epochs from `from` on (`finished`: and after its clock).
-    pub(crate) fn seal_at(&mut self, from: u64, finished: bool) {
+    /// Mark the state as holding the epochs from `from` on ([`Input::Finished`]: and after
+    /// its clock).
+    pub(crate) fn seal_at(&mut self, from: u64, input: Input) {
         self.valid_from = from;
-        self.finished = finished;
+        self.finished = input == Input::Finished;
     }
 
     /// Certify the samples `pending` collected since the last call, over `threads` scoped

@@ -23,6 +23,7 @@ use super::config::NetConfig;
 use super::input::Rows;
 use super::output::EpochWriter;
 use super::{NetOptions, NetSummary, estimated_columns};
+use crate::output::Header;
 use crate::{CliError, RowError};
 
 /// Timely's process configuration.
@@ -246,8 +247,8 @@ pub fn run_timely<W: Write>(
     let mut writer = EpochWriter::new(
         out,
         opts.format,
-        opts.flush_each_row,
-        opts.resume.is_none(),
+        opts.flush,
+        Header::when_fresh(opts.resume.as_ref()),
         estimated_columns(&cfg.network, &names),
     );
     let mut report = SiteReport::default();

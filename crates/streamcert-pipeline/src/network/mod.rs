@@ -27,7 +27,7 @@ use output::EpochWriter;
 pub use verdict::{summary_json, summary_text, verdict_line};
 
 use crate::CliError;
-use crate::output::Format;
+use crate::output::{Flush, Format, Header};
 
 /// Counts over a run (continued across checkpoint and resume).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -71,8 +71,8 @@ pub struct NetSummary {
 pub struct NetOptions {
     /// Output format.
     pub format: Format,
-    /// Flush every epoch row (a live input).
-    pub flush_each_row: bool,
+    /// When epoch rows reach the output ([`Flush::EachRow`] for a live input).
+    pub flush: Flush,
     /// Write the whole network's state here at the end (and every `checkpoint_every` rows).
     pub checkpoint: Option<PathBuf>,
     /// Checkpoint period in input rows.
@@ -149,8 +149,13 @@ pub fn run<R: Read, W: Write>(
     let mut rows = Rows::new(cfg, input, input_name)?;
     let io = |e: std::io::Error| CliError::io("writing output", e);
     let estimated = estimated_columns(&cfg.network, &names);
-    let mut writer =
-        EpochWriter::new(out, opts.format, opts.flush_each_row, opts.resume.is_none(), estimated);
+    let mut writer = EpochWriter::new(
+        out,
+        opts.format,
+        opts.flush,
+        Header::when_fresh(opts.resume.as_ref()),
+        estimated,
+    );
     // Resuming: rows at the start of the input whose samples every subsystem in them already
     // holds (time not after its newest) are a replay and are passed over, counted.
     let mut replaying = opts.resume.is_some();

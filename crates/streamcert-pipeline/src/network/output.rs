@@ -7,7 +7,7 @@ use serde::Serialize;
 use streamcert_network::EpochReport;
 
 use super::NetSummary;
-use crate::output::Format;
+use crate::output::{Flush, Format, Header};
 
 /// One output row per epoch (JSON lines; the CSV has the same fields, `local` as one column
 /// `cert_<name>` per subsystem).
@@ -59,10 +59,12 @@ impl<W: Write> EpochWriter<W> {
     pub(super) fn new(
         out: W,
         format: Format,
-        flush_each_row: bool,
-        header: bool,
+        flush: Flush,
+        header: Header,
         estimated: Vec<String>,
     ) -> Self {
+        let flush_each_row = flush == Flush::EachRow;
+        let header = header == Header::Write;
         let (csv, json) = match format {
             Format::Csv => (Some(csv::Writer::from_writer(out)), None),
             Format::Jsonl => (None, Some(std::io::BufWriter::new(out))),

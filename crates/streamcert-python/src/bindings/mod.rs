@@ -168,9 +168,10 @@ fn warning_gain(py: Python<'_>, beta_a: f64, beta_b: f64) -> PyResult<f64> {
 /// (`triplets`: `i,j,gamma` lines; otherwise a dense matrix).
 #[pyfunction]
 fn cli_compose_json(py: Python<'_>, rates: &str, gains: &str, triplets: bool) -> PyResult<String> {
-    use streamcert_pipeline::compose::{GainsFormat, Method, run};
+    use streamcert_pipeline::compose::{GainsFormat, Method, Render, run};
     let format = if triplets { GainsFormat::Triplets } else { GainsFormat::Dense };
-    run(rates, "rates", gains, "gains", format, Method::Auto, true).map_err(|e| to_py(py, e.into()))
+    run(rates, "rates", gains, "gains", format, Method::Auto, Render::Json)
+        .map_err(|e| to_py(py, e.into()))
 }
 
 /// Run `seed` of the paper's G5 experiment `experiment` (1 or 2): a dict of arrays `t`

@@ -11,7 +11,7 @@ use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::{Flush, Format, Header};
 pub use summary::Summary;
-pub(crate) use summary::reason_words;
+pub(crate) use summary::{reason_phrase, reason_words};
 
 mod summary;
 use crate::output::{EvidenceWriter, region_columns};

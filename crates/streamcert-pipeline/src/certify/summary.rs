@@ -265,7 +265,12 @@ impl Summary {
 
 /// A reason's kind in words, with the kind (the certify summary's and the network verdict's).
 pub(crate) fn reason_words(kind: &str) -> String {
-    let words = match kind {
+    format!("{} [{kind}]", reason_phrase(kind))
+}
+
+/// A reason's kind in words a person reads (the kind itself where it has none).
+pub(crate) fn reason_phrase(kind: &str) -> &str {
+    match kind {
         "warming_up" => "warming up (too few columns yet)",
         "insufficient_excitation" | "weak_instruments" => {
             "too little excitation (weak instruments)"
@@ -285,8 +290,7 @@ pub(crate) fn reason_words(kind: &str) -> String {
             "the data barely identify the rate: the input moved too rarely in the windows"
         }
         other => other,
-    };
-    format!("{words} [{kind}]")
+    }
 }
 
 impl Summary {

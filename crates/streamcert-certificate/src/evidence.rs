@@ -275,7 +275,8 @@ impl std::fmt::Display for NotCertified {
             }
             Self::RateDropped { window, upper } => write!(
                 f,
-                "window {window}: the rate is at most {}, below the margin (dynamics changed?)",
+                "window {window}: the rate is at most {}, below the margin (the candidate does \
+                 not contract enough on the newest data)",
                 Fixed::<4>(*upper)
             ),
             Self::VaryingDynamics { window, statistic, threshold } => write!(

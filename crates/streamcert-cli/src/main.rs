@@ -15,8 +15,19 @@ use streamcert_pipeline::{CliError, certify, compose, config, network, simulate}
 /// Exit codes: 0 success, 2 invalid command line or configuration, 3 malformed input data,
 /// 4 I/O failure, 5 checkpoint failure, 6 not certified at the end of the input (only with
 /// --require-certified).
+/// The exit codes, listed in every `--help`.
+const EXIT_CODES: &str = "Exit codes: 0 success, 2 invalid command line or configuration \
+     (nothing was read), 3 malformed input data, 4 I/O failure, 5 checkpoint failure, 6 not \
+     certified at the end of the input (only with --require-certified).";
+
 #[derive(Parser)]
-#[command(name = "streamcert", version, about, long_about = None)]
+#[command(
+    name = "streamcert",
+    version,
+    about,
+    long_about = None,
+    after_help = EXIT_CODES
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -32,6 +43,11 @@ enum Command {
     /// From a live input (a pipe or a terminal on stdin) every row is flushed as it is
     /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. A
     /// summary goes to stderr (or to --summary FILE as JSON).
+    #[command(
+        after_help = EXIT_CODES,
+        override_usage = "streamcert certify --config <CONFIG> [--input <FILE>] [OPTIONS]\n       \
+                          streamcert certify --print-config"
+    )]
     Certify {
         #[command(flatten)]
         io: Stream,
@@ -52,6 +68,7 @@ enum Command {
         plot: Option<PathBuf>,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
+    #[command(after_help = EXIT_CODES)]
     Compose {
         /// Local rates beta_i, one per subsystem (whitespace, comma or newline separated).
         #[arg(long)]
@@ -74,6 +91,11 @@ enum Command {
     /// every epoch. One output row per epoch: network rate, certified, gate, critical coupling
     /// scale, the limiting subsystem and coupling, the subsystems not certified and why, and
     /// each local certificate. A summary goes to stderr (or to --summary FILE as JSON).
+    #[command(
+        after_help = EXIT_CODES,
+        override_usage = "streamcert network --config <CONFIG> [--input <FILE>] [OPTIONS]\n       \
+                          streamcert network --print-config"
+    )]
     Network {
         #[command(flatten)]
         io: Stream,
@@ -162,10 +184,11 @@ struct Persist {
 /// Configuration, input and output of the streaming commands (`certify`, `network`).
 #[derive(clap::Args)]
 struct Stream {
-    /// Configuration (TOML); see --print-config.
+    /// Required (unless --print-config): the configuration (TOML), with your columns, gain
+    /// and margin; --print-config writes the template.
     #[arg(long, required_unless_present = "print_config")]
     config: Option<PathBuf>,
-    /// Print a commented configuration and exit.
+    /// Print the commented configuration template and exit.
     #[arg(long)]
     print_config: bool,
     /// Input CSV file, or - for stdin.
@@ -462,6 +485,13 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             eprintln!("streamcert: error: {e}");
+            if matches!(e, CliError::Row(_)) {
+                eprintln!(
+                    "streamcert: the run stopped at this row (--on-bad-row stop, the default); \
+                     --on-bad-row skip counts and skips malformed rows instead (a skipped row \
+                     closes the gates until the windows refill)"
+                );
+            }
             ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1))
         }
     }

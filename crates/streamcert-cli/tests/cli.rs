@@ -316,6 +316,8 @@ fn each_bad_input_has_its_message_and_exit_code() {
         let (code, stderr) = certify_rows(body, &[]);
         assert_eq!(code, Some(3), "{stderr}");
         assert!(stderr.contains(message), "expected `{message}` in `{stderr}`");
+        // The way on past a bad row is named where the run stopped.
+        assert!(stderr.contains("--on-bad-row skip"), "{stderr}");
     }
     // Skip policy: every bad row counted, the run succeeds.
     let all_bad: String =
@@ -419,5 +421,19 @@ fn simulate_seed_is_the_reproduction_run() {
             let (y, u) = (traj.output(k), traj.input(k));
             assert_eq!(fields, vec![traj.t[k], y[0], u[0], y[1], u[1]], "row {k}");
         }
+    }
+}
+
+/// `--help` of the streaming commands shows `--config` as required in the usage and lists
+/// the exit codes.
+#[test]
+fn help_shows_the_required_configuration_and_the_exit_codes() {
+    for command in ["certify", "network"] {
+        let out = run(&[command, "--help"], b"");
+        assert!(out.status.success());
+        let help = text(&out.stdout);
+        assert!(help.contains(&format!("streamcert {command} --config <CONFIG>")), "{help}");
+        assert!(help.contains("Exit codes: 0 success, 2 invalid"), "{help}");
+        assert!(help.contains("6 not certified at the end"), "{help}");
     }
 }

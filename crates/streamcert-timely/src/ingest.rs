@@ -10,7 +10,7 @@ use timely::dataflow::ProbeHandle;
 
 use crate::site::{Input, Pending};
 use crate::wire::Msg;
-use crate::worker::{MsgInput, describe};
+use crate::wire::MsgInput;
 use crate::{Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, send};
 
 /// What the input gives next.
@@ -187,7 +187,7 @@ where
                 self.give_changed();
             }
             Some((line, f)) => {
-                let message = describe(&f, &self.sh.cfg);
+                let message = Failure::describe(&f, &self.sh.cfg);
                 self.give(Msg::Failed { process, line, message });
                 send(self.tx, Event::Failed(f));
             }

@@ -85,3 +85,7 @@ impl From<WireSnapshot> for LocalSnapshot {
         Self { t: w.t, verdict, couplings: w.couplings }
     }
 }
+
+/// The dataflow's input of messages (a site's snapshots and marks), by epoch.
+pub(crate) type MsgInput =
+    timely::dataflow::InputHandle<u64, timely::container::CapacityContainerBuilder<Vec<Msg>>>;

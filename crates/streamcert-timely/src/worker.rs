@@ -3,18 +3,16 @@
 
 use std::collections::BTreeMap;
 use timely::container::CapacityContainerBuilder;
+use timely::dataflow::ProbeHandle;
 use timely::dataflow::channels::pact::Exchange;
 use timely::dataflow::operators::generic::operator::Operator;
 use timely::dataflow::operators::{Input, Probe};
-use timely::dataflow::{InputHandle, ProbeHandle};
 
 use crate::ingest::Site;
-use crate::wire::Msg;
+use crate::wire::{Msg, MsgInput};
 use crate::{
     ComposerState, Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, handshake, send,
 };
-
-pub(crate) type MsgInput = InputHandle<u64, CapacityContainerBuilder<Vec<Msg>>>;
 
 /// One worker of the run.
 pub(crate) fn main<E, S, I>(worker: &mut timely::worker::Worker, sh: &Shared<S>, tx: &Tx<E>)
@@ -205,27 +203,4 @@ pub(crate) fn new_run_id() -> u64 {
         .map_or(0, |d| d.as_nanos());
     let text = format!("{nanos}-{}", std::process::id());
     streamcert_certificate::fnv1a64(text.as_bytes())
-}
-
-/// A site's failure as text for process 0.
-pub(crate) fn describe<E: std::error::Error>(
-    f: &Failure<E>,
-    cfg: &streamcert_network::NetworkConfig,
-) -> String {
-    let name = |i: usize| cfg.subsystems.get(i).map_or("", |s| s.name.as_str()).to_string();
-    match f {
-        Failure::Source { source, .. } => source.to_string(),
-        Failure::Network { source, .. } => source.to_string(),
-        Failure::NotOwned { index, owner, .. } => {
-            format!("subsystem {index} (`{}`) is read by process {owner}", name(*index))
-        }
-        Failure::Subsystem { index, message, .. } => {
-            format!("subsystem {index} (`{}`): {message}", name(*index))
-        }
-        Failure::Remote { message, .. }
-        | Failure::Checkpoint(message)
-        | Failure::PeerRefused(message)
-        | Failure::Output(message) => message.clone(),
-        Failure::Compose(e) => e.to_string(),
-    }
 }

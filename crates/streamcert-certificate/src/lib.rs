@@ -93,7 +93,10 @@ pub use fixed::{Sig, SigRange};
 pub use gate::{Gate, GateState};
 pub use nonlinear::{Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest};
 pub use radius::{certificate_surface, certificate_value};
-pub use row::{EVIDENCE_COLUMNS, EvidenceRow, ReasonText};
+pub use row::{
+    ColumnKind, EVIDENCE_COLUMN_KINDS, EVIDENCE_COLUMNS, EvidenceRow, NUMBER_COLUMNS, ReasonText,
+    WINDOW_COLUMNS,
+};
 pub use streamcert_regression::Interval;
 pub use streamcert_regression::ResidualSource;
 

@@ -7,32 +7,80 @@ use serde::{Serialize, Serializer};
 
 use crate::{Evidence, NotCertified};
 
+/// What a column of [`EVIDENCE_COLUMNS`] holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ColumnKind {
+    /// A number (absent: an empty CSV field, `null`, NaN in arrays).
+    Number,
+    /// A gate, open or closed (0/1).
+    Gate,
+    /// Why a gate is closed (text).
+    Reason,
+    /// The window length `M_w` of a look (absent before one).
+    Window,
+}
+
+/// Every evidence column with what it holds, in the order of [`EvidenceRow`] and the CSV
+/// header: the one list the header, the Python package's arrays and their kinds come from.
+pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 23] = {
+    use ColumnKind::{Gate, Number, Reason, Window};
+    [
+        ("t", Number),
+        ("beta_hat", Number),
+        ("rho", Number),
+        ("eps", Number),
+        ("kurtosis", Number),
+        ("spike_fraction", Number),
+        ("cert_gauss", Number),
+        ("cert_wass", Number),
+        ("gauss_open", Gate),
+        ("wass_open", Gate),
+        ("reason_gauss", Reason),
+        ("reason_wass", Reason),
+        ("rho_calibrated", Number),
+        ("cert_calibrated", Number),
+        ("calibrated_window", Window),
+        ("calibrated_open", Gate),
+        ("reason_calibrated", Reason),
+        ("cert_nonlinear", Number),
+        ("nonlinear_window", Window),
+        ("nonlinear_open", Gate),
+        ("reason_nonlinear", Reason),
+        ("nonlinear_y_lo", Number),
+        ("nonlinear_y_hi", Number),
+    ]
+};
+
 /// The column names of [`EvidenceRow`], in order (the CSV header).
-pub const EVIDENCE_COLUMNS: [&str; 23] = [
-    "t",
-    "beta_hat",
-    "rho",
-    "eps",
-    "kurtosis",
-    "spike_fraction",
-    "cert_gauss",
-    "cert_wass",
-    "gauss_open",
-    "wass_open",
-    "reason_gauss",
-    "reason_wass",
-    "rho_calibrated",
-    "cert_calibrated",
-    "calibrated_window",
-    "calibrated_open",
-    "reason_calibrated",
-    "cert_nonlinear",
-    "nonlinear_window",
-    "nonlinear_open",
-    "reason_nonlinear",
-    "nonlinear_y_lo",
-    "nonlinear_y_hi",
-];
+pub const EVIDENCE_COLUMNS: [&str; 23] = of_kind(None);
+
+/// The [`ColumnKind::Number`] columns, in order ([`EvidenceRow::numbers`] gives their values).
+pub const NUMBER_COLUMNS: [&str; 13] = of_kind(Some(ColumnKind::Number));
+
+/// The [`ColumnKind::Window`] columns, in order.
+pub const WINDOW_COLUMNS: [&str; 2] = of_kind(Some(ColumnKind::Window));
+
+/// The names of the columns of `kind` (every column for `None`), in order; a count that is
+/// not `N` fails the build.
+const fn of_kind<const N: usize>(kind: Option<ColumnKind>) -> [&'static str; N] {
+    let mut out = [""; N];
+    let (mut i, mut n) = (0, 0);
+    while i < EVIDENCE_COLUMN_KINDS.len() {
+        let (name, k) = EVIDENCE_COLUMN_KINDS[i];
+        let wanted = match kind {
+            Some(want) => want as u8 == k as u8,
+            None => true,
+        };
+        if wanted {
+            assert!(n < N, "more columns of this kind than the array holds");
+            out[n] = name;
+            n += 1;
+        }
+        i += 1;
+    }
+    assert!(n == N, "fewer columns of this kind than the array holds");
+    out
+}
 
 /// A reason, serialised as its `Display` text (formatted on the stack: no allocation for
 /// texts up to 192 bytes).
@@ -131,6 +179,28 @@ pub struct EvidenceRow {
     pub nonlinear_y_hi: Option<f64>,
 }
 
+impl EvidenceRow {
+    /// The values of the [`NUMBER_COLUMNS`], in that order (`None` where absent).
+    #[must_use]
+    pub fn numbers(&self) -> [Option<f64>; 13] {
+        [
+            Some(self.t),
+            self.beta_hat,
+            self.rho,
+            self.eps,
+            self.kurtosis,
+            self.spike_fraction,
+            self.cert_gauss,
+            self.cert_wass,
+            self.rho_calibrated,
+            self.cert_calibrated,
+            self.cert_nonlinear,
+            self.nonlinear_y_lo,
+            self.nonlinear_y_hi,
+        ]
+    }
+}
+
 impl From<&Evidence> for EvidenceRow {
     fn from(e: &Evidence) -> Self {
         let amb = e.ambiguity;
@@ -159,5 +229,56 @@ impl From<&Evidence> for EvidenceRow {
             nonlinear_y_lo: e.nonlinear_region.map(|r| r.lo),
             nonlinear_y_hi: e.nonlinear_region.map(|r| r.hi),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Oracle: serde's own field names and values. The columns are the serialised row's keys
+    /// in order, and `numbers()` gives the values serde writes under `NUMBER_COLUMNS`.
+    #[test]
+    fn the_column_lists_are_the_serialised_rows() {
+        let row = EvidenceRow {
+            t: 1.5,
+            beta_hat: Some(2.0),
+            rho: None,
+            eps: Some(0.25),
+            kurtosis: Some(3.0),
+            spike_fraction: Some(0.01),
+            cert_gauss: Some(-1.0),
+            cert_wass: None,
+            rho_calibrated: Some(0.5),
+            cert_calibrated: Some(1.25),
+            cert_nonlinear: Some(0.75),
+            nonlinear_y_lo: Some(-2.0),
+            nonlinear_y_hi: Some(2.5),
+            gauss_open: 1,
+            wass_open: 0,
+            reason_gauss: None,
+            reason_wass: Some(ReasonText(NotCertified::WarmingUp { columns: 3, needed: 150 })),
+            calibrated_window: Some(600),
+            calibrated_open: 1,
+            reason_calibrated: None,
+            nonlinear_window: None,
+            nonlinear_open: 0,
+            reason_nonlinear: Some(ReasonText(NotCertified::NoNonlinearModel)),
+        };
+        let json = serde_json::to_value(row).expect("serialised");
+        let object = json.as_object().expect("an object");
+        let keys: Vec<&str> = object.keys().map(String::as_str).collect();
+        let mut sorted = EVIDENCE_COLUMNS.to_vec();
+        sorted.sort_unstable();
+        let mut keys_sorted = keys.clone();
+        keys_sorted.sort_unstable();
+        assert_eq!(keys_sorted, sorted, "the same names");
+        for (name, value) in NUMBER_COLUMNS.iter().zip(row.numbers()) {
+            assert_eq!(object[*name].as_f64(), value, "{name}");
+        }
+        let kinds = |k: ColumnKind| EVIDENCE_COLUMN_KINDS.iter().filter(move |c| c.1 == k);
+        assert!(kinds(ColumnKind::Gate).all(|(n, _)| n.ends_with("_open")));
+        assert!(kinds(ColumnKind::Reason).all(|(n, _)| n.starts_with("reason_")));
+        assert_eq!(WINDOW_COLUMNS, ["calibrated_window", "nonlinear_window"]);
     }
 }

@@ -2,49 +2,21 @@
 
 use streamcert_certificate::{Evidence, EvidenceRow, Interval, NotCertified};
 
-/// The number columns, in the order of the command line's CSV (`EVIDENCE_COLUMNS`, without
-/// the gates, windows and reasons); an absent value is NaN.
-pub const FLOAT_COLUMNS: [&str; 13] = [
-    "t",
-    "beta_hat",
-    "rho",
-    "eps",
-    "kurtosis",
-    "spike_fraction",
-    "cert_gauss",
-    "cert_wass",
-    "rho_calibrated",
-    "cert_calibrated",
-    "cert_nonlinear",
-    "nonlinear_y_lo",
-    "nonlinear_y_hi",
-];
+/// The number columns, in the order of the command line's CSV (the certificate crate's
+/// [`NUMBER_COLUMNS`](streamcert_certificate::NUMBER_COLUMNS): `EVIDENCE_COLUMNS` without the
+/// gates, windows and reasons); an absent value is NaN.
+pub use streamcert_certificate::NUMBER_COLUMNS as FLOAT_COLUMNS;
+/// The window-length columns (`M_w` of the calibrated and nonlinear looks); absent is NaN.
+pub use streamcert_certificate::WINDOW_COLUMNS;
 
 /// The four gates, in the CSV's order: `gauss_open`, `wass_open`, `calibrated_open`,
 /// `nonlinear_open`; their reasons are `reason_<gate>` (without `_open`).
 pub const GATES: [&str; 4] = ["gauss", "wass", "calibrated", "nonlinear"];
 
-/// The window-length columns (`M_w` of the calibrated and nonlinear looks); absent is NaN.
-pub const WINDOW_COLUMNS: [&str; 2] = ["calibrated_window", "nonlinear_window"];
-
 /// The values of the [`FLOAT_COLUMNS`] of one row, in that order.
 #[must_use]
 pub fn float_values(r: &EvidenceRow) -> [Option<f64>; 13] {
-    [
-        Some(r.t),
-        r.beta_hat,
-        r.rho,
-        r.eps,
-        r.kurtosis,
-        r.spike_fraction,
-        r.cert_gauss,
-        r.cert_wass,
-        r.rho_calibrated,
-        r.cert_calibrated,
-        r.cert_nonlinear,
-        r.nonlinear_y_lo,
-        r.nonlinear_y_hi,
-    ]
+    r.numbers()
 }
 
 /// Evidence of consecutive samples, one vector per column: the values the command line

@@ -45,7 +45,8 @@ DEFAULT_CONFIG: str = _native.DEFAULT_CONFIG
 #: ``u[:, 1]`` as columns ``y_b``, ``u_b``; the paper's gain ``[[-4.0]]``, margin 0.05): the
 #: project's examples' configuration, not a default.
 G5_NODE_B_CONFIG: str = _native.G5_NODE_B_CONFIG
-#: ``streamcert network --print-config``: an example network configuration, commented.
+#: An example network configuration for G5's two subsystems, commented (``streamcert network
+#: --print-config`` writes it with the columns, gains and margins as ``"REQUIRED"``).
 NETWORK_EXAMPLE_CONFIG: str = _native.NETWORK_EXAMPLE_CONFIG
 Evidence = _native.Evidence
 

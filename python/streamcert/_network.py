@@ -20,7 +20,7 @@ class NetworkCertifier:
     ``limiting_coupling``, ``not_certified``, ...).
 
     ``config`` is the network configuration: a dict with the TOML file's keys
-    (``streamcert network --print-config``, ``NETWORK_EXAMPLE_CONFIG``), or use
+    (``NETWORK_EXAMPLE_CONFIG``; ``streamcert network --print-config`` is its template), or use
     ``NetworkCertifier.from_toml(path)``. Its defaults are the command line's: the calibrated
     certificates, composed at risk ``delta`` split over the subsystems.
     """

@@ -339,7 +339,7 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
         Command::Network { io, persist, summary, cluster, require, plot } => {
             let Persist { checkpoint, checkpoint_every, resume } = persist;
             if io.print_config {
-                print!("{}", network::EXAMPLE_CONFIG);
+                print!("{}", network::template());
                 return Ok(Outcome::Done);
             }
             let (path, text) = io.config_text()?;

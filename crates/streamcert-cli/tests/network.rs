@@ -5,7 +5,7 @@ mod common;
 
 use std::path::PathBuf;
 
-use common::{compose, run, text, tmp, wait_bounded};
+use common::{compose, network_example, run, text, tmp, wait_bounded};
 
 /// `streamcert network` on Experiment 2's data with bidirectional coupling: each epoch's local
 /// certificates are the `certify` runs' values at the last row before the epoch, and the
@@ -17,9 +17,9 @@ fn network_equals_two_certify_runs_and_compose() {
         b"",
     );
     assert!(data.status.success());
-    let example = run(&["network", "--print-config"], b"");
+    let example = network_example();
     let net_cfg = tmp("network.toml");
-    std::fs::write(&net_cfg, &example.stdout).expect("write");
+    std::fs::write(&net_cfg, &example).expect("write");
     let net = run(&["network", "--config", net_cfg.to_str().expect("utf8")], &data.stdout);
     assert!(net.status.success(), "{}", text(&net.stderr));
     // The same certifier settings as the example's shared sections, one subsystem each: the
@@ -91,9 +91,9 @@ fn network_split_and_resume_equals_one_run() {
         &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "2"],
         b"",
     );
-    let example = run(&["network", "--print-config"], b"");
+    let example = network_example();
     let cfg = tmp("network-resume.toml");
-    std::fs::write(&cfg, &example.stdout).expect("write");
+    std::fs::write(&cfg, &example).expect("write");
     let cfg = cfg.to_str().expect("utf8");
     let whole = run(&["network", "--config", cfg], &data.stdout);
     assert!(whole.status.success(), "{}", text(&whole.stderr));
@@ -128,7 +128,7 @@ fn network_long_rows_equal_the_wide_file() {
         &["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "3"],
         b"",
     );
-    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let example = network_example();
     let wide_cfg = tmp("network-wide.toml");
     std::fs::write(&wide_cfg, &example).expect("write");
     let long_cfg = tmp("network-long.toml");
@@ -195,7 +195,7 @@ fn g5_bidirectional(seed: u32, steps: u32) -> std::process::Output {
 #[test]
 fn network_estimates_the_couplings_of_bidirectional_g5() {
     let data = g5_bidirectional(2, 3000);
-    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let example = network_example();
     let body =
         example.replace("gamma = 0.4", "estimate = true").replace("risk = 0.01 ", "risk = 0.04 ");
     let net_cfg = tmp("network-estimated.toml");
@@ -275,7 +275,7 @@ fn two_timely_processes_write_the_one_process_rows() {
     let data = g5_bidirectional(3, 1500);
     let input = tmp("timely-g5.csv");
     std::fs::write(&input, &data.stdout).expect("write");
-    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let example = network_example();
     let estimated = example
         .replacen("gamma = 0.4", "estimate = true", 1)
         .replace("# risk = 0.01", "risk = 0.04")
@@ -341,9 +341,9 @@ fn two_timely_processes_write_the_one_process_rows() {
 /// configuration error.
 #[test]
 fn timely_runs_refuse_a_checkpoint_period() {
-    let example = run(&["network", "--print-config"], b"");
+    let example = network_example();
     let cfg = tmp("timely-checkpoint.toml");
-    std::fs::write(&cfg, &example.stdout).expect("write");
+    std::fs::write(&cfg, &example).expect("write");
     let ckpt = tmp("timely-checkpoint.ckpt");
     let out = run(
         &[
@@ -361,4 +361,21 @@ fn timely_runs_refuse_a_checkpoint_period() {
     );
     assert_eq!(out.status.code(), Some(2), "{}", text(&out.stderr));
     assert!(text(&out.stderr).contains("every epoch boundary"), "{}", text(&out.stderr));
+}
+
+/// `network --print-config` writes the template: run as it is, it is refused (exit 2) naming
+/// each subsystem's gain and the margins; the example with them set runs.
+#[test]
+fn the_printed_network_template_needs_the_users_choices() {
+    let out = run(&["network", "--print-config"], b"");
+    assert!(out.status.success());
+    assert_eq!(text(&out.stdout), streamcert_pipeline::network::template());
+    let path = tmp("network-template.toml");
+    std::fs::write(&path, &out.stdout).expect("write");
+    let refused = run(&["network", "--config", path.to_str().expect("utf8")], b"");
+    assert_eq!(refused.status.code(), Some(2));
+    let err = text(&refused.stderr);
+    for key in ["subsystem[0].gain", "subsystem[1].gain", "network.margin", "certificate.margin"] {
+        assert!(err.contains(key), "{key}: {err}");
+    }
 }

@@ -5,7 +5,7 @@
 
 mod common;
 
-use common::{config, run, simulate, text, tmp};
+use common::{config, network_example, run, simulate, text, tmp};
 
 /// `--require-certified`: exit 6 exactly when the verdict at the end is not "certified", after
 /// every output is written; without the flag the same run exits 0.
@@ -86,9 +86,9 @@ fn plot_draws_a_picture_of_certify_and_network_runs() {
     }
     let net_data =
         run(&["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional"], b"");
-    let example = run(&["network", "--print-config"], b"");
+    let example = network_example();
     let net_cfg = tmp("network-plot.toml");
-    std::fs::write(&net_cfg, &example.stdout).expect("write");
+    std::fs::write(&net_cfg, &example).expect("write");
     for ext in ["png", "svg"] {
         let picture = tmp(&format!("network.{ext}"));
         let _ = std::fs::remove_file(&picture);
@@ -245,7 +245,7 @@ fn the_network_verdict_agrees_with_the_gate_at_the_last_epoch() {
         b"",
     );
     assert!(data.status.success());
-    let example = text(&run(&["network", "--print-config"], b"").stdout);
+    let example = network_example();
     let write = |tag: &str, body: &str| {
         let path = tmp(&format!("network-verdict-{tag}.toml"));
         std::fs::write(&path, body).expect("write");

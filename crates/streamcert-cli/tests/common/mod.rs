@@ -70,6 +70,12 @@ pub(crate) fn config(tag: &str) -> PathBuf {
     path
 }
 
+/// The example network configuration (`network::EXAMPLE_CONFIG`: G5's two subsystems);
+/// `network --print-config` writes it with the user's choices as placeholders.
+pub(crate) fn network_example() -> String {
+    streamcert_pipeline::network::EXAMPLE_CONFIG.to_string()
+}
+
 pub(crate) fn simulate(seed: &str) -> Vec<u8> {
     let out = run(&["simulate", "g5", "--experiment", "1", "--seed", seed], b"");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));

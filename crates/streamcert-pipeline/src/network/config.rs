@@ -8,6 +8,7 @@ use streamcert_network::{EstimatedCoupling, NetworkCertifier, NetworkConfig, Sub
 
 use crate::CliError;
 use crate::compose::{self, GainsFormat};
+use crate::config::REQUIRED_VALUE;
 use crate::config::{self, Columns};
 
 /// The commented example printed by `streamcert network --print-config`: G5's two observed
@@ -167,6 +168,54 @@ pub struct NetConfig {
     pub process_of: Vec<usize>,
 }
 
+/// The key paths of `value` (under `at`) set to [`REQUIRED_VALUE`], anywhere in it.
+fn placeholders(value: &toml::Value, at: &str, out: &mut Vec<String>) {
+    let join = |key: &str| if at.is_empty() { key.to_string() } else { format!("{at}.{key}") };
+    match value {
+        toml::Value::String(s) if s == REQUIRED_VALUE => out.push(at.to_string()),
+        toml::Value::Table(t) => {
+            for (k, v) in t {
+                placeholders(v, &join(k), out);
+            }
+        }
+        toml::Value::Array(items) => {
+            if items.iter().any(|v| matches!(v, toml::Value::String(s) if s == REQUIRED_VALUE)) {
+                out.push(at.to_string());
+            } else {
+                for (i, v) in items.iter().enumerate() {
+                    placeholders(v, &format!("{at}[{i}]"), out);
+                }
+            }
+        }
+        _ => {}
+    }
+}
+
+/// What `streamcert network --print-config` writes: [`EXAMPLE_CONFIG`] with the user's
+/// choices (the time column, each subsystem's columns and candidate gain, the network's and
+/// the local certificates' margins) as [`REQUIRED_VALUE`] placeholders, refused by [`parse`]
+/// naming each until they are set.
+#[must_use]
+pub fn template() -> String {
+    EXAMPLE_CONFIG
+        .replacen(
+            "# Data: `streamcert simulate g5 --experiment 2 --coupling bidirectional` writes these columns.",
+            "# Required: every key set to \"REQUIRED\" below (your columns, each subsystem's candidate\n\
+             # gain, the margins); a file that leaves one so is refused naming it. The couplings and\n\
+             # the rest are an example for two subsystems A and B.",
+            1,
+        )
+        .replacen("margin = 0.0            #", "margin = \"REQUIRED\"    #", 1)
+        .replacen("time = \"t\"", "time = \"REQUIRED\"", 1)
+        .replace("outputs = [\"y_a\"]", "outputs = [\"REQUIRED\"]")
+        .replace("inputs = [\"u_a\"]", "inputs = [\"REQUIRED\"]")
+        .replace("outputs = [\"y_b\"]", "outputs = [\"REQUIRED\"]")
+        .replace("inputs = [\"u_b\"]", "inputs = [\"REQUIRED\"]")
+        .replace("gain = [[-2.5]]", "gain = \"REQUIRED\"")
+        .replace("gain = [[-3.0]]", "gain = \"REQUIRED\"")
+        .replacen("margin = 0.1\n", "margin = \"REQUIRED\"\n", 1)
+}
+
 /// Parse and validate; `path` names the file in errors.
 ///
 /// # Errors
@@ -174,6 +223,17 @@ pub struct NetConfig {
 pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     let bad = |message: String| CliError::Config { path: path.to_string(), message };
     let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
+    let mut unset = Vec::new();
+    placeholders(&toml::Value::Table(table.clone()), "", &mut unset);
+    if !unset.is_empty() {
+        return Err(bad(format!(
+            "required {} not set: {} (your plant's columns, each subsystem's candidate gain and \
+             the margins have no default; `streamcert network --print-config` marks them \
+             \"{REQUIRED_VALUE}\")",
+            if unset.len() == 1 { "key" } else { "keys" },
+            unset.join(", ")
+        )));
+    }
     let take = |table: &mut toml::Table, key: &str| table.remove(key);
     let section: NetworkSection = take(&mut table, "network")
         .ok_or_else(|| bad("missing [network]".into()))?
@@ -361,6 +421,35 @@ mod tests {
             }
             other => panic!("expected a configuration error with `{needle}`, got {other:?}"),
         }
+    }
+
+    /// The committed example the docs run is [`EXAMPLE_CONFIG`], byte for byte.
+    #[test]
+    fn the_committed_example_is_the_example() {
+        let committed = include_str!("../../../../examples/data/g5_network.toml");
+        assert_eq!(committed, EXAMPLE_CONFIG);
+    }
+
+    /// `network --print-config`'s template is refused naming every choice it leaves to the
+    /// user, and the example (the template with G5's choices) parses.
+    #[test]
+    fn the_template_names_every_required_key() {
+        let err = parse(&template(), "net.toml").unwrap_err().to_string();
+        for path in [
+            "network.margin",
+            "columns.time",
+            "subsystem[0].outputs",
+            "subsystem[0].inputs",
+            "subsystem[0].gain",
+            "subsystem[1].gain",
+            "certificate.margin",
+        ] {
+            assert!(err.contains(path), "`{path}` not in: {err}");
+        }
+        assert!(!err.contains("gamma") && !err.contains("epoch"), "{err}");
+        let one = EXAMPLE_CONFIG.replace("gain = [[-3.0]]", "gain = \"REQUIRED\"");
+        let err = parse(&one, "net.toml").unwrap_err().to_string();
+        assert!(err.contains("required key not set: subsystem[1].gain"), "{err}");
     }
 
     #[test]

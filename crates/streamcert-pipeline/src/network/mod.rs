@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use serde::{Deserialize, Serialize};
 use streamcert_network::NetworkCertifier;
 
-pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse};
+pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse, template};
 pub use distributed::{Cluster, Reopen, SiteReport, run_timely};
 use input::Rows;
 use output::EpochWriter;

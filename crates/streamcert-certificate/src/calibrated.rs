@@ -205,11 +205,14 @@ mod config;
 mod coupling;
 mod look;
 mod update;
+mod validate;
+mod window_look;
 
-pub(crate) use crate::look::{Look, standing};
+pub(crate) use crate::look::standing;
 pub use config::{Calibration, RiskSplit};
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
 use coupling::{CouplingLook, CouplingState};
+pub use window_look::WindowLook;
 
 pub use crate::look::quantile::{
     calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
@@ -224,52 +227,6 @@ use crate::guard::{ChangeGuard, Fresh, Groups, ModelGuard};
 use crate::nonlinear::{NonlinearLook, NonlinearState};
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use streamcert_regression::Model;
-
-/// One window's latest look.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct WindowLook {
-    /// Window length `M_w` in columns.
-    pub window: usize,
-    /// Look number `k` of this window.
-    pub look: u64,
-    /// Time of the look.
-    pub t: f64,
-    /// `β̂_w` of the instrumented estimate.
-    pub beta_hat: f64,
-    /// `ρ_w`.
-    pub radius: f64,
-    /// The estimated standard deviation `√λ_max(Ω̂)` of `β̂_w` (before the quantile).
-    pub sd: f64,
-    /// Degrees of freedom `ν` of the quantile (effective blocks less `p + m`).
-    pub nu: f64,
-    /// The upper bound `β̂_w + t_ν(1 − δ) · sd_w` used to close stale certificates (one look's
-    /// risk, not the run's spending: closing never costs validity). Computed only when `β̂_w`
-    /// is below the margin; otherwise it cannot be below the margin and is `None`.
-    pub upper: Option<f64>,
-}
-
-impl Look for WindowLook {
-    fn time(&self) -> f64 {
-        self.t
-    }
-    fn window(&self) -> usize {
-        self.window
-    }
-    fn value(&self) -> f64 {
-        self.certificate()
-    }
-    fn upper(&self) -> Option<f64> {
-        self.upper
-    }
-}
-
-impl WindowLook {
-    /// `β̂_w − ρ_w`.
-    #[must_use]
-    pub fn certificate(&self) -> f64 {
-        self.beta_hat - self.radius
-    }
-}
 
 /// The calibrated certificate after one sample.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

@@ -19,9 +19,13 @@
 
 use std::path::Path;
 
+mod legend;
+
 use plotters::coord::Shift;
 use plotters::prelude::*;
 pub use plotters::style::RGBColor;
+
+use legend::{draw_legend, entries, wrap};
 
 /// A figure that could not be drawn or written.
 #[derive(Debug, thiserror::Error)]
@@ -248,88 +252,6 @@ pub fn tick(v: f64) -> String {
     let text = format!("{v:.4}");
     let text = text.trim_end_matches('0').trim_end_matches('.');
     if text == "-0" { "0".into() } else { text.into() }
-}
-
-/// One legend entry: a line or a filled box, and its text.
-struct Entry {
-    text: String,
-    color: RGBColor,
-    boxed: bool,
-    dashed: bool,
-}
-
-/// The legend entries of `panel`, in drawing order.
-fn entries(panel: &Panel, labels: &[(String, bool)]) -> Vec<Entry> {
-    let mut out: Vec<Entry> = Vec::new();
-    for sp in &panel.spans {
-        if !out.iter().any(|e| e.text == sp.label) {
-            out.push(Entry { text: sp.label.clone(), color: sp.color, boxed: true, dashed: false });
-        }
-    }
-    if let Some(h) = &panel.heatmap {
-        out.push(Entry { text: h.missing.clone(), color: MISSING, boxed: true, dashed: false });
-    }
-    for (_, label) in &panel.hlines {
-        out.push(Entry { text: label.clone(), color: BLACK, boxed: false, dashed: false });
-    }
-    for (s, (text, dashed)) in panel.series.iter().zip(labels) {
-        out.push(Entry { text: text.clone(), color: s.color, boxed: false, dashed: *dashed });
-    }
-    out
-}
-
-/// Words of `text` in lines of at most `width` characters.
-fn wrap(text: &str, width: usize) -> Vec<String> {
-    let mut lines: Vec<String> = vec![String::new()];
-    for word in text.split_whitespace() {
-        let last = lines.last_mut().expect("one line");
-        if !last.is_empty() && last.chars().count() + 1 + word.chars().count() > width {
-            lines.push(word.to_string());
-        } else {
-            if !last.is_empty() {
-                last.push(' ');
-            }
-            last.push_str(word);
-        }
-    }
-    lines
-}
-
-/// Draw the legend column of a panel: each entry's mark and its words, wrapped.
-fn draw_legend<DB: DrawingBackend>(
-    area: &DrawingArea<DB, Shift>,
-    entries: &[Entry],
-    wrap_at: usize,
-) -> Result<()>
-where
-    DB::ErrorType: 'static,
-{
-    let font = ("sans-serif", 13).into_font();
-    let mut y = 30;
-    for e in entries {
-        let mark_y = y + 7;
-        if e.boxed {
-            area.draw(&Rectangle::new(
-                [(6, mark_y - 6), (26, mark_y + 6)],
-                e.color.mix(0.45).filled(),
-            ))
-            .map_err(anyhow)?;
-        } else if e.dashed {
-            area.draw(&PathElement::new(vec![(6, mark_y), (12, mark_y)], e.color.stroke_width(2)))
-                .map_err(anyhow)?;
-            area.draw(&PathElement::new(vec![(18, mark_y), (26, mark_y)], e.color.stroke_width(2)))
-                .map_err(anyhow)?;
-        } else {
-            area.draw(&PathElement::new(vec![(6, mark_y), (26, mark_y)], e.color.stroke_width(2)))
-                .map_err(anyhow)?;
-        }
-        for line in wrap(&e.text, wrap_at) {
-            area.draw(&Text::new(line, (32, y), font.clone())).map_err(anyhow)?;
-            y += 16;
-        }
-        y += 4;
-    }
-    Ok(())
 }
 
 /// The colour of a heatmap cell without a value (for example before the first estimate).
@@ -559,104 +481,4 @@ pub fn save_as(fig: &Figure, path: &Path) -> Result<()> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The data lines of an SVG (stroke width 2, left of the legend column) as pixel points.
-    fn data_lines(svg: &str, plot_width: f64) -> Vec<Vec<(f64, f64)>> {
-        svg.split("<polyline")
-            .skip(1)
-            .filter(|el| el.contains("stroke-width=\"2\""))
-            .filter_map(|el| {
-                let start = el.find("points=\"")? + 8;
-                let end = start + el[start..].find('"')?;
-                let points: Vec<(f64, f64)> = el[start..end]
-                    .split_whitespace()
-                    .filter_map(|p| {
-                        let (x, y) = p.split_once(',')?;
-                        Some((x.parse().ok()?, y.parse().ok()?))
-                    })
-                    .collect();
-                (points.iter().all(|&(x, _)| x < plot_width)).then_some(points)
-            })
-            .collect()
-    }
-
-    fn figure() -> Figure {
-        init_fonts().expect("the embedded font");
-        let wave: Vec<(f64, f64)> =
-            (0..=200).map(|k| f64::from(k) * 0.05).map(|t| (t, 10.0 * (t * 2.0).sin())).collect();
-        let mut top = Panel::new("rate", "t [s]", "rate").line("estimate", wave, BLUE);
-        top.y_range = Some((-5.0, 5.0));
-        top.hlines.push((0.5, "margin 0.5".into()));
-        top.spans = vec![
-            Span { x0: 1.0, x1: 2.0, label: "gate open".into(), color: BLUE },
-            Span { x0: 3.0, x1: 4.0, label: "gate open".into(), color: BLUE },
-        ];
-        let strip = Panel::strip(
-            "why the gate was closed",
-            "t [s]",
-            vec![
-                Span { x0: 0.0, x1: 1.0, label: "warming up".into(), color: GREY },
-                Span { x0: 2.0, x1: 3.0, label: "below the margin".into(), color: RED_ },
-            ],
-        );
-        // From t = 2 to 8 only: on its own axis it would span the panel.
-        let flat: Vec<(f64, f64)> = (20..=80).map(|k| (f64::from(k) * 0.1, 0.2)).collect();
-        let low = Panel::new("eps", "t [s]", "ε").line("radius", flat, GREEN);
-        let mut panels = vec![top, strip, low];
-        for p in &mut panels {
-            p.x_range = Some((0.0, 10.0));
-        }
-        Figure { panels, rows: 3, cols: 1, size: (1200, 910) }
-    }
-
-    /// The SVG holds the shaded spans (one legend entry per label), the strip's labels in
-    /// words, and the legend texts, clipping said.
-    #[test]
-    fn the_svg_holds_the_spans_and_the_labels() {
-        let svg = svg_string(&figure()).expect("drawn");
-        for label in ["gate open", "warming up", "below the margin", "radius", "margin 0.5"] {
-            assert!(svg.contains(label), "{label}");
-        }
-        assert!(svg.contains("estimate (clipped to [-5, 5])"));
-        assert_eq!(svg.matches("gate open").count(), 1, "one legend entry for both spans");
-        // Two shaded spans and two strip cells, besides the legend's boxes.
-        assert!(svg.matches("<rect").count() >= 4 + 3);
-    }
-
-    /// Every data line stays inside its own panel (the panels' bands by their weights: 3, 1,
-    /// 3 of 910 pixels), left of the legend column; and the panels share one time axis: a
-    /// time is at one pixel in both panels.
-    #[test]
-    fn every_line_stays_inside_its_panel_on_one_time_axis() {
-        let fig = figure();
-        let svg = svg_string(&fig).expect("drawn");
-        let plot_width = f64::from(fig.size.0 - LEGEND_WIDTH);
-        let lines = data_lines(&svg, plot_width);
-        assert_eq!(lines.len(), 2, "the two panels' lines (the wave clipped, not broken)");
-        let bands = [(0.0, 390.0), (390.0, 520.0), (520.0, 910.0)];
-        for line in &lines {
-            let band = bands
-                .iter()
-                .find(|(lo, hi)| line.iter().all(|&(_, y)| y >= *lo && y <= *hi))
-                .unwrap_or_else(|| panic!("a line crosses panels: {:?}", &line[..3]));
-            assert!(band.0 != 390.0, "no line in the strip");
-        }
-        assert_eq!(lines[0].len(), 201);
-        // The wave's points are every 0.05 s from 0: t = 2 is its 41st, t = 8 its 161st.
-        let (wave, flat) = (&lines[0], &lines[1]);
-        assert!((wave[40].0 - flat[0].0).abs() <= 1.0, "t = 2: {} and {}", wave[40].0, flat[0].0);
-        let end = flat.last().expect("points").0;
-        assert!((wave[160].0 - end).abs() <= 1.0, "t = 8: {} and {end}", wave[160].0);
-    }
-
-    #[test]
-    fn ticks_are_written_as_people_write_numbers() {
-        assert_eq!(tick(500.0), "500");
-        assert_eq!(tick(2.5), "2.5");
-        assert_eq!(tick(0.05), "0.05");
-        assert_eq!(tick(-0.0), "0");
-        assert_eq!(tick(-1.0), "-1");
-    }
-}
+mod tests;

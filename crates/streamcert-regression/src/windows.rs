@@ -41,9 +41,12 @@ use serde::{Deserialize, Serialize};
 mod batch;
 mod coefficients;
 mod estimate;
+mod jackknife;
+mod outcome;
 mod region;
 
-pub use estimate::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, WindowEstimate};
+pub use jackknife::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
+pub use outcome::WindowEstimate;
 
 use crate::{Interval, RegressionError};
 

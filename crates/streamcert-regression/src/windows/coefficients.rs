@@ -2,9 +2,8 @@
 //! or a certificate over a region of states, needs), after an estimate or fused with it.
 
 use super::batch::{Batches, overlap_factor};
-use super::estimate::{
-    JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, block_weight,
-};
+use super::estimate::block_weight;
+use super::jackknife::{JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
 use super::{InstrumentedWindows, Layout, WindowEstimate};
 
 impl InstrumentedWindows {

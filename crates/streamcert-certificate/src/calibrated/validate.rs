@@ -1,0 +1,147 @@
+//! [`Calibration::validate`]: the calibrated certificate's settings checked against the
+//! regression and the margin, each refusal saying what would be valid.
+
+use streamcert_regression::RegressionConfig;
+
+use super::Calibration;
+use crate::CertifyError;
+
+impl Calibration {
+    /// Check the settings against the regression and the margin.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] with what would be valid.
+    pub fn validate(&self, reg: &RegressionConfig, margin: f64) -> Result<(), CertifyError> {
+        let bad = |field: &'static str, reason: String| {
+            Err(CertifyError::InvalidConfig { field, reason })
+        };
+        if !(self.delta > 0.0 && self.delta < 1.0) {
+            return bad("calibration.delta", format!("must lie in (0, 1), got {}", self.delta));
+        }
+        if !(margin > 0.0) {
+            return bad(
+                "margin",
+                format!(
+                    "must be > 0 for the calibrated certificate, got {margin}: a certified rate \
+                     at or below 0 does not mean the loop contracts (use a small positive margin, \
+                     for example 0.05)"
+                ),
+            );
+        }
+        if !(0.0..=1e-3).contains(&self.relative_ridge) {
+            return bad(
+                "calibration.relative_ridge",
+                format!("must lie in [0, 1e-3], got {}", self.relative_ridge),
+            );
+        }
+        if let Some(n) = self.windows {
+            if !(1..=16).contains(&n) {
+                return bad("calibration.windows", format!("must lie in 1..=16, got {n}"));
+            }
+        }
+        if !(self.look_spacing > 0.0 && self.look_spacing <= 1.0) {
+            return bad(
+                "calibration.look_spacing",
+                format!("must lie in (0, 1], got {}", self.look_spacing),
+            );
+        }
+        if !(1..=8).contains(&self.instrument_intervals) {
+            return bad(
+                "calibration.instrument_intervals",
+                format!("must lie in 1..=8, got {}", self.instrument_intervals),
+            );
+        }
+        if !(1..=8).contains(&self.batch_blocks) {
+            return bad(
+                "calibration.batch_blocks",
+                format!(
+                    "must lie in 1..=8 (the settings `cargo xtask validity` measures reach 8), \
+                     got {}",
+                    self.batch_blocks
+                ),
+            );
+        }
+        if let Some(r) = self.change_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return bad("calibration.change_risk", format!("must lie in (0, 1), got {r}"));
+            }
+        }
+        if let Some(r) = self.guard_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return bad("calibration.guard_risk", format!("must lie in (0, 1), got {r}"));
+            }
+        }
+        if !(self.auto_batch_risk > 0.0 && self.auto_batch_risk < 1.0) {
+            return bad(
+                "calibration.auto_batch_risk",
+                format!("must lie in (0, 1), got {}", self.auto_batch_risk),
+            );
+        }
+        if !(self.auto_batches == 0 || self.auto_batches >= 8) {
+            return bad(
+                "calibration.auto_batches",
+                format!(
+                    "must be 0 (off) or at least 8 (on fewer batches the Student-t quantile \
+                     outweighs any spread it saves), got {}",
+                    self.auto_batches
+                ),
+            );
+        }
+        // The affine model's intercept is one more unknown; the model guard's larger fit has
+        // its extra regressors (in batches of one block: see `guard_unknowns`).
+        let d = reg.outputs
+            + reg.inputs
+            + usize::from(reg.model == streamcert_regression::Model::Affine);
+        let g = self.guard_unknowns(reg.outputs);
+        let min = self.smallest_window(reg.horizon, d);
+        let guarded = Self::min_window(reg.horizon, d + g);
+        let counted = "p + m, + 1 for the affine model's intercept";
+        if reg.window < guarded && guarded >= min {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for a calibrated bound with its guards with h = {}: \
+                     the guards' larger fits have up to {} unknowns per output ({counted}, + p \
+                     for the hidden-dynamics guard or + 2p for the nonlinearity guard), so the \
+                     smallest valid window is {guarded} columns (h · (unknowns + 2)); without \
+                     the guards it would be {min}",
+                    reg.window,
+                    reg.horizon,
+                    d + g
+                ),
+            );
+        }
+        if reg.window < min && self.batch_blocks == 1 {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for a calibrated bound with h = {} and {d} unknowns \
+                     per output ({counted}): the smallest valid window is {min} columns \
+                     (h · (unknowns + 2))",
+                    reg.window, reg.horizon
+                ),
+            );
+        }
+        if reg.window < min {
+            return bad(
+                "window",
+                format!(
+                    "M = {} is too short for a calibrated bound with h = {}, {d} unknowns per \
+                     output ({counted}) and batches of b = {} blocks: the smallest valid window \
+                     is {min} columns (h · (b (unknowns + 1) + 1)), or use fewer blocks per \
+                     batch",
+                    reg.window, reg.horizon, self.batch_blocks
+                ),
+            );
+        }
+        if let Some(cap) = self.max_window {
+            if cap < reg.window {
+                return bad(
+                    "calibration.max_window",
+                    format!("must be at least the window M = {}, got {cap}", reg.window),
+                );
+            }
+        }
+        Ok(())
+    }
+}

@@ -2,7 +2,10 @@
 //! of samples per iteration pushed with `NetworkCertifier::push_batch` in 10 ms batches over 1
 //! and 2 threads, the network composed at the 1 s epoch (sparse: `N` above `dense_limit`).
 //! The baseline in the same run is the same network fed sample by sample with
-//! `NetworkCertifier::push` (round robin over the subsystems, one thread).
+//! `NetworkCertifier::push` (round robin over the subsystems, one thread). At `N = 10⁴` the
+//! same path also runs with the default local certificate (the calibrated certificate with its
+//! guards, `Calibration::new(0.01)`) over 2 threads, after three seconds of data have filled
+//! its windows (`fleet/push_batch_default_2t`).
 //!
 //! Run: `cargo bench --bench fleet` (throughput in samples per second).
 
@@ -11,17 +14,20 @@ use std::hint::black_box;
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::certificate::CertifierConfig;
+use streamcert::certificate::{Calibration, CertifierConfig};
 use streamcert::network::{NetworkCertifier, NetworkConfig, SampleBatch, SubsystemSpec};
 use streamcert::regression::RegressionConfig;
 
 const RATE: usize = 1000; // samples per second per subsystem
 const CHUNK: usize = 10; // samples per subsystem per batch (10 ms)
 
-fn network(n: usize, seed: u64) -> NetworkCertifier {
+fn network(n: usize, seed: u64, calibrated: bool) -> NetworkCertifier {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let local =
+    let mut local =
         CertifierConfig::new(RegressionConfig::new(1, 1, 150, 5, 1e-4), vec![-1.0], 0.2, 0.05, 10);
+    if calibrated {
+        local.calibration = Some(Calibration::new(0.01));
+    }
     let specs = (0..n).map(|i| SubsystemSpec::new(&format!("s{i}"), local.clone())).collect();
     let mut edges = Vec::with_capacity(3 * n);
     for i in 0..n {
@@ -74,7 +80,7 @@ fn fleet(c: &mut Criterion) {
     for n in [1_000usize, 10_000, 100_000] {
         group.throughput(Throughput::Elements((n * RATE) as u64));
         for threads in [1usize, 2] {
-            let mut net = network(n, n as u64);
+            let mut net = network(n, n as u64, false);
             let mut batch = SampleBatch::new();
             let mut step = 0u64;
             one_second(&mut net, &mut batch, &values, &mut step, threads); // warm the windows
@@ -82,8 +88,19 @@ fn fleet(c: &mut Criterion) {
                 b.iter(|| one_second(&mut net, &mut batch, &values, &mut step, threads));
             });
         }
+        if n == 10_000 {
+            let mut net = network(n, n as u64, true);
+            let mut batch = SampleBatch::new();
+            let mut step = 0u64;
+            for _ in 0..3 {
+                one_second(&mut net, &mut batch, &values, &mut step, 2);
+            }
+            group.bench_function(BenchmarkId::new("push_batch_default_2t", n), |b| {
+                b.iter(|| one_second(&mut net, &mut batch, &values, &mut step, 2));
+            });
+        }
         if n <= 10_000 {
-            let mut net = network(n, n as u64);
+            let mut net = network(n, n as u64, false);
             let mut step = 0u64;
             let push_second = |net: &mut NetworkCertifier, step: &mut u64| {
                 for _ in 0..RATE {

@@ -11,8 +11,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, NonlinearConfig, ResidualSource, RiskSplit,
-    certificate_value,
+    Calibration, Certifier, CertifierConfig, GuardVariance, NonlinearConfig, ResidualSource,
+    RiskSplit, certificate_value,
 };
 use streamcert::regression::{
     EstimateStatus, InstrumentedWindows, Model, RegressionConfig, SlidingRegression,
@@ -128,7 +128,9 @@ fn certifier_step(c: &mut Criterion) {
     // without any guard (the calibrated step as it was before the intercept and the guards);
     // variant 7 is the affine calibrated certificate without its guards; variants 8 and 9
     // are the default without its change guard and without its two model guards (hidden
-    // dynamics, nonlinearity), so that each guard's share of the default step is measured.
+    // dynamics, nonlinearity), so that each guard's share of the default step is measured;
+    // variant 10 is the default with the model guards' tests on the jackknife covariance
+    // (`GuardVariance::Jackknife`, the certificate's own) instead of the first-order one.
     let cases = [
         (1usize, 1usize, 0u8),
         (1, 1, 1),
@@ -140,6 +142,7 @@ fn certifier_step(c: &mut Criterion) {
         (1, 1, 7),
         (1, 1, 8),
         (1, 1, 9),
+        (1, 1, 10),
         (10, 10, 0),
         (10, 10, 1),
         (10, 10, 5),
@@ -173,6 +176,11 @@ fn certifier_step(c: &mut Criterion) {
             };
             cfg.calibration = Some(no_model);
         }
+        if variant == 10 {
+            let jackknife =
+                Calibration { guard_variance: GuardVariance::Jackknife, ..Calibration::new(0.01) };
+            cfg.calibration = Some(jackknife);
+        }
         if variant == 5 || variant == 6 {
             cfg.regression.model = Model::ThroughOrigin;
         }
@@ -203,6 +211,7 @@ fn certifier_step(c: &mut Criterion) {
             "gaussian_and_calibrated_unguarded",
             "gaussian_and_calibrated_without_change_guard",
             "gaussian_and_calibrated_without_model_guards",
+            "gaussian_and_calibrated_jackknife_guards",
         ][usize::from(variant)];
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;

@@ -13,6 +13,7 @@ use streamcert::regression::{
 
 mod coefficients;
 mod estimators;
+mod moments;
 mod side_by_side;
 mod units;
 mod window_range;

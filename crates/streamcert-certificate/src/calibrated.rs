@@ -209,7 +209,7 @@ mod validate;
 mod window_look;
 
 pub(crate) use crate::look::standing;
-pub use config::{Calibration, RiskSplit};
+pub use config::{Calibration, GuardVariance, RiskSplit};
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
 use coupling::{CouplingLook, CouplingState};
 pub use window_look::WindowLook;
@@ -322,6 +322,8 @@ impl CalibratedState {
         )?
         .with_ranges(p)
         .with_batch(cal.batch_blocks)?;
+        // The change guard's fresh estimates from the segment sums (`O(1)` per estimate).
+        let windows = if cal.plant_change { windows.with_moments() } else { windows };
         // The nonlinear certificate takes `τ` as one more input with gain zero.
         let mut nl_gain = gain.to_vec();
         if affine {
@@ -389,6 +391,7 @@ impl CalibratedState {
                 // split over the windows keeps the false closings of a look at about δ.
                 let alpha = cal.guard_risk(lengths.len());
                 ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
+                    .map(|g| g.with_variance(cal.guard_variance))
             })
             .collect::<Result<_, _>>()?,
             change: cal.plant_change.then(|| {
@@ -456,6 +459,18 @@ impl CalibratedState {
         if let Some(c) = &mut self.change {
             c.reset();
         }
+    }
+
+    /// Recompute what the checkpoint does not carry (the windows' segment sums, the looks'
+    /// scratch), after a restore: the same bits as the uninterrupted run.
+    pub(crate) fn rebuild(&mut self) {
+        if self.change.is_some() {
+            self.windows.keep_moments();
+        }
+        // The looks' batched covariance (scratch, not serialised), sized here so that no
+        // step allocates.
+        let pp = self.sym.len();
+        self.est.batched.score_cov.resize(pp * pp, 0.0);
     }
 
     /// The current coupling bound per block (empty without a coupling configuration).

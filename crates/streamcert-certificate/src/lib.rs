@@ -79,8 +79,8 @@ mod radius;
 mod row;
 
 pub use calibrated::{
-    Calibration, CouplingBlock, CouplingBound, CouplingConfig, RiskSplit, WindowLook,
-    calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
+    Calibration, CouplingBlock, CouplingBound, CouplingConfig, GuardVariance, RiskSplit,
+    WindowLook, calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
 };
 pub use certifier::Certifier;
 pub use certifier::checkpoint::{

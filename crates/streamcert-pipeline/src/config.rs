@@ -3,7 +3,8 @@
 use serde::Deserialize;
 use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
-    Calibration, Certifier, CertifierConfig, FeatureSet, NonlinearConfig, ResidualSource, RiskSplit,
+    Calibration, Certifier, CertifierConfig, FeatureSet, GuardVariance, NonlinearConfig,
+    ResidualSource, RiskSplit,
 };
 use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 
@@ -115,6 +116,8 @@ struct CalibrationSection {
     risk_split: Option<RiskSplit>,
     #[serde(default)]
     relative_ridge: Option<f64>,
+    #[serde(default)]
+    guard_variance: Option<GuardVariance>,
 }
 
 fn default_true() -> bool {
@@ -145,6 +148,7 @@ impl Default for CalibrationSection {
             guard_risk: None,
             risk_split: None,
             relative_ridge: None,
+            guard_variance: None,
         }
     }
 }
@@ -169,6 +173,7 @@ impl CalibrationSection {
             guard_risk: self.guard_risk.or(d.guard_risk),
             risk_split: self.risk_split.unwrap_or(d.risk_split),
             relative_ridge: self.relative_ridge.unwrap_or(d.relative_ridge),
+            guard_variance: self.guard_variance.unwrap_or(d.guard_variance),
             ..d
         }
     }

@@ -77,4 +77,7 @@ pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
-pub use windows::{InstrumentedWindows, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, WindowEstimate};
+pub use windows::{
+    BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MIN_LEVERAGE_PIVOT,
+    MIN_RESIDUAL_SHARE, WindowEstimate,
+};

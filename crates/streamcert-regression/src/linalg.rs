@@ -11,7 +11,7 @@
 ///
 /// Returns `false` when `A` is not numerically positive definite (a pivot `<= 0` or not finite).
 #[must_use]
-#[inline]
+#[inline(always)]
 pub fn cholesky_in_place(a: &mut [f64], n: usize) -> bool {
     for j in 0..n {
         let row_j = &a[j * n..j * n + j];
@@ -53,7 +53,7 @@ pub(crate) fn dot(a: &[f64], b: &[f64]) -> f64 {
 /// Solve `L Lᵀ x = b` in place in `b`, with `L` from [`cholesky_in_place`]: forward
 /// substitution by dot products with the rows of `L`, back substitution by updates along the
 /// rows of `L` (both walk `L` contiguously).
-#[inline]
+#[inline(always)]
 pub fn cholesky_solve_in_place(l: &[f64], n: usize, b: &mut [f64]) {
     let b = &mut b[..n];
     for i in 0..n {
@@ -83,6 +83,7 @@ pub(crate) fn fast_hypot(a: f64, b: f64) -> f64 {
 /// Returns the ratio `min |u_ii| / max |u_ii|` (0 for an exactly singular matrix), a cheap
 /// conditioning indicator.
 #[must_use]
+#[inline(always)]
 pub fn lu_in_place(a: &mut [f64], n: usize, piv: &mut [usize]) -> f64 {
     let (mut umin, mut umax) = (f64::INFINITY, 0.0f64);
     for k in 0..n {
@@ -119,6 +120,7 @@ pub fn lu_in_place(a: &mut [f64], n: usize, piv: &mut [usize]) -> f64 {
 }
 
 /// Solve `A x = b` in place in `b` from the factors of [`lu_in_place`].
+#[inline(always)]
 pub fn lu_solve_in_place(lu: &[f64], n: usize, piv: &[usize], b: &mut [f64]) {
     for k in 0..n {
         b.swap(k, piv[k]);

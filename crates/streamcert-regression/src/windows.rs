@@ -41,12 +41,16 @@ use serde::{Deserialize, Serialize};
 mod batch;
 mod coefficients;
 mod estimate;
+mod fresh;
 mod jackknife;
+mod moments;
 mod outcome;
 mod region;
+mod scores;
 
 pub use jackknife::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
-pub use outcome::WindowEstimate;
+pub use moments::MAX_MOMENT_ENTRIES;
+pub use outcome::{BatchedCovariance, WindowEstimate};
 
 use crate::{Interval, RegressionError};
 
@@ -110,6 +114,10 @@ pub struct InstrumentedWindows {
     // not written, so a state without it reads as it always did).
     #[serde(default = "batch::one", skip_serializing_if = "batch::is_one")]
     batch: usize,
+    // The segment sums of the blocks' records (`with_moments`): derived from the block ring,
+    // not serialised, rebuilt on restore (`rebuild_moments`).
+    #[serde(skip)]
+    moments: Option<moments::Moments>,
 }
 
 /// `out = Σ` of the `S`-value blocks in `older` then `newer`.
@@ -189,6 +197,7 @@ impl InstrumentedWindows {
             open_range: Vec::new(),
             block_ranges: Vec::new(),
             batch: 1,
+            moments: None,
         })
     }
 
@@ -337,6 +346,9 @@ impl InstrumentedWindows {
         self.block_head = 0;
         self.block_len = 0;
         self.open_range.fill(Interval::EMPTY);
+        if let Some(mo) = &mut self.moments {
+            mo.clear();
+        }
     }
 
     /// Add the outer products of the column `(z, dy)` in ring slot `q`, paired with its
@@ -431,6 +443,9 @@ impl InstrumentedWindows {
         for (o, v) in blocks.iter_mut().zip(open.iter_mut()) {
             *o = *v;
             *v = 0.0;
+        }
+        if self.moments.is_some() {
+            self.moments_push(b);
         }
         self.block_head = if b + 1 == self.block_cap() { 0 } else { b + 1 };
         self.block_len = (self.block_len + 1).min(self.block_cap());

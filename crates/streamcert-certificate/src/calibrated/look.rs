@@ -29,7 +29,16 @@ impl CalibratedState {
             o.look(w, self.ridge, self.min_pivot);
         }
         let p = self.sym.len().isqrt();
-        let rate = self.rate(w, 0);
+        // The estimate, and where the window carries it the covariance in batches, in one
+        // solve and one pass over the blocks.
+        let (rate, batched) = if self.auto_applies(w) {
+            let (ridge, pivot, b) = (self.ridge, self.min_pivot, self.auto_blocks(w));
+            self.windows.estimate_batched(w, b, ridge, &self.tmat, pivot, &mut self.est);
+            let batched = self.batched_rate();
+            (self.rate_of_estimate(), batched)
+        } else {
+            (self.rate(w, 0), None)
+        };
         // A look that the data do not identify: the fit refused (a regressor that never
         // moved beyond the intercept, a block that alone identifies a direction), or too few
         // effective moves for a bound (`ν <= 0`).
@@ -68,8 +77,8 @@ impl CalibratedState {
         let (second, delta, below) = (self.cal.auto_batch_risk, self.cal.delta, beta_hat < margin);
         let mut radius;
         let upper_radius;
-        match self.auto_rate(w) {
-            Some((_, v2, nu2)) => {
+        match batched {
+            Some((v2, nu2)) => {
                 radius = calibrated_radius(variance, nu, risk * (1.0 - second));
                 let r2 = calibrated_radius(v2, nu2, risk * second);
                 upper_radius =
@@ -122,24 +131,47 @@ impl CalibratedState {
         self.cal.batch_blocks == 1 && self.auto_blocks(w) >= 2
     }
 
-    /// Window `w`'s estimate with the second covariance, when it applies and is ready.
-    fn auto_rate(&mut self, w: usize) -> Option<(f64, f64, f64)> {
-        if !self.auto_applies(w) {
+    /// The estimate's second covariance (in batches, `self.est.batched` of
+    /// [`InstrumentedWindows::estimate_batched`](streamcert_regression::InstrumentedWindows::estimate_batched)):
+    /// `(σ²_max, ν)` as [`rate`](Self::rate) gives them, `None` when not ready.
+    fn batched_rate(&mut self) -> Option<(f64, f64)> {
+        let b = &self.est.batched;
+        if !(self.est.ready && b.ready) {
             return None;
         }
-        self.windows.set_batch(self.auto_blocks(w));
-        let r = self.rate(w, 0);
-        self.windows.set_batch(self.cal.batch_blocks);
-        r
+        let p = self.sym.len().isqrt();
+        let d = self.tmat.len() / p;
+        let mut variance = linalg::sym_eig_extremes(&b.score_cov, p * p, &mut self.eig_work).1;
+        if p == 2 {
+            variance = variance.min(rank_one_variance_bound(&b.score_cov));
+        }
+        let nu = b.effective_blocks.min(b.batches as f64) - d as f64;
+        Some((variance, nu))
     }
 
     /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest
     /// `skip`: `(β̂_w, σ²_max, ν)` of the module docs, `None` when the fit is not ready.
     pub(super) fn rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let p = self.sym.len().isqrt();
-        let d = self.tmat.len() / p;
         let (ridge, pivot) = (self.ridge, self.min_pivot);
         self.windows.estimate_older(w, skip, ridge, &self.tmat, pivot, &mut self.est);
+        self.rate_of_estimate()
+    }
+
+    /// The change guard's fresh estimate of window `w` less its newest `skip` blocks: as
+    /// [`rate`](Self::rate), with the first-order variance from the windows' segment sums
+    /// ([`InstrumentedWindows::fresh_estimate`](streamcert_regression::InstrumentedWindows::fresh_estimate),
+    /// `O(1)` in the window's length). A fresh estimate spends no risk and only closes looks,
+    /// so its variance need not carry the jackknife's leverage.
+    pub(super) fn fresh_rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
+        let (ridge, pivot) = (self.ridge, self.min_pivot);
+        self.windows.fresh_estimate(w, skip, ridge, &self.tmat, pivot, &mut self.est);
+        self.rate_of_estimate()
+    }
+
+    /// `(β̂, σ²_max, ν)` of the estimate in `self.est`, `None` when it is not ready.
+    fn rate_of_estimate(&mut self) -> Option<(f64, f64, f64)> {
+        let p = self.sym.len().isqrt();
+        let d = self.tmat.len() / p;
         if !self.est.ready {
             return None;
         }

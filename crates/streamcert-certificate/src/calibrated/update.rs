@@ -80,7 +80,10 @@ impl CalibratedState {
             }
             // The change guard's fresh estimates, at the blocks its pace makes due and at each
             // window's look (so that no look stands unchecked against the newest data). Each
-            // window's split test takes the shorter window's estimate of the same block.
+            // window's split test takes the shorter window's estimate of the same block. A
+            // fresh estimate is first-order (`O(1)`, `fresh_rate`) unless it is the look's;
+            // one that would close something is retaken with the look's variance first, so
+            // that what closes is what the look's variance says.
             let fresh = |(beta_hat, variance, nu): (f64, f64, f64)| {
                 Fresh::new(t, beta_hat, variance.max(0.0).sqrt(), nu)
             };
@@ -93,38 +96,63 @@ impl CalibratedState {
                         .change
                         .as_ref()
                         .is_some_and(|c| c.due(v, block) | (looking >> v & 1 == 1));
+                if !due {
+                    continue;
+                }
                 // A window's estimate on its newest blocks: its look's, where it looked at
-                // this block (the same numbers), else computed.
-                let newest_rate = |s: &mut Self, v: usize| {
-                    if looking >> v & 1 == 1 { rates[v] } else { s.rate(v, 0) }
-                };
-                if due {
-                    let newest = newest_rate(self, v).map(fresh);
-                    // The split's two parts at the same block: the older part of window v
-                    // and window v − 1's estimate now (taken above when it was due too).
-                    let (older, newer) = if v == 0 {
-                        (None, None)
+                // this block (the same numbers), else first-order.
+                let newest_fresh = |s: &mut Self, v: usize| {
+                    if looking >> v & 1 == 1 {
+                        rates[v].map(fresh).map(Fresh::exact)
                     } else {
-                        let skip = self.windows.window(v - 1) / self.horizon;
-                        let newer = if taken >> (v - 1) & 1 == 1 {
-                            None
-                        } else {
-                            Some(newest_rate(self, v - 1).map(fresh))
-                        };
-                        (self.rate(v, skip).map(fresh), newer)
-                    };
-                    if let Some(c) = &mut self.change {
-                        c.set(v, newest);
-                        if v > 0 {
-                            if let Some(newer) = newer {
-                                c.set(v - 1, newer);
-                            }
-                            let newer = self.windows.window(v - 1) as u64;
-                            c.set_split(v, older, self.seen.saturating_sub(newer));
+                        s.fresh_rate(v, 0).map(fresh)
+                    }
+                };
+                let newest = newest_fresh(self, v);
+                // The split's two parts at the same block: the older part of window v and
+                // window v − 1's estimate now (taken above when it was due too).
+                let skip = if v == 0 { 0 } else { self.windows.window(v - 1) / self.horizon };
+                let newer = (v > 0 && taken >> (v - 1) & 1 == 0).then(|| newest_fresh(self, v - 1));
+                let mut older = if v == 0 { None } else { self.fresh_rate(v, skip).map(fresh) };
+                if let Some(c) = &mut self.change {
+                    c.set(v, newest);
+                    if let Some(newer) = newer {
+                        c.set(v - 1, newer);
+                    }
+                }
+                if v > 0 {
+                    if self.change.as_ref().is_some_and(|c| c.split_needs_exact(v, older)) {
+                        older = self.rate(v, skip).map(fresh).map(Fresh::exact);
+                        let newer = self.rate(v - 1, 0).map(fresh).map(Fresh::exact);
+                        if let Some(c) = &mut self.change {
+                            c.set(v - 1, newer);
                         }
                     }
-                    taken |= 1 << v;
-                    looked = true;
+                    let first = self.seen.saturating_sub(self.windows.window(v - 1) as u64);
+                    if let Some(c) = &mut self.change {
+                        c.set_split(v, older, first);
+                    }
+                }
+                taken |= 1 << v;
+                looked = true;
+            }
+            // A first-order fresh estimate that would close a held look is retaken with the
+            // look's variance (on the window's newest blocks now).
+            if looked {
+                let mut held = [None; 16];
+                for (h, l) in held.iter_mut().zip(&self.latest) {
+                    *h = l.map(|l| (l.beta_hat, l.sd));
+                }
+                let w = self.latest.len();
+                let mask = self.change.as_ref().map_or(0, |c| c.needs_exact(&held[..w]));
+                for v in 0..w {
+                    if mask >> v & 1 == 0 || !self.windows.is_full(v) {
+                        continue;
+                    }
+                    let exact = self.rate(v, 0).map(fresh).map(Fresh::exact);
+                    if let Some(c) = &mut self.change {
+                        c.set(v, exact);
+                    }
                 }
             }
         }

@@ -153,7 +153,7 @@ impl Certifier {
     /// # Errors
     /// [`CertifyError::Checkpoint`] or the configuration's error, naming the first problem.
     pub fn verify(self) -> Result<Self, CertifyError> {
-        let c = self;
+        let mut c = self;
         c.cfg.validate()?;
         c.regression.check_state().map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
         c.regression.check_statistics(1e-9).map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
@@ -183,8 +183,9 @@ impl Certifier {
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }
-        if let Some(state) = &c.calibrated {
+        if let Some(state) = &mut c.calibrated {
             state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
+            state.rebuild();
         }
         Ok(c)
     }

@@ -10,8 +10,9 @@
 //! `P_v = 2^(v−1) P_0` for the longer windows, which double in length (each window from the
 //! second on is refreshed about fifteen times per its own span, and window `v − 1` is due
 //! at every block window `v` is). A fresh estimate (`β̂_v` and its standard deviation
-//! `s_v`, by the calibrated look's formulas) spends no risk of `δ` and certifies nothing;
-//! two tests decide:
+//! `s_v`: the calibrated look's estimate and degrees of freedom, with the first-order
+//! variance from the windows' segment sums, see *Cost* below; at a window's look, the look's
+//! own numbers) spends no risk of `δ` and certifies nothing; two tests decide:
 //!
 //! ```text
 //! split test of window v >= 1:  β̂_{v−1} + t_{ν_{v−1}}(1 − α) · √(s_{v−1}² + s_o²)  >=  β̂_o
@@ -56,17 +57,28 @@
 //!
 //! Closing never costs validity; its price is power (a false comparison closes a standing
 //! look until the next comparison, and a change to a still contracting plant closes the
-//! longer windows' looks until the shorter windows certify the new plant). A fresh estimate
-//! of window `v` costs `O(B_v (k d + p²) + k³)`, twice per due block (its newest columns
-//! and its older part; window `v − 1`'s newest is the one taken at the same block, and a
-//! window that looks at the block hands over its look's estimate), so about
-//! `3 B_0 / P_0 ≈ 24` block passes per block per window, `O(W (k d + p²))` per sample
-//! amortised, no allocation (for the default five windows about 98 block passes per block;
-//! for four 75, 165 with every window at the shortest window's pace and 217 before the
-//! phases were aligned).
-//! On the default `p = m = 1` step the guard costs about 250 ns per sample (the step without
-//! it, BENCHMARKS.md), a third of the step; a split statistic kept up to date per block
-//! instead of recomputed is the open way to cheaper.
+//! longer windows' looks until the shorter windows certify the new plant).
+//!
+//! **Cost.** A fresh estimate is
+//! [`InstrumentedWindows::fresh_estimate`](streamcert_regression::InstrumentedWindows::fresh_estimate):
+//! the span's sums and the second moments of its blocks' sums from segment sums kept along the
+//! block ring (at most one subtraction over at most the longest window's blocks), the solve
+//! of the look, and each block's first-order influence summed as a quadratic form in those
+//! moments with `B/(B − d)` for the fitted directions; `O(1)` in the window's length (about
+//! `(d + p)² k²/2` products per block to keep the moments, a solve and a quadratic form per
+//! estimate), no allocation, and the same numbers after a restore (the moments are rebuilt
+//! from the ring). Where a quadratic form falls below `10⁻⁹` of its terms' magnitude, or
+//! with batches of more than one block, it is the look's pass over the blocks (the
+//! jackknife) instead. A first-order estimate decides nothing by itself: where it would
+//! close something (a held look below it, a split test that rejects), it is retaken with the
+//! look's variance, the delete-one-block jackknife (`O(B_v)`, on the window's newest blocks
+//! at that block), and the comparison is made on that. The first-order variance is the
+//! smaller where an input moved in a few blocks (it has no leverage factor): taken alone it
+//! closed the heat exchanger's gate (`cargo xtask real`) on 15 % more of its rows; retaken,
+//! the gate is the same at every row as with the jackknife throughout. About 1.2 fresh
+//! estimates per block of `h` columns for the default five windows, each `O(1)` unless
+//! retaken (the pass over the blocks each used to cost, about 98 block visits per block,
+//! was a third of the default step; BENCHMARKS.md).
 //! Pace and closing delay, measured (`cargo xtask validity --only-change 200`, dt = 0.01,
 //! drops from rate 3 to −0.2, 0, 0.04): open later than 1.5 spans in 2.0 / 3.0 / 2.5 % of
 //! runs with every window at the shortest window's pace, 2.0 / 3.5 / 3.0 % with the pace
@@ -99,12 +111,22 @@ pub(crate) struct Fresh {
     pub quantile: f64,
     /// See [`quantile`](Self::quantile).
     pub split_quantile: f64,
+    /// `true` for the look's variance (the jackknife), `false` for the first-order one of
+    /// the segment sums (*Cost* in the module docs), which is replaced by the jackknife's
+    /// before it closes anything.
+    #[serde(default)]
+    pub exact: bool,
 }
 
 impl Fresh {
-    /// An estimate `β̂`, `s`, `ν` at time `t`, its quantiles not yet set.
+    /// An estimate `β̂`, `s`, `ν` at time `t` (first-order), its quantiles not yet set.
     pub(crate) fn new(t: f64, beta_hat: f64, sd: f64, nu: f64) -> Self {
-        Self { t, beta_hat, sd, nu, quantile: f64::NAN, split_quantile: f64::NAN }
+        Self { t, beta_hat, sd, nu, quantile: f64::NAN, split_quantile: f64::NAN, exact: false }
+    }
+
+    /// This estimate, marked as taken with the look's variance.
+    pub(crate) fn exact(self) -> Self {
+        Self { exact: true, ..self }
     }
 }
 
@@ -217,6 +239,37 @@ impl ChangeGuard {
                 self.changed = Some(s);
             }
         }
+    }
+
+    /// Whether window `v >= 1`'s split test with `older` against window `v − 1`'s fresh
+    /// estimate would reject while one of the two is first-order (so that both are retaken
+    /// with the look's variance first).
+    pub(crate) fn split_needs_exact(&self, v: usize, older: Option<Fresh>) -> bool {
+        let newer = v.checked_sub(1).and_then(|u| self.fresh[u]);
+        older.zip(newer).is_some_and(|(old, new)| {
+            let spread = (new.sd * new.sd + old.sd * old.sd).sqrt();
+            let upper = new.beta_hat + new.split_quantile * spread;
+            upper < old.beta_hat && !(old.exact && new.exact)
+        })
+    }
+
+    /// The windows whose first-order fresh estimate would close one of the held `looks`
+    /// (window `v`'s against the looks of windows `w >= v`, as [`admits`](Self::admits)
+    /// compares them), as a bit set: each is retaken with the look's variance before it
+    /// closes anything.
+    pub(crate) fn needs_exact(&self, looks: &[Option<(f64, f64)>]) -> u32 {
+        let mut out = 0u32;
+        for (v, f) in self.fresh.iter().enumerate() {
+            let Some(f) = f.filter(|f| !f.exact) else { continue };
+            let rejects = looks.iter().skip(v).flatten().any(|&(beta_hat, sd)| {
+                let spread = (f.sd * f.sd + sd * sd).sqrt();
+                f.beta_hat + f.quantile * spread < beta_hat
+            });
+            if rejects {
+                out |= 1 << v;
+            }
+        }
+        out
     }
 
     /// The shortest window's latest fresh estimate.

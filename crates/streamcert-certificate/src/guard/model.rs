@@ -32,7 +32,9 @@
 //! W = vec(Φ̂_S)ᵀ Ω̂_SS⁻¹ vec(Φ̂_S)   against   ν q/(ν − q + 1) · F_{q, ν−q+1}(1 − α)
 //! ```
 //!
-//! (Hotelling's quantile, `Ω̂` the batch-means coefficient covariance of the larger fit, `ν`
+//! (Hotelling's quantile, `Ω̂` the batch-means coefficient covariance of the larger fit, by
+//! default from each block's first-order influence with `B/(B − d)`, or its delete-one-block
+//! change, [`Calibration::guard_variance`](crate::Calibration::guard_variance); `ν`
 //! its effective number of batches less its unknowns per output, `α` the guard's risk per
 //! test, [`Calibration::guard_risk`](crate::Calibration::guard_risk), by default `δ/W` per
 //! look of each of the `W` windows), rejects at risk about `α` when the linear
@@ -77,7 +79,7 @@ use streamcert_regression::{InstrumentedWindows, WindowEstimate};
 
 use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
 use crate::look::same_windows;
-use crate::{CertifyError, NotCertified};
+use crate::{CertifyError, GuardVariance, NotCertified};
 
 /// Which groups of extra regressors the guard fits and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -125,6 +127,9 @@ pub(crate) struct ModelGuard {
     sub: Vec<f64>,
     rhs: Vec<f64>,
     work: Vec<f64>,
+    /// The covariance of the tests ([`Calibration::guard_variance`](crate::Calibration::guard_variance)).
+    #[serde(default)]
+    variance: GuardVariance,
 }
 
 impl ModelGuard {
@@ -163,7 +168,14 @@ impl ModelGuard {
             sub: vec![0.0; q * q],
             rhs: vec![0.0; q],
             work: vec![0.0; q],
+            variance: GuardVariance::FirstOrder,
         })
+    }
+
+    /// This guard with its tests on the covariance `variance`.
+    pub(crate) fn with_variance(mut self, variance: GuardVariance) -> Self {
+        self.variance = variance;
+        self
     }
 
     /// Whether the guard fits the curvature terms (and so needs the column's samples).
@@ -245,7 +257,14 @@ impl ModelGuard {
         self.dir.fill(0.0);
         self.dir[d * p..].fill(1.0);
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        let ok = windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov);
+        let ok = match self.variance {
+            GuardVariance::FirstOrder => {
+                windows.estimate_coefficients_first_order(w, ridge, &self.dir, min_pivot, est, cov)
+            }
+            GuardVariance::Jackknife => {
+                windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov)
+            }
+        };
         if !ok {
             return;
         }
@@ -316,6 +335,7 @@ impl ModelGuard {
             && (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)
             && self.groups == fresh.groups
             && self.alpha == fresh.alpha
+            && self.variance == fresh.variance
             && same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && self.latest.len() == fresh.latest.len()

@@ -132,6 +132,14 @@ fn the_defaults_are_the_guarded_calibrated_certificate_with_the_zero_order_hold(
     let risk = base().replace("# guard_risk = 0.002 ", "guard_risk = 0.05 ");
     let c = parse(&risk, "x").unwrap().certifier.calibration.unwrap();
     assert_eq!(c.guard_risk(4), 0.05);
+    // The model guards' covariance: first-order unless stated; the jackknife on request; a
+    // misspelt name is refused.
+    assert_eq!(cal.guard_variance, streamcert_certificate::GuardVariance::FirstOrder);
+    let jack =
+        base().replace("# guard_variance = \"first_order\" ", "guard_variance = \"jackknife\" ");
+    let c = parse(&jack, "x").unwrap().certifier.calibration.unwrap();
+    assert_eq!(c.guard_variance, streamcert_certificate::GuardVariance::Jackknife);
+    assert!(parse(&jack.replace("\"jackknife\"", "\"jack\""), "x").is_err());
     // The risk split across windows: equal unless stated; a misspelt split is refused.
     assert_eq!(cal.risk_split, streamcert_certificate::RiskSplit::Equal);
     let split = base().replace("# risk_split = \"equal\" ", "risk_split = \"by_length\" ");

@@ -2,8 +2,8 @@
 //! window's block sums, and the batch-means covariance of the scores with its effective
 //! number of blocks.
 
-use super::batch::{Batches, overlap_factor};
-use super::jackknife::{JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
+use super::batch::overlap_factor;
+use super::jackknife::MIN_LEVERAGE_PIVOT;
 use super::outcome::WindowEstimate;
 use super::{InstrumentedWindows, Layout};
 use crate::linalg;
@@ -83,12 +83,13 @@ impl InstrumentedWindows {
     /// remainder `r = B mod b` and is weighted by `c_{r,h}/c_{b,h}`), `B` is the number of
     /// batches `⌈B/b⌉` and `c_h` becomes `c_{b,h} = 3bh²/(3bh² − h² + 1)`; the effective
     /// number is then over batch weights, `w_j = tr(Xᵀ H_j X)`. A window whose residual
-    /// moments vanish ([`MIN_RESIDUAL_SHARE`]: an exact identity, not a noisy fit) is not
+    /// moments vanish ([`MIN_RESIDUAL_SHARE`](crate::MIN_RESIDUAL_SHARE): an exact identity, not a noisy fit) is not
     /// ready. (A Bartlett weight ½ on
     /// neighbouring blocks, exact in expectation and less conservative under sensor noise,
     /// raised the false-opening rate of the study's scalar cell at `M = 150` to 16 in 1000:
-    /// not used.) Cost `O(n (k d + p²) + B (d² k + d³ + p⁴) + k³)`: the calibrated certificate
-    /// calls it at its looks and its change guard at the guard's pace, never per sample.
+    /// not used.) Cost `O(B (d² k + d³ + p⁴) + k³)`: the calibrated certificate calls it at
+    /// its looks, never per sample (its change guard takes
+    /// [`fresh_estimate`](Self::fresh_estimate), `O(1)` in the window's length).
     ///
     /// The ridge `λ` is relative to each diagonal entry: a regressor in other units scales
     /// its rows and columns and its ridge alike, so the estimate, its covariance and every
@@ -125,6 +126,39 @@ impl InstrumentedWindows {
         self.estimate_span(self.span(w, skip), ridge, t, min_pivot_ratio, out);
     }
 
+    /// As [`estimate`](Self::estimate) (batches of one block, which this structure must
+    /// have), and in the same pass over the blocks the covariance in batches of `batch >= 2`
+    /// blocks into `out.batched` (bit for bit what [`set_batch`](Self::set_batch)`(batch)`
+    /// then [`estimate`](Self::estimate) would give): a look's two covariances for one solve
+    /// and one pass.
+    pub fn estimate_batched(
+        &self,
+        w: usize,
+        batch: usize,
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+    ) {
+        let pp = self.p * self.p;
+        if out.batched.score_cov.len() != pp * pp {
+            // Only on an estimate read back without it (the field is not serialised; the
+            // calibrated certificate sizes it on restore).
+            out.batched.score_cov.resize(pp * pp, 0.0);
+        }
+        out.batched.ready = false;
+        let span = self.span(w, 0);
+        let blocks = span.0.saturating_sub(span.1);
+        out.batched.batches = blocks.div_ceil(batch.max(1));
+        out.batched.effective_blocks = 0.0;
+        let second = if self.batch == 1 && batch >= 2 && out.batched.batches > self.layout().d {
+            batch
+        } else {
+            0
+        };
+        self.estimate_span_second(span, ridge, t, min_pivot_ratio, out, second);
+    }
+
     fn estimate_span(
         &self,
         span: (usize, usize),
@@ -133,18 +167,30 @@ impl InstrumentedWindows {
         min_pivot_ratio: f64,
         out: &mut WindowEstimate,
     ) {
+        self.estimate_span_second(span, ridge, t, min_pivot_ratio, out, 0);
+    }
+
+    fn estimate_span_second(
+        &self,
+        span: (usize, usize),
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+        second: usize,
+    ) {
         if !self.solve_span(span, ridge, t, min_pivot_ratio, out) {
             return;
         }
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(span, t, out, 1, 2, 2),
-            (1, 3, 3) => self.block_scores(span, t, out, 1, 3, 3),
-            (1, 4, 4) => self.block_scores(span, t, out, 1, 4, 4),
-            (1, 5, 5) => self.block_scores(span, t, out, 1, 5, 5),
-            (1, 6, 6) => self.block_scores(span, t, out, 1, 6, 6),
-            _ => self.block_scores(span, t, out, p, d, k),
+            (1, 2, 2) => self.block_scores(span, t, out, (1, 2, 2), second),
+            (1, 3, 3) => self.block_scores(span, t, out, (1, 3, 3), second),
+            (1, 4, 4) => self.block_scores(span, t, out, (1, 4, 4), second),
+            (1, 5, 5) => self.block_scores(span, t, out, (1, 5, 5), second),
+            (1, 6, 6) => self.block_scores(span, t, out, (1, 6, 6), second),
+            _ => self.block_scores(span, t, out, (p, d, k), second),
         };
         out.effective_blocks =
             if sum_w2 > 0.0 && out.leverage_pivot > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
@@ -155,6 +201,15 @@ impl InstrumentedWindows {
         }
         out.ready = out.leverage_pivot > MIN_LEVERAGE_PIVOT
             && out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
+        if second >= 2 {
+            let b = &mut out.batched;
+            let overlap = overlap_factor(second, self.horizon);
+            for v in &mut b.score_cov {
+                *v *= overlap;
+            }
+            b.ready = out.leverage_pivot > MIN_LEVERAGE_PIVOT
+                && out.theta.iter().chain(&b.score_cov).all(|v| v.is_finite());
+        }
     }
 
     /// The two-stage least-squares solve of [`estimate`](Self::estimate) on the blocks `span`
@@ -169,9 +224,49 @@ impl InstrumentedWindows {
         min_pivot_ratio: f64,
         out: &mut WindowEstimate,
     ) -> bool {
-        let lay = self.layout();
-        let (p, d, k) = (lay.p, lay.d, lay.k);
         let blocks = span.0.saturating_sub(span.1);
+        if blocks.div_ceil(self.batch) > self.layout().d {
+            // A pass over the blocks (not the segment sums, whose subtractions can cost a
+            // few digits on an ill-conditioned early window): the looks' sums as accurate as
+            // a direct sum.
+            self.span_sums(span, &mut out.sums);
+        }
+        self.solve_sums(blocks, ridge, t, min_pivot_ratio, out)
+    }
+
+    /// [`solve_span`](Self::solve_span) on `blocks` blocks whose sums are in `out.sums`
+    /// (read only when there are more than `d` batches).
+    pub(super) fn solve_sums(
+        &self,
+        blocks: usize,
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+    ) -> bool {
+        let lay = self.layout();
+        match (lay.p, lay.d, lay.k) {
+            (1, 2, 2) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 2, 2)),
+            (1, 3, 3) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 3, 3)),
+            (1, 4, 4) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 4, 4)),
+            (1, 5, 5) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 5, 5)),
+            dims => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, dims),
+        }
+    }
+
+    /// [`solve_sums`](Self::solve_sums) with the dimensions passed in (literal for the
+    /// common single-output shapes, so that the compiler unrolls the small solves; the same
+    /// operations in the same order).
+    #[inline(always)]
+    fn solve_dims(
+        &self,
+        blocks: usize,
+        ridge: f64,
+        t: &[f64],
+        min_pivot_ratio: f64,
+        out: &mut WindowEstimate,
+        (p, d, k): (usize, usize, usize),
+    ) -> bool {
         out.ready = false;
         (out.pivot_ratio, out.effective_blocks, out.leverage_pivot) = (0.0, 0.0, 0.0);
         out.columns = blocks * self.horizon;
@@ -180,8 +275,7 @@ impl InstrumentedWindows {
         if batches <= d {
             return false;
         }
-        self.span_sums(span, &mut out.sums);
-        let (nm, rest) = out.sums.split_at(lay.cw());
+        let (nm, rest) = out.sums.split_at(Layout { p, d, k }.cw());
         let (cw, hm) = rest.split_at(p * k);
         // Q = (H + λ diag H)⁻¹ Nᵀ: row i of Q stored as column i of Nᵀ solved against H.
         // The ridge relative to each diagonal entry, `H + λ diag(H)`: a regressor in other
@@ -269,118 +363,5 @@ impl InstrumentedWindows {
             q_ainv(&out.lu, &out.piv, &out.q, d, k, row, |b, v| out.x[j * k + b] = v);
         }
         true
-    }
-
-    /// The block sums of the scores of window `w`, each block's delete-one-block change of
-    /// `sym(Θ̂ T)` ([`Jackknife::block`]), added as `Σ_j vec(S_j) vec(S_j)ᵀ` into
-    /// `out.score_cov`, and `(Σ_j w_j, Σ_j w_j²)` for the weights `w_j = tr(X_jᵀ H_j X_j)`,
-    /// from each block's sums (oldest first); `out.leverage_pivot` the smallest pivot ratio of
-    /// `I − L_j`. The dimensions are passed in so that the call site for `p = m = 1`, `J = 1`
-    /// gets unrolled code.
-    #[inline(always)]
-    #[allow(clippy::too_many_arguments)]
-    fn block_scores(
-        &self,
-        span: (usize, usize),
-        t: &[f64],
-        out: &mut WindowEstimate,
-        p: usize,
-        d: usize,
-        k: usize,
-    ) -> (f64, f64) {
-        let lay = Layout { p, d, k };
-        let pp = p * p;
-        let score_cov = &mut out.score_cov[..pp * pp];
-        score_cov.fill(0.0);
-        let jack = Jackknife {
-            theta: &out.theta[..p * d],
-            qa: &out.qa[..k * d],
-            root: &out.diag[..d],
-            p,
-            d,
-            k,
-        };
-        let mut scratch = JackScratch {
-            lu: &mut out.jack[..d * d],
-            piv: &mut out.jack_piv[..d],
-            g: &mut out.gj[..p * d],
-            residual: 0.0,
-            raw: 0.0,
-        };
-        let x = &out.x[..p * k];
-        let block = &mut out.block[..pp];
-        let (mut sum_w, mut sum_w2, mut cov) = (0.0, 0.0, 0.0);
-        let mut least = 1.0f64;
-        let (older, newer) = self.span_blocks(span);
-        let stride = lay.stride();
-        // Batches of `b > 1` blocks: the batch's score sum in `g` (p d >= p² values, free
-        // here), its weight in `batch_w`.
-        let batch = self.batch;
-        let mut batches = Batches::new((older.len() + newer.len()) / stride, batch, self.horizon);
-        let acc = &mut out.g[..if batch > 1 { pp } else { 0 }];
-        acc.fill(0.0);
-        let mut batch_w = 0.0;
-        for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
-            let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
-            least = least.min(jack.block(bn, bcw, &mut scratch));
-            let g = &scratch.g;
-            for i in 0..p {
-                for jj in 0..p {
-                    let mut v = 0.0;
-                    for a in 0..d {
-                        v += g[i * d + a] * t[a * p + jj];
-                    }
-                    block[i * p + jj] = v;
-                }
-            }
-            for i in 0..p {
-                for jj in i + 1..p {
-                    let s = 0.5 * (block[i * p + jj] + block[jj * p + i]);
-                    block[i * p + jj] = s;
-                    block[jj * p + i] = s;
-                }
-            }
-            let weight = block_weight(bh, x, k);
-            if batch == 1 {
-                if pp == 1 {
-                    // One output: the sum in a register (in memory, every block waited for
-                    // the previous block's store to be read back), the same additions.
-                    cov += block[0] * block[0];
-                } else {
-                    for a in 0..pp {
-                        for b in 0..pp {
-                            score_cov[a * pp + b] += block[a] * block[b];
-                        }
-                    }
-                }
-                sum_w += weight;
-                sum_w2 += weight * weight;
-                continue;
-            }
-            for (c, &v) in acc.iter_mut().zip(block.iter()) {
-                *c += v;
-            }
-            batch_w += weight;
-            if let Some(f) = batches.close() {
-                for a in 0..pp {
-                    for b in 0..pp {
-                        score_cov[a * pp + b] += f * acc[a] * acc[b];
-                    }
-                }
-                sum_w += batch_w;
-                sum_w2 += batch_w * batch_w;
-                acc.fill(0.0);
-                batch_w = 0.0;
-            }
-        }
-        out.leverage_pivot = least;
-        if !(scratch.residual > MIN_RESIDUAL_SHARE * scratch.raw) {
-            // An exact identity (see `MIN_RESIDUAL_SHARE`): nothing is identified.
-            out.leverage_pivot = 0.0;
-        }
-        if batch == 1 && pp == 1 {
-            score_cov[0] = cov;
-        }
-        (sum_w, sum_w2)
     }
 }

@@ -72,6 +72,26 @@ pub struct WindowEstimate {
     // Scratch: `√A_aa` of the latest solve (d values).
     #[serde(default)]
     pub(super) diag: Vec<f64>,
+    /// The covariance in batches of [`InstrumentedWindows::estimate_batched`] (not
+    /// serialised: rewritten by every such call).
+    #[serde(skip)]
+    pub batched: BatchedCovariance,
+}
+
+/// The second covariance of [`InstrumentedWindows::estimate_batched`]: the same blocks'
+/// delete-one-block changes in batches of `b` blocks (see
+/// [`InstrumentedWindows::with_batch`]), beside the estimate's own in batches of one.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BatchedCovariance {
+    /// `true` when the fields below hold a covariance of this call (more than `d` batches,
+    /// every value finite, no block of leverage 1).
+    pub ready: bool,
+    /// `p² × p²`, as [`WindowEstimate::score_cov`].
+    pub score_cov: Vec<f64>,
+    /// The effective number of batches (as [`WindowEstimate::effective_blocks`]).
+    pub effective_blocks: f64,
+    /// The number of batches `⌈B/b⌉`.
+    pub batches: usize,
 }
 
 impl WindowEstimate {
@@ -104,6 +124,10 @@ impl WindowEstimate {
             gj: vec![0.0; p * d],
             standardised: false,
             diag: vec![0.0; d],
+            batched: BatchedCovariance {
+                score_cov: vec![0.0; p * p * p * p],
+                ..BatchedCovariance::default()
+            },
         }
     }
 

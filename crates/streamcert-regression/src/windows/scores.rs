@@ -8,6 +8,36 @@ use super::jackknife::{JackScratch, Jackknife, MIN_RESIDUAL_SHARE};
 use super::outcome::WindowEstimate;
 use super::{InstrumentedWindows, Layout};
 
+/// Add a block's score changes `block` and weight to the open batch (`acc`, its weight);
+/// where the block closes the batch, add the batch's outer product (times its factor) to
+/// `cov` and its weight to the sums `(Σ w, Σ w²)`, and open the next.
+#[inline(always)]
+fn batch_step(
+    (acc, batch_w): (&mut [f64], &mut f64),
+    block: &[f64],
+    weight: f64,
+    batches: &mut Batches,
+    cov: &mut [f64],
+    (sum_w, sum_w2): (&mut f64, &mut f64),
+) {
+    for (c, &v) in acc.iter_mut().zip(block) {
+        *c += v;
+    }
+    *batch_w += weight;
+    if let Some(f) = batches.close() {
+        let pp = acc.len();
+        for a in 0..pp {
+            for b in 0..pp {
+                cov[a * pp + b] += f * acc[a] * acc[b];
+            }
+        }
+        *sum_w += *batch_w;
+        *sum_w2 += *batch_w * *batch_w;
+        acc.fill(0.0);
+        *batch_w = 0.0;
+    }
+}
+
 impl InstrumentedWindows {
     /// The block sums of the scores of window `w`, each block's delete-one-block change of
     /// `sym(Θ̂ T)` ([`Jackknife::block`]), added as `Σ_j vec(S_j) vec(S_j)ᵀ` into
@@ -103,41 +133,14 @@ impl InstrumentedWindows {
                 }
                 sum_w += weight;
                 sum_w2 += weight * weight;
-                if second < 2 {
-                    continue;
-                }
-                for (c, &v) in acc.iter_mut().zip(block.iter()) {
-                    *c += v;
-                }
-                batch_w += weight;
-                if let Some(f) = seconds.close() {
-                    for a in 0..pp {
-                        for b in 0..pp {
-                            second_cov[a * pp + b] += f * acc[a] * acc[b];
-                        }
-                    }
-                    sum_w_b += batch_w;
-                    sum_w2_b += batch_w * batch_w;
-                    acc.fill(0.0);
-                    batch_w = 0.0;
+                if second >= 2 {
+                    let sums = (&mut sum_w_b, &mut sum_w2_b);
+                    batch_step((acc, &mut batch_w), block, weight, &mut seconds, second_cov, sums);
                 }
                 continue;
             }
-            for (c, &v) in acc.iter_mut().zip(block.iter()) {
-                *c += v;
-            }
-            batch_w += weight;
-            if let Some(f) = batches.close() {
-                for a in 0..pp {
-                    for b in 0..pp {
-                        score_cov[a * pp + b] += f * acc[a] * acc[b];
-                    }
-                }
-                sum_w += batch_w;
-                sum_w2 += batch_w * batch_w;
-                acc.fill(0.0);
-                batch_w = 0.0;
-            }
+            let sums = (&mut sum_w, &mut sum_w2);
+            batch_step((acc, &mut batch_w), block, weight, &mut batches, score_cov, sums);
         }
         out.leverage_pivot = least;
         if !(scratch.residual > MIN_RESIDUAL_SHARE * scratch.raw) {

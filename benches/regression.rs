@@ -185,11 +185,12 @@ fn certifier_step(c: &mut Criterion) {
             cfg.regression.model = Model::ThroughOrigin;
         }
         if variant == 6 {
-            // The calibrated step as it was before the intercept, the guards and the default
-            // windows changed: four windows, the risk split by length.
+            // The calibrated step as it was before the intercept, the guards, the default
+            // windows and the anchored window: four windows, the risk split by length.
             let was = Calibration {
                 windows: Some(4),
                 risk_split: RiskSplit::ByLength,
+                anchored_share: 0.0,
                 ..Calibration::new(0.01).unguarded()
             };
             cfg.calibration = Some(was);

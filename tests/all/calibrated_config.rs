@@ -50,7 +50,10 @@ fn the_risk_split_across_windows() {
         for i in 0..traj.len() {
             c.push(traj.t[i], traj.output(i), traj.input(i)).unwrap();
             if let Some(l) = c.calibrated_looks()[0].filter(|l| l.look == 1) {
-                let want = calibrated_radius(l.sd * l.sd, l.nu, look_risk(0.01, share, 1));
+                // The sliding windows split `1 − anchored_share` of δ.
+                let sliding = 1.0 - Calibration::new(0.01).anchored_share;
+                let want =
+                    calibrated_radius(l.sd * l.sd, l.nu, look_risk(0.01, sliding * share, 1));
                 assert!((l.radius - want).abs() <= 1e-12 * want, "{split:?}: {} {want}", l.radius);
                 checked = true;
                 break;
@@ -206,14 +209,15 @@ fn automatic_batches_take_the_smaller_radius_at_their_shares_of_the_risk() {
                     assert_eq!(la.radius.to_bits(), lb.radius.to_bits());
                     continue;
                 }
-                let risk = look_risk(0.01, 1.0 / windows, la.look) * (1.0 - share);
+                let sliding = 1.0 - Calibration::new(0.01).anchored_share;
+                let risk = look_risk(0.01, sliding / windows, la.look) * (1.0 - share);
                 let first = calibrated_radius(lb.sd * lb.sd, lb.nu, risk);
                 assert!(la.radius <= first * (1.0 + 1e-12), "window {w}: {} > {first}", la.radius);
                 if la.radius < first * (1.0 - 1e-9) {
                     // The batched radius stood: at its share of the risk, from 30 batches
                     // (ν at most 30 − d = 27; 57 and more in batches of one block).
                     batched_won += 1;
-                    let batched = look_risk(0.01, 1.0 / windows, la.look) * share;
+                    let batched = look_risk(0.01, sliding / windows, la.look) * share;
                     let expected = calibrated_radius(la.sd * la.sd, la.nu, batched);
                     assert!((la.radius - expected).abs() <= 1e-12 * expected, "window {w}");
                     assert!(la.nu <= 27.0 && la.nu < lb.nu, "window {w}: ν {} / {}", la.nu, lb.nu);

@@ -2,6 +2,7 @@
 
 mod affine;
 mod ambiguity;
+mod anchored;
 mod calibrated;
 mod calibrated_config;
 mod certificate;

@@ -272,9 +272,13 @@ proptest! {
         // The certificate's arithmetic, without the lack-of-fit check (which only closes gates).
         let mut cfg = config(k, 0.05, window, 1);
         cfg.nonlinear = Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(1) });
-        // Guards and the batched second covariance (`auto_batches`) are the linear one's only.
-        cfg.calibration =
-            cfg.calibration.map(|c| Calibration { auto_batches: 0, ..Calibration::unguarded(c) });
+        // Guards, the batched second covariance (`auto_batches`) and the anchored window (whose
+        // share the sliding windows' looks give up) are the linear one's only.
+        cfg.calibration = cfg.calibration.map(|c| Calibration {
+            auto_batches: 0,
+            anchored_share: 0.0,
+            ..Calibration::unguarded(c)
+        });
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut compared = 0;
         for i in 0..traj.t.len() {

@@ -60,13 +60,14 @@ fn opens(cfg: &CertifierConfig, traj: &Trajectory) -> (bool, Vec<NotCertified>) 
 /// A damped mass by its position (`ẍ = −2 ẋ + u + w`: the position does not contract) and a
 /// lightly damped oscillator by its position (`ẍ = −x − 0.05 ẋ + u + w`: its state decays at
 /// 0.025, below the margin, in any metric): without the guard the first-order model certifies
-/// them; with it the gate opens in at most what δ = 0.01 allows over 100 runs (the lower end
+/// them (the mass in 2 of 100 runs, the oscillator in 99: the anchored window's growing data
+/// see through the mass more often than the sliding windows alone did); with it the gate opens in at most what δ = 0.01 allows over 100 runs (the lower end
 /// of the 95 % Clopper–Pearson interval at most δ), and the reason names the hidden dynamics.
 #[test]
 fn outputs_with_a_hidden_state_are_not_certified() {
     let runs = 100u64;
     for (name, a, unguarded_at_least) in
-        [("damped mass", [0.0, 1.0, 0.0, -2.0], 1), ("oscillator", [0.0, 1.0, -1.0, -0.05], 10)]
+        [("damped mass", [0.0, 1.0, 0.0, -2.0], 1), ("oscillator", [0.0, 1.0, -1.0, -0.05], 50)]
     {
         let scenario = by_position(a);
         let count = |guard: bool, runs: u64| {
@@ -83,14 +84,14 @@ fn outputs_with_a_hidden_state_are_not_certified() {
                 .count();
             (opened, hidden)
         };
-        let (unguarded, _) = count(false, 20);
+        let (unguarded, _) = count(false, 100);
         let (guarded, hidden) = count(true, runs);
         eprintln!(
-            "{name}: unguarded {unguarded} of 20, guarded {guarded} of {runs}, reason in {hidden}"
+            "{name}: unguarded {unguarded} of {runs}, guarded {guarded} of {runs}, reason in {hidden}"
         );
         assert!(
             unguarded >= unguarded_at_least,
-            "{name}: the first-order model opened {unguarded} of 20"
+            "{name}: the first-order model opened {unguarded} of {runs}"
         );
         let (lower, _) = clopper_pearson(guarded, runs as usize);
         assert!(lower <= 0.01, "{name}: {guarded} of {runs} opened with the guard");

@@ -11,6 +11,7 @@ use streamcert::regression::{
     SlidingRegression,
 };
 
+mod anchored;
 mod coefficients;
 mod estimators;
 mod moments;

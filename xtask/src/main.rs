@@ -80,6 +80,10 @@ enum Command {
         /// fifth, at least 50, per contracting one), written to HELD.md.
         #[arg(long)]
         only_held: Option<usize>,
+        /// Only the power table (contracting candidates), with this many runs per cell,
+        /// written to POWER.md.
+        #[arg(long)]
+        only_power: Option<usize>,
     },
     /// The two public plant records of examples/real/ (the heat exchanger and the cascaded
     /// tanks), checked by SHA-256, converted, certified, and the exchanger compared in °C
@@ -269,6 +273,7 @@ fn main() -> Result<()> {
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
         Command::Validity { out, only_held: Some(runs), .. } => validity::held_only(runs, &out),
+        Command::Validity { out, only_power: Some(runs), .. } => validity::power_only(runs, &out),
         Command::Validity { runs, out, only_change: None, .. } => validity::run(runs, &out),
         Command::Validity { out, only_change: Some(runs), .. } => validity::change_only(runs, &out),
         Command::Real { from, out } => real::run(from.as_deref(), &out),

@@ -29,8 +29,10 @@ struct RunResult {
     /// First opening of the calibrated gate, and of the paper's gate for each `c`.
     calibrated_open: Option<f64>,
     paper_open: [bool; 3],
-    /// Run maximum over looks of `(β̂_w − β*) / ρ_w`.
+    /// Run maximum over looks of `(β̂_w − β*) / ρ_w` (every window's and the anchored one's).
     max_ratio: f64,
+    /// The same over the anchored window's looks alone (`−∞` without one).
+    anchored_max: f64,
     /// The longest window's last `β̂_w`, `ρ_w` and the spread `sd_w` its radius used
     /// (`ρ_w = t_ν(1 − δ_{w,k}) · sd_w`).
     last_long: Option<(f64, f64, f64)>,
@@ -49,8 +51,13 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
     let truth = cell.truth();
     let mut cal = Certifier::new(cell.config(None))?;
     let mut papers = PAPER_C.map(|c| Certifier::new(cell.config(Some(c))));
-    let mut out = RunResult { max_ratio: f64::NEG_INFINITY, ..RunResult::default() };
+    let mut out = RunResult {
+        max_ratio: f64::NEG_INFINITY,
+        anchored_max: f64::NEG_INFINITY,
+        ..RunResult::default()
+    };
     let mut seen = vec![0u64; cal.calibrated_looks().len()];
+    let mut anchored_seen = (0u64, 0u64);
     let (p, (y0, u0), (sy, su)) = (cell.observed, cell.offset, cell.scale);
     let (mut y, mut u) = (vec![0.0; p], vec![0.0; traj.input(0).len()]);
     for i in 0..traj.len() {
@@ -87,6 +94,14 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
             if let Some(l) = look.filter(|l| l.look != seen[w]) {
                 seen[w] = l.look;
                 out.max_ratio = out.max_ratio.max((l.beta_hat - truth) / l.radius);
+            }
+        }
+        // The anchored window's looks too (a new look or a new epoch).
+        if let (Some(l), epoch) = cal.anchored_look() {
+            if (epoch, l.look) != anchored_seen {
+                anchored_seen = (epoch, l.look);
+                out.max_ratio = out.max_ratio.max((l.beta_hat - truth) / l.radius);
+                out.anchored_max = out.anchored_max.max((l.beta_hat - truth) / l.radius);
             }
         }
         for (k, p) in papers.iter_mut().enumerate() {
@@ -232,94 +247,18 @@ pub(crate) fn held_only(runs: usize, out: &Path) -> Result<()> {
     )
 }
 
-/// Run the study (`runs` per near-margin cell, `runs / 5` per power cell, at least 50);
-/// write `VALIDITY.md` under `out`.
-pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
-    let power_runs = (runs / 5).max(50);
-    let change_runs = (runs / 5).clamp(20, 200);
-    let near = near_margin_cells();
-    let power = power_cells();
-    let bar = progress(
-        near.len() * runs
-            + 2 * power.len() * power_runs
-            + change::CELLS * change_runs
-            + held::work(runs, power_runs),
-        "validity",
-    );
+/// The power table: `power_runs` runs of each contracting cell, with the settings before the
+/// defaults beside them.
+fn power_table(power: &[Cell], power_runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
     let mut s = String::new();
-    let _ = writeln!(
-        s,
-        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (the affine model: an intercept in every regression; the guards: hidden dynamics, nonlinearity, plant change; windows doubling from M until the longest holds 200 blocks of h columns, at least five, each at an equal share δ/W of the risk; looks every half window; instrument lag 1). `guard closed`: the share of samples whose calibrated gate a guard held closed (its reason is a guard's: false closings on the first-order linear cells), and of those the hidden-dynamics guard's alone. The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.\n"
-    );
-    // Near-margin cells.
-    let mut rows = Vec::new();
-    let mut refused = Vec::new();
-    for (ci, cell) in near.iter().enumerate() {
-        if let Err(e) = Certifier::new(cell.config(None)) {
-            refused.push(vec![cell.family.clone(), cell.window.to_string(), e.to_string()]);
-            bar.inc(runs as u64);
-            continue;
-        }
-        let results = run_many(cell, runs, 1_000_000 * (ci as u64 + 1), &bar)?;
-        let opened = results.iter().filter(|r| r.calibrated_open.is_some()).count();
-        let (_, hi) = clopper_pearson(opened, runs);
-        let mut ratios: Vec<f64> =
-            results.iter().map(|r| r.max_ratio).filter(|r| r.is_finite()).collect();
-        let q99 = if ratios.is_empty() { f64::NAN } else { quantile(&mut ratios, 0.99) };
-        let paper: Vec<String> = (0..3)
-            .map(|k| {
-                format!(
-                    "{:.1} %",
-                    100.0 * results.iter().filter(|r| r.paper_open[k]).count() as f64 / runs as f64
-                )
-            })
-            .collect();
-        rows.push(vec![
-            cell.family.clone(),
-            format!("{:.3}", cell.truth()),
-            cell.window.to_string(),
-            format!("{} / {runs}", opened),
-            format!("{hi:.4}"),
-            if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
-            format!("{q99:.2}"),
-            guard_share(&results),
-        ]);
-        rows.last_mut().expect("pushed").extend(Efficiency::cells(&results));
-        rows.last_mut().expect("pushed").push(paper.join(" / "));
-    }
-    let _ = writeln!(s, "## Candidates just below the margin (n_s = 1): every opening is false\n");
-    let _ = writeln!(
-        s,
-        "{}",
-        markdown(
-            &[
-                "cell",
-                "β*",
-                "M",
-                "calibrated opened",
-                "95 % CP upper",
-                "≤ 2δ",
-                "q99 of run max (β̂−β*)/ρ",
-                "guard closed: all / hidden dynamics",
-                "ρ / (z·sd) longest window",
-                "spending t / z",
-                "spread sd used / sd(β̂)",
-                "paper c = 0.1 / 0.3 / 1 opened"
-            ],
-            &rows
-        )
-    );
-    let _ = writeln!(s, "Refused configurations (the message the user sees):\n");
-    let _ = writeln!(s, "{}", markdown(&["cell", "M", "message"], &refused));
-    // Power.
     let mut rows = Vec::new();
     for (ci, cell) in power.iter().enumerate() {
         let seed = 50_000_000 + 1_000_000 * ci as u64;
-        let results = run_many(cell, power_runs, seed, &bar)?;
+        let results = run_many(cell, power_runs, seed, bar)?;
         let times: Vec<f64> = results.iter().filter_map(|r| r.calibrated_open).collect();
         let share = times.len() as f64 / power_runs as f64;
         // The same runs with the calibrated certificate as it was before the defaults.
-        let before = run_many(&Cell { before: true, ..cell.clone() }, power_runs, seed, &bar)?;
+        let before = run_many(&Cell { before: true, ..cell.clone() }, power_runs, seed, bar)?;
         let before: Vec<f64> = before.iter().filter_map(|r| r.calibrated_open).collect();
         let paper: Vec<String> = (0..3)
             .map(|k| {
@@ -371,6 +310,106 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     s.push_str(
         "`before`: the same runs with the calibrated certificate's settings as they were when the safe-by-default and plant-data issues were filed (the model through the origin, no guards, no automatic batches, at least four windows with the risk split by length; the fits as today: the relative ridge, the delete-one-block variance); the difference is what the default settings cost on each cell.\n\nThe rows \"model through the origin\" run the 5× cell's and the sensor-noise cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between such a row and the one above it is the price of the intercept on such a loop. The rows \"four windows split by length\" run the same runs with every default but the windows, as they were at filing (four, the longer windows the larger share of δ): the default's fifth window makes up for the level the intercept cannot use, and its equal split keeps the shortest window's share for the fast loops.\n\n",
     );
+    Ok(s)
+}
+
+/// The power table alone, `runs` per cell, into `POWER.md`.
+pub(crate) fn power_only(runs: usize, out: &Path) -> Result<()> {
+    let power = power_cells();
+    let bar = progress(2 * power.len() * runs, "power");
+    let s = power_table(&power, runs, &bar)?;
+    bar.finish_and_clear();
+    write(
+        &out.join("POWER.md"),
+        &format!("# Power\n\nProduced by `cargo xtask validity --only-power {runs}`.\n\n{s}"),
+    )
+}
+
+/// Run the study (`runs` per near-margin cell, `runs / 5` per power cell, at least 50);
+/// write `VALIDITY.md` under `out`.
+pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
+    let power_runs = (runs / 5).max(50);
+    let change_runs = (runs / 5).clamp(20, 200);
+    let near = near_margin_cells();
+    let power = power_cells();
+    let bar = progress(
+        near.len() * runs
+            + 2 * power.len() * power_runs
+            + change::CELLS * change_runs
+            + held::work(runs, power_runs),
+        "validity",
+    );
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (the affine model: an intercept in every regression; the guards: hidden dynamics, nonlinearity, plant change; the anchored window, every block since the start (or a change point), looking at sizes M·√2^(j−1) at 0.9 δ of the risk; windows doubling from M until the longest holds 200 blocks of h columns, at least five, each at an equal share of the other 0.1 δ; looks every half window; instrument lag 1). `guard closed`: the share of samples whose calibrated gate a guard held closed (its reason is a guard's: false closings on the first-order linear cells), and of those the hidden-dynamics guard's alone. The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.\n"
+    );
+    // Near-margin cells.
+    let mut rows = Vec::new();
+    let mut refused = Vec::new();
+    for (ci, cell) in near.iter().enumerate() {
+        if let Err(e) = Certifier::new(cell.config(None)) {
+            refused.push(vec![cell.family.clone(), cell.window.to_string(), e.to_string()]);
+            bar.inc(runs as u64);
+            continue;
+        }
+        let results = run_many(cell, runs, 1_000_000 * (ci as u64 + 1), &bar)?;
+        let opened = results.iter().filter(|r| r.calibrated_open.is_some()).count();
+        let (_, hi) = clopper_pearson(opened, runs);
+        let mut ratios: Vec<f64> =
+            results.iter().map(|r| r.max_ratio).filter(|r| r.is_finite()).collect();
+        let q99 = if ratios.is_empty() { f64::NAN } else { quantile(&mut ratios, 0.99) };
+        let paper: Vec<String> = (0..3)
+            .map(|k| {
+                format!(
+                    "{:.1} %",
+                    100.0 * results.iter().filter(|r| r.paper_open[k]).count() as f64 / runs as f64
+                )
+            })
+            .collect();
+        rows.push(vec![
+            cell.family.clone(),
+            format!("{:.3}", cell.truth()),
+            cell.window.to_string(),
+            format!("{} / {runs}", opened),
+            format!("{hi:.4}"),
+            if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
+            format!("{q99:.2}"),
+            {
+                let over = results.iter().filter(|r| r.anchored_max > 1.0).count();
+                format!("{over} / {runs}")
+            },
+            guard_share(&results),
+        ]);
+        rows.last_mut().expect("pushed").extend(Efficiency::cells(&results));
+        rows.last_mut().expect("pushed").push(paper.join(" / "));
+    }
+    let _ = writeln!(s, "## Candidates just below the margin (n_s = 1): every opening is false\n");
+    let _ = writeln!(
+        s,
+        "{}",
+        markdown(
+            &[
+                "cell",
+                "β*",
+                "M",
+                "calibrated opened",
+                "95 % CP upper",
+                "≤ 2δ",
+                "q99 of run max (β̂−β*)/ρ",
+                "anchored look above β*",
+                "guard closed: all / hidden dynamics",
+                "ρ / (z·sd) longest window",
+                "spending t / z",
+                "spread sd used / sd(β̂)",
+                "paper c = 0.1 / 0.3 / 1 opened"
+            ],
+            &rows
+        )
+    );
+    let _ = writeln!(s, "Refused configurations (the message the user sees):\n");
+    let _ = writeln!(s, "{}", markdown(&["cell", "M", "message"], &refused));
+    s.push_str(&power_table(&power, power_runs, &bar)?);
     // Plant change.
     s.push_str(&change::table(change_runs, &bar)?);
     // Held inputs and units.
@@ -378,7 +417,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     bar.finish_and_clear();
     let _ = writeln!(
         s,
-        "## Reading the tables\n\n- `95 % CP upper` is the upper end of the two-sided 95 % Clopper–Pearson interval on the false-opening rate; the guarantee passes the cell when it is at most 2δ = {}.\n- `q99 of run max (β̂−β*)/ρ`: over runs, the 99th percentile of the largest ratio over every look of every window; the union bound needs it at most 1 in about a fraction 1 − δ of runs.\n- `ρ / (z·sd)`: the longest window's radius at the end of the run over the radius of an oracle with one look that knows the spread of that window's estimate over the runs, z = z(1 − δ).\n- Its two factors (medians over the runs; their product is close to the ratio): `spending t / z`, the Student-t quantile at the risk the window's last look spent (`δ_{{w,k}}`, at `ν` degrees of freedom) over the one-look `z`, the price of a bound valid at every look of every window; and `spread sd used / sd(β̂)`, the spread the radius used (`√λ_max(Ω̂)`, for p = 2 the rank-one bound) over the spread of the estimate across the runs. A spread factor near 1 says the variance is estimated as the oracle knows it; above 1 it is the worst direction of `sym ΔJ` (p ≥ 2) or the batch-means count of sensor noise that telescopes across blocks.\n- The paper's certificate has no stated risk; its columns give the share of runs whose gate opened.",
+        "## Reading the tables\n\n- `95 % CP upper` is the upper end of the two-sided 95 % Clopper–Pearson interval on the false-opening rate; the guarantee passes the cell when it is at most 2δ = {}.\n- `q99 of run max (β̂−β*)/ρ`: over runs, the 99th percentile of the largest ratio over every look of every window and of the anchored window; the union bound needs it at most 1 in about a fraction 1 − δ of runs.\n- `anchored look above β*`: the runs in which some look of the anchored window had `β̂ − ρ > β*` (an overstated rate, whether or not a guard let it stand); the anchored window spends `0.9 δ` of the risk, so the union bound allows about `0.9 δ` of the runs.\n- `ρ / (z·sd)`: the longest window's radius at the end of the run over the radius of an oracle with one look that knows the spread of that window's estimate over the runs, z = z(1 − δ).\n- Its two factors (medians over the runs; their product is close to the ratio): `spending t / z`, the Student-t quantile at the risk the window's last look spent (`δ_{{w,k}}`, at `ν` degrees of freedom) over the one-look `z`, the price of a bound valid at every look of every window; and `spread sd used / sd(β̂)`, the spread the radius used (`√λ_max(Ω̂)`, for p = 2 the rank-one bound) over the spread of the estimate across the runs. A spread factor near 1 says the variance is estimated as the oracle knows it; above 1 it is the worst direction of `sym ΔJ` (p ≥ 2) or the batch-means count of sensor noise that telescopes across blocks.\n- The paper's certificate has no stated risk; its columns give the share of runs whose gate opened.",
         2.0 * DELTA
     );
     write(&out.join("VALIDITY.md"), &s)?;

@@ -80,7 +80,8 @@ mod row;
 
 pub use calibrated::{
     Calibration, CouplingBlock, CouplingBound, CouplingConfig, GuardVariance, RiskSplit,
-    WindowLook, calibrated_radius, look_risk, rank_one_variance_bound, t_quantile,
+    WindowLook, anchored_look_risk, calibrated_radius, look_risk, rank_one_variance_bound,
+    t_quantile,
 };
 pub use certifier::Certifier;
 pub use certifier::checkpoint::{

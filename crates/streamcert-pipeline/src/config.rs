@@ -118,6 +118,12 @@ struct CalibrationSection {
     relative_ridge: Option<f64>,
     #[serde(default)]
     guard_variance: Option<GuardVariance>,
+    #[serde(default)]
+    anchored_share: Option<f64>,
+    #[serde(default)]
+    anchored_growth: Option<f64>,
+    #[serde(default)]
+    anchored_looks: Option<usize>,
 }
 
 fn default_true() -> bool {
@@ -149,6 +155,9 @@ impl Default for CalibrationSection {
             risk_split: None,
             relative_ridge: None,
             guard_variance: None,
+            anchored_share: None,
+            anchored_growth: None,
+            anchored_looks: None,
         }
     }
 }
@@ -174,6 +183,9 @@ impl CalibrationSection {
             risk_split: self.risk_split.unwrap_or(d.risk_split),
             relative_ridge: self.relative_ridge.unwrap_or(d.relative_ridge),
             guard_variance: self.guard_variance.unwrap_or(d.guard_variance),
+            anchored_share: self.anchored_share.unwrap_or(d.anchored_share),
+            anchored_growth: self.anchored_growth.unwrap_or(d.anchored_growth),
+            anchored_looks: self.anchored_looks.unwrap_or(d.anchored_looks),
             ..d
         }
     }

@@ -78,6 +78,6 @@ pub use estimate::{Estimate, EstimateStatus};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{
-    BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MIN_LEVERAGE_PIVOT,
+    AnchoredWindow, BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MIN_LEVERAGE_PIVOT,
     MIN_RESIDUAL_SHARE, WindowEstimate,
 };

@@ -38,6 +38,7 @@
 
 use serde::{Deserialize, Serialize};
 
+mod anchored;
 mod batch;
 mod coefficients;
 mod estimate;
@@ -48,6 +49,7 @@ mod outcome;
 mod region;
 mod scores;
 
+pub use anchored::AnchoredWindow;
 pub use jackknife::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
 pub use moments::MAX_MOMENT_ENTRIES;
 pub use outcome::{BatchedCovariance, WindowEstimate};
@@ -114,6 +116,10 @@ pub struct InstrumentedWindows {
     // not written, so a state without it reads as it always did).
     #[serde(default = "batch::one", skip_serializing_if = "batch::is_one")]
     batch: usize,
+    // Blocks of `h` columns per record of the block ring: 1, but in the anchored window's
+    // ring, whose records merge in pairs (`coarsen`); not written when 1.
+    #[serde(default = "batch::one", skip_serializing_if = "batch::is_one")]
+    coarse: usize,
     // The segment sums of the blocks' records (`with_moments`): derived from the block ring,
     // not serialised, rebuilt on restore (`rebuild_moments`).
     #[serde(skip)]
@@ -197,6 +203,7 @@ impl InstrumentedWindows {
             open_range: Vec::new(),
             block_ranges: Vec::new(),
             batch: 1,
+            coarse: 1,
             moments: None,
         })
     }
@@ -253,7 +260,7 @@ impl InstrumentedWindows {
     /// Instrumented columns in window `w` (complete blocks only).
     #[must_use]
     pub fn columns(&self, w: usize) -> usize {
-        self.block_len.min(self.windows[w]) * self.horizon
+        self.block_len.min(self.windows[w]) * self.coarse * self.horizon
     }
 
     /// `true` when window `w` holds its full length.
@@ -478,7 +485,8 @@ impl InstrumentedWindows {
             && self.in_open < self.horizon
             && self.block_head < self.block_cap()
             && self.block_len <= self.block_cap()
-            && self.block_len as u64 <= self.usable / self.horizon as u64
+            && self.coarse.is_power_of_two()
+            && (self.block_len * self.coarse) as u64 <= self.usable / self.horizon as u64
             && (self.usable == 0 || self.len == self.cap());
         if !counters_ok {
             return Err(RegressionError::CorruptState("window counters out of range".into()));

@@ -97,7 +97,7 @@ impl Cell {
             let filed =
                 Calibration { windows: Some(windows), risk_split: RiskSplit::ByLength, ..cal };
             cfg.calibration = Some(if self.before {
-                Calibration { auto_batches: 0, ..filed.unguarded() }
+                Calibration { auto_batches: 0, anchored_share: 0.0, ..filed.unguarded() }
             } else if self.filed_windows {
                 filed
             } else {

@@ -38,7 +38,14 @@ impl CalibratedState {
             (None, None) => true,
             _ => false,
         };
+        let anchored_ok = match (&self.anchored, &fresh.anchored) {
+            (Some(a), Some(b)) => a.matches(b, &self.windows, self.seen),
+            (None, None) => true,
+            _ => false,
+        };
         let ok = coupling_ok
+            && anchored_ok
+            && self.sliding_share == fresh.sliding_share
             && order_ok
             && change_ok
             && self.affine == fresh.affine

@@ -10,6 +10,23 @@ use crate::NotCertified;
 use crate::nonlinear::LookAt;
 use streamcert_regression::linalg;
 
+/// What a look's radius needs besides its estimate: the risk it spends, the margin (for the
+/// upper bound of a rate below it) and whether it carries the second covariance.
+pub(super) struct Bound {
+    pub(super) risk: f64,
+    pub(super) margin: f64,
+    pub(super) auto: bool,
+}
+
+/// A look's radius, the spread and degrees of freedom of the covariance that gave it, and its
+/// upper bound (for a rate below the margin).
+pub(super) struct Radius {
+    pub(super) radius: f64,
+    pub(super) sd: f64,
+    pub(super) nu: f64,
+    pub(super) upper: Option<f64>,
+}
+
 impl CalibratedState {
     /// Window `w`'s look at time `t`: spends `δ_{w,k}` whether or not it certifies; the
     /// nonlinear certificate looks at the same window with the same risk. Returns the
@@ -60,7 +77,7 @@ impl CalibratedState {
             }
             return None;
         };
-        let risk = look_risk(self.cal.delta, self.shares[w], k);
+        let risk = look_risk(self.cal.delta, self.sliding_share * self.shares[w], k);
         let pp = self.col_range.len();
         self.windows.window_range(w, &mut self.regions[w * pp..(w + 1) * pp]);
         if let Some(c) = &mut self.coupling {
@@ -68,13 +85,36 @@ impl CalibratedState {
             let look = CouplingLook { w, k, t, share: self.shares[w], nu, window };
             c.look(&look, &self.windows, &mut self.est, p);
         }
-        // The second covariance (about `auto_batches` batches) on the windows long enough
-        // for it: the second radius at `auto_batch_risk` of the risk, the first at the rest,
-        // the smaller standing.
-        // The upper bound (at the whole `δ`, for a rate below the margin only) is computed
-        // where it is reported.
+        let at = Bound { risk, margin, auto: self.auto_applies(w) };
+        self.latest[w] = self.bound(&at, (beta_hat, variance, nu), batched).map(|b| WindowLook {
+            window: self.windows.window(w),
+            look: k,
+            t,
+            beta_hat,
+            radius: b.radius,
+            sd: b.sd,
+            nu: b.nu,
+            upper: b.upper,
+            anchored: false,
+        });
+        rate
+    }
+
+    /// A look's radius at risk `at.risk` from its estimate `(β̂, σ²_max, ν)` and, where it
+    /// carries one (`at.auto`), its second covariance `batched` `(σ²_max, ν)`: the second
+    /// radius at [`auto_batch_risk`](crate::Calibration::auto_batch_risk) of the risk, the
+    /// first at the rest, the smaller standing; and the upper bound at the whole `δ` (split
+    /// the same way) for a rate below the margin. `None` when a number is not finite.
+    pub(super) fn bound(
+        &self,
+        at: &Bound,
+        (beta_hat, variance, nu): (f64, f64, f64),
+        batched: Option<(f64, f64)>,
+    ) -> Option<Radius> {
+        let (second, delta, below) =
+            (self.cal.auto_batch_risk, self.cal.delta, beta_hat < at.margin);
+        let risk = at.risk;
         let (mut variance, mut nu) = (variance, nu);
-        let (second, delta, below) = (self.cal.auto_batch_risk, self.cal.delta, beta_hat < margin);
         let mut radius;
         let upper_radius;
         match batched {
@@ -90,9 +130,9 @@ impl CalibratedState {
                     (radius, variance, nu) = (r2, v2, nu2);
                 }
             }
-            None if self.auto_applies(w) => {
-                // Not ready with batches (cannot happen on a full window): the first radius
-                // at the share of the risk it was given.
+            None if at.auto => {
+                // Not ready with batches: the first radius at the share of the risk it was
+                // given.
                 radius = calibrated_radius(variance, nu, risk * (1.0 - second));
                 upper_radius =
                     below.then(|| calibrated_radius(variance, nu, delta * (1.0 - second)));
@@ -102,18 +142,12 @@ impl CalibratedState {
                 upper_radius = below.then(|| calibrated_radius(variance, nu, delta));
             }
         }
-        let upper = upper_radius.map(|r| beta_hat + r);
-        self.latest[w] = (beta_hat.is_finite() && radius.is_finite()).then_some(WindowLook {
-            window: self.windows.window(w),
-            look: k,
-            t,
-            beta_hat,
+        (beta_hat.is_finite() && radius.is_finite()).then(|| Radius {
             radius,
             sd: variance.max(0.0).sqrt(),
             nu,
-            upper,
-        });
-        rate
+            upper: upper_radius.map(|r| beta_hat + r),
+        })
     }
 
     /// Blocks per batch of window `w`'s second covariance
@@ -134,7 +168,7 @@ impl CalibratedState {
     /// The estimate's second covariance (in batches, `self.est.batched` of
     /// [`InstrumentedWindows::estimate_batched`](streamcert_regression::InstrumentedWindows::estimate_batched)):
     /// `(σ²_max, ν)` as [`rate`](Self::rate) gives them, `None` when not ready.
-    fn batched_rate(&mut self) -> Option<(f64, f64)> {
+    pub(super) fn batched_rate(&mut self) -> Option<(f64, f64)> {
         let b = &self.est.batched;
         if !(self.est.ready && b.ready) {
             return None;
@@ -169,7 +203,7 @@ impl CalibratedState {
     }
 
     /// `(β̂, σ²_max, ν)` of the estimate in `self.est`, `None` when it is not ready.
-    fn rate_of_estimate(&mut self) -> Option<(f64, f64, f64)> {
+    pub(super) fn rate_of_estimate(&mut self) -> Option<(f64, f64, f64)> {
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
         if !self.est.ready {
@@ -203,11 +237,28 @@ impl CalibratedState {
         let nonlinear = self.nonlinear_looks();
         let mut order = None;
         let mut changed = None;
-        let (best, contradicted) = standing(&self.latest, margin, |w, look| {
+        // The windows' latest looks, then the anchored look (index `W`): it holds the data of
+        // every window and more, so the guards must admit it as they admit the longest full
+        // window (every window's fresh estimate; that window's model tests, and a rejection
+        // of a longer one's).
+        let count = self.latest.len();
+        let mut looks = [None; 17];
+        looks[..count].copy_from_slice(&self.latest);
+        looks[count] = self.anchored_look();
+        let longest = (0..count).rev().find(|&w| self.windows.is_full(w)).unwrap_or(0);
+        let anchored_start = self.anchored.as_ref().map_or(0, |a| a.start);
+        let (best, contradicted) = standing(&looks[..=count], margin, |w, look| {
+            // The anchored look: compared with every window's fresh estimate, refused as the
+            // longest full window's look is by the model guards.
+            let (w, first, others) = if w == count {
+                (longest, anchored_start, Some(count - 1))
+            } else {
+                (w, self.look_cols[w].saturating_sub(look.window as u64), None)
+            };
             // The change guard: the look must agree with the newest data.
             if let Some(guard) = &self.change {
-                let first = self.look_cols[w].saturating_sub(look.window as u64);
-                if let Err(reason) = guard.admits(w, (look.window, look.beta_hat, look.sd), first) {
+                let v = others.unwrap_or(w);
+                if let Err(reason) = guard.admits(v, (look.window, look.beta_hat, look.sd), first) {
                     changed.get_or_insert(reason);
                     return false;
                 }

@@ -78,6 +78,10 @@ impl CalibratedState {
                 }
                 self.until_look[w] -= 1;
             }
+            // The anchored window takes every block and looks at its sizes.
+            if block_done {
+                looked |= self.anchored_block(t, margin);
+            }
             // The change guard's fresh estimates, at the blocks its pace makes due and at each
             // window's look (so that no look stands unchecked against the newest data). Each
             // window's split test takes the shorter window's estimate of the same block. A
@@ -139,12 +143,15 @@ impl CalibratedState {
             // A first-order fresh estimate that would close a held look is retaken with the
             // look's variance (on the window's newest blocks now).
             if looked {
-                let mut held = [None; 16];
+                // The windows' looks, then the anchored look (compared with every window's
+                // fresh estimate).
+                let mut held = [None; 17];
                 for (h, l) in held.iter_mut().zip(&self.latest) {
                     *h = l.map(|l| (l.beta_hat, l.sd));
                 }
                 let w = self.latest.len();
-                let mask = self.change.as_ref().map_or(0, |c| c.needs_exact(&held[..w]));
+                held[w] = self.anchored_look().map(|l| (l.beta_hat, l.sd));
+                let mask = self.change.as_ref().map_or(0, |c| c.needs_exact(&held[..=w]));
                 for v in 0..w {
                     if mask >> v & 1 == 0 || !self.windows.is_full(v) {
                         continue;
@@ -159,6 +166,14 @@ impl CalibratedState {
         // The verdict changes only with the looks (returned by reference: with a nonlinear
         // look it is a few hundred bytes).
         if looked || self.verdict.is_none() {
+            // The change guard's evidence of a change against the anchored look starts a new
+            // epoch: the anchored window then holds no data from before it.
+            if looked && self.anchored_contradicted() {
+                let (cal, base, seen) = (self.cal, self.base_blocks(), self.seen);
+                if let Some(a) = &mut self.anchored {
+                    a.restart(&cal, base, seen);
+                }
+            }
             let verdict = self.verdict(margin);
             return self.verdict.insert(verdict);
         }

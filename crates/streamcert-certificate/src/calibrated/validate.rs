@@ -39,6 +39,27 @@ impl Calibration {
                 return bad("calibration.windows", format!("must lie in 1..=16, got {n}"));
             }
         }
+        if !(0.0..1.0).contains(&self.anchored_share) {
+            return bad(
+                "calibration.anchored_share",
+                format!(
+                    "must lie in [0, 1) (0 turns the anchored window off), got {}",
+                    self.anchored_share
+                ),
+            );
+        }
+        if !(self.anchored_growth > 1.0 && self.anchored_growth <= 4.0) {
+            return bad(
+                "calibration.anchored_growth",
+                format!("must lie in (1, 4], got {}", self.anchored_growth),
+            );
+        }
+        if !(1..=64).contains(&self.anchored_looks) {
+            return bad(
+                "calibration.anchored_looks",
+                format!("must lie in 1..=64, got {}", self.anchored_looks),
+            );
+        }
         if !(self.look_spacing > 0.0 && self.look_spacing <= 1.0) {
             return bad(
                 "calibration.look_spacing",

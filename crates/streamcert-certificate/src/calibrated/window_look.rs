@@ -26,6 +26,11 @@ pub struct WindowLook {
     /// risk, not the run's spending: closing never costs validity). Computed only when `β̂_w`
     /// is below the margin; otherwise it cannot be below the margin and is `None`.
     pub upper: Option<f64>,
+    /// `true` for the anchored window's look (every block since its epoch began;
+    /// [`Calibration::anchored_share`](crate::Calibration::anchored_share)), whose `window`
+    /// is then the columns it held; `false` for a sliding window's.
+    #[serde(default)]
+    pub anchored: bool,
 }
 
 impl Look for WindowLook {

@@ -16,6 +16,15 @@ impl Certifier {
         self.calibrated.as_ref().map_or(&[], |c| c.looks())
     }
 
+    /// The anchored window's latest look in its current epoch (`None` without one: no
+    /// calibration, [`anchored_share`](crate::Calibration::anchored_share) of 0, before its
+    /// first look of the epoch, or a look without an estimate), and the epoch
+    /// (1 from the start; one more after each gap or change point).
+    #[must_use]
+    pub fn anchored_look(&self) -> (Option<WindowLook>, u64) {
+        self.calibrated.as_ref().map_or((None, 0), |c| (c.anchored_look(), c.anchored_epoch()))
+    }
+
     /// The latest nonlinear look of each window, shortest window first (empty without a
     /// nonlinear configuration).
     #[must_use]

@@ -309,6 +309,23 @@ impl ChangeGuard {
         Ok(())
     }
 
+    /// Whether the evidence against a look (`β̂`, `s`) whose data start at column `first` is
+    /// strong enough to drop its data, not only to close it: a change point after `first`
+    /// (a split test that rejected), or a window's fresh estimate significantly below it at
+    /// the split test's risk `α` (smaller than the held comparisons' `α_held`). The anchored
+    /// window starts a new epoch on it; a held comparison alone closes its look until the
+    /// next comparison, as for a window's.
+    pub(crate) fn drops(&self, (beta_hat, sd): (f64, f64), first: u64) -> bool {
+        let split = self.split.iter().flatten().chain(&self.changed);
+        if split.into_iter().any(|&(older, upper, boundary)| upper < older && first < boundary) {
+            return true;
+        }
+        self.fresh.iter().flatten().any(|f| {
+            let spread = (f.sd * f.sd + sd * sd).sqrt();
+            f.beta_hat + f.split_quantile * spread < beta_hat
+        })
+    }
+
     /// Whether a deserialised guard matches a fresh one of the same configuration.
     pub(crate) fn matches(&self, fresh: &Self) -> bool {
         self.alpha == fresh.alpha

@@ -61,6 +61,17 @@ pub struct Summary {
     /// The region (output ranges) of the calibrated certificate standing at the last row.
     #[serde(default)]
     pub calibrated_region: Vec<(f64, f64)>,
+    /// While the nonlinear (region-valid) gate is open, the time it last opened (`None` while
+    /// closed or without `[nonlinear]`).
+    #[serde(default)]
+    pub nonlinear_since: Option<f64>,
+    /// The nonlinear gate's reason at the last row, when closed.
+    #[serde(default)]
+    pub nonlinear_last_reason: Option<NotCertified>,
+    /// The output range `(lo, hi)` the nonlinear certificate standing at the last row speaks
+    /// for.
+    #[serde(default)]
+    pub nonlinear_region: Option<(f64, f64)>,
     /// The rows of the picture (`--plot`), not checkpointed: a resumed run's picture starts at
     /// the resume.
     #[serde(skip)]
@@ -127,6 +138,15 @@ impl Summary {
         if let Some(trace) = &mut self.trace {
             trace.push_evidence(ev);
         }
+        if ev.nonlinear.open {
+            self.nonlinear_since.get_or_insert(t);
+            self.nonlinear_last_reason = None;
+            self.nonlinear_region = ev.nonlinear_region.map(|r| (r.lo, r.hi));
+        } else {
+            self.nonlinear_since = None;
+            self.nonlinear_last_reason = ev.nonlinear.reason;
+            self.nonlinear_region = None;
+        }
         let v = &ev.calibrated;
         if v.open {
             self.calibrated_since.get_or_insert(t);
@@ -145,6 +165,9 @@ impl Summary {
     pub(crate) fn count_skip(&mut self) {
         self.gauss_since = None;
         self.calibrated_since = None;
+        self.nonlinear_since = None;
+        self.nonlinear_region = None;
+        self.nonlinear_last_reason = Some(NotCertified::SkippedSample);
         self.count_reason(NotCertified::SkippedSample);
     }
 
@@ -180,6 +203,42 @@ impl Summary {
                     .map_or_else(|| "closed".into(), |t| format!("open since {}", when(Some(t))))
             );
         };
+        let linear = self.linear_verdict(cal, cfg, outputs, &candidate);
+        match (&cfg.nonlinear, outputs.first()) {
+            (Some(_), Some(name)) => format!("{linear}; {}", self.nonlinear_verdict(name)),
+            _ => linear,
+        }
+    }
+
+    /// The region-valid (nonlinear) verdict at the end: certified since when over which
+    /// output range (the rate bounded at every state of it), or not, with the reason at the
+    /// end.
+    fn nonlinear_verdict(&self, output: &str) -> String {
+        match (self.nonlinear_since, self.nonlinear_region) {
+            (Some(since), region) => format!(
+                "region-valid verdict: CERTIFIED from {} to the end (nonlinear certificate: the \
+                 rate bounded at every state of {output} in {})",
+                when(Some(since)),
+                region.map_or_else(
+                    || "(none recorded)".into(),
+                    |(lo, hi)| SigRange(lo, hi).to_string()
+                )
+            ),
+            (None, _) => format!(
+                "region-valid verdict: NOT CERTIFIED at the end (nonlinear certificate){}",
+                self.nonlinear_last_reason.map_or_else(String::new, |r| format!(": {r}"))
+            ),
+        }
+    }
+
+    /// The linear calibrated certificate's verdict at the end (the verdict line's first part).
+    fn linear_verdict(
+        &self,
+        cal: &streamcert_certificate::Calibration,
+        cfg: &CertifierConfig,
+        outputs: &[String],
+        candidate: &str,
+    ) -> String {
         match self.calibrated_since {
             Some(since) => {
                 let region: Vec<String> = outputs
@@ -190,10 +249,11 @@ impl Summary {
                 // The risk is stated for one Jacobian over the region; the nonlinearity guard
                 // tests that, it does not bound a rate that varies (NONLINEAR.md).
                 let scope = if cfg.nonlinear.is_some() {
-                    "the nonlinear gate's line below bounds the rate at every state of it"
+                    "the region-valid verdict after it bounds the rate at every state of a region"
                 } else if cal.nonlinearity {
                     "the nonlinearity guard tests this but does not bound a rate that varies \
-                     over the region: for a nonlinear scalar loop enable [nonlinear]"
+                     over the region: for a nonlinear scalar loop, `[nonlinear] enabled = true` \
+                     adds the region-valid verdict, a rate bounded at every state of the region"
                 } else {
                     "the nonlinearity guard is off"
                 };
@@ -349,3 +409,6 @@ fn candidate(cfg: &CertifierConfig) -> String {
         .collect();
     format!("for K = [{}] at the margin {} /s", rows.join(", "), Sig(cfg.margin))
 }
+
+#[cfg(test)]
+mod tests;

@@ -45,6 +45,18 @@ impl InstrumentedWindows {
     pub fn batch(&self) -> usize {
         self.batch
     }
+
+    /// Blocks of `h` columns per record of the ring: 1, but for the anchored window's ring
+    /// ([`AnchoredWindow`](crate::AnchoredWindow)), whose records merge in pairs as it grows.
+    #[must_use]
+    pub fn coarse(&self) -> usize {
+        self.coarse
+    }
+
+    /// The overlap factor `c_{b,h}` of a batch of `batch` records (`batch · coarse` blocks).
+    pub(super) fn overlap(&self, batch: usize) -> f64 {
+        overlap_factor(batch * self.coarse, self.horizon)
+    }
 }
 
 pub(super) fn one() -> usize {
@@ -78,12 +90,14 @@ pub(super) struct Batches {
 }
 
 impl Batches {
-    pub(super) fn new(blocks: usize, size: usize, horizon: usize) -> Self {
+    /// `blocks` records of `coarse` blocks of `horizon` columns each (`coarse = 1` but for
+    /// the anchored window's merged records), in batches of `size` records.
+    pub(super) fn new(blocks: usize, size: usize, horizon: usize, coarse: usize) -> Self {
         let rem = blocks % size;
         let partial = if rem == 0 {
             1.0
         } else {
-            overlap_factor(rem, horizon) / overlap_factor(size, horizon)
+            overlap_factor(rem * coarse, horizon) / overlap_factor(size * coarse, horizon)
         };
         Self { size, target: if rem == 0 { size } else { rem }, filled: 0, partial }
     }

@@ -1,7 +1,7 @@
 //! The batch-means covariance of a window's coefficients (what a test of some coefficients,
 //! or a certificate over a region of states, needs), after an estimate or fused with it.
 
-use super::batch::{Batches, overlap_factor};
+use super::batch::Batches;
 use super::estimate::block_weight;
 use super::jackknife::{JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
 use super::{InstrumentedWindows, Layout, WindowEstimate};
@@ -175,7 +175,7 @@ impl InstrumentedWindows {
         // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
         // estimate; `stride >= p d` values), its weight in `batch_w`.
         let batch = self.batch;
-        let mut batches = Batches::new(blocks, batch, self.horizon);
+        let mut batches = Batches::new(blocks, batch, self.horizon, self.coarse);
         let acc = &mut out.sums[..if batch > 1 { n } else { 0 }];
         acc.fill(0.0);
         let (mut sum_w, mut sum_w2, mut batch_w) = (0.0, 0.0, 0.0);
@@ -232,7 +232,7 @@ impl InstrumentedWindows {
             }
         }
         // The delete-one-block changes already carry each block's leverage: no `B/(B − d)`.
-        let scale = overlap_factor(batch, self.horizon);
+        let scale = self.overlap(batch);
         for v in cov.iter_mut() {
             *v *= scale;
         }

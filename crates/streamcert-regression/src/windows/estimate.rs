@@ -2,7 +2,6 @@
 //! window's block sums, and the batch-means covariance of the scores with its effective
 //! number of blocks.
 
-use super::batch::overlap_factor;
 use super::jackknife::MIN_LEVERAGE_PIVOT;
 use super::outcome::WindowEstimate;
 use super::{InstrumentedWindows, Layout};
@@ -195,7 +194,7 @@ impl InstrumentedWindows {
         out.effective_blocks =
             if sum_w2 > 0.0 && out.leverage_pivot > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
         // The delete-one-block changes already carry each block's leverage: no `B/(B − d)`.
-        let overlap = overlap_factor(self.batch, self.horizon);
+        let overlap = self.overlap(self.batch);
         for v in &mut out.score_cov {
             *v *= overlap;
         }
@@ -203,7 +202,7 @@ impl InstrumentedWindows {
             && out.theta.iter().chain(&out.score_cov).all(|v| v.is_finite());
         if second >= 2 {
             let b = &mut out.batched;
-            let overlap = overlap_factor(second, self.horizon);
+            let overlap = self.overlap(second);
             for v in &mut b.score_cov {
                 *v *= overlap;
             }
@@ -269,7 +268,7 @@ impl InstrumentedWindows {
     ) -> bool {
         out.ready = false;
         (out.pivot_ratio, out.effective_blocks, out.leverage_pivot) = (0.0, 0.0, 0.0);
-        out.columns = blocks * self.horizon;
+        out.columns = blocks * self.coarse * self.horizon;
         let batches = blocks.div_ceil(self.batch);
         out.batches = batches;
         if batches <= d {

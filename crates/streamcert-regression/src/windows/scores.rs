@@ -89,14 +89,14 @@ impl InstrumentedWindows {
         // here), its weight in `batch_w`.
         let batch = self.batch;
         let nblocks = (older.len() + newer.len()) / stride;
-        let mut batches = Batches::new(nblocks, batch, self.horizon);
+        let mut batches = Batches::new(nblocks, batch, self.horizon, self.coarse);
         // The batched sums: of the estimate's own batches (`batch > 1`), or of the second
         // covariance's (`second >= 2`, with batches of one block).
         let size = if batch > 1 { batch } else { second };
         let acc = &mut out.g[..if size > 1 { pp } else { 0 }];
         acc.fill(0.0);
         let mut batch_w = 0.0;
-        let mut seconds = Batches::new(nblocks, second.max(1), self.horizon);
+        let mut seconds = Batches::new(nblocks, second.max(1), self.horizon, self.coarse);
         let (mut sum_w_b, mut sum_w2_b) = (0.0, 0.0);
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);

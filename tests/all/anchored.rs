@@ -164,6 +164,48 @@ fn a_plant_change_starts_a_new_anchored_epoch() {
     assert!(anchored_look_risk(0.01, cal.anchored_share, 1, 1, 11) <= look_risk(0.01, 1.0, 1));
 }
 
+/// A checkpoint taken mid-run (after the anchored records merged, with blocks waiting in
+/// the open record) and restored continues bit for bit: every later evidence row and the
+/// anchored look equal the uninterrupted run's; a re-sealed state whose anchored epoch start
+/// lies after the columns seen, or whose record size is not a power of two, is refused.
+#[test]
+fn the_anchored_window_checkpoints_and_is_checked() {
+    let traj = run_scenario(&short_window_plant(), 21);
+    let cfg = calibrated(1, vec![-1.2], 150, 10);
+    let mut whole = Certifier::new(cfg.clone()).expect("valid");
+    let all: Vec<_> = (0..traj.len())
+        .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
+        .collect();
+    for split in [1777, 3003] {
+        let mut first = Certifier::new(cfg.clone()).expect("valid");
+        for k in 0..split {
+            first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+        }
+        let text = first.checkpoint().expect("serialises");
+        let mut second = Certifier::restore(&text).expect("restores");
+        for k in split..traj.len() {
+            let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+            assert_eq!(ev, all[k], "row {k} after a restore at {split}");
+        }
+        assert_eq!(second.anchored_look(), whole.anchored_look());
+        let payload = streamcert::certificate::unseal::<streamcert::certificate::CertifierConfig>(
+            &text, None,
+        )
+        .expect("sealed");
+        // Records of 2 blocks at 1777 samples (354 blocks), of 4 at 3003 (598).
+        let coarse = if split < 2000 { "\"coarse\":2" } else { "\"coarse\":4" };
+        assert!(payload.contains(coarse), "merged records at {split}");
+        let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
+        let bad = payload.replace(coarse, "\"coarse\":3");
+        assert!(Certifier::restore(&reseal(bad)).is_err(), "a record of 3 blocks");
+        let at = payload.find("\"start\":").expect("epoch start") + "\"start\":".len();
+        let digits = payload[at..].chars().take_while(char::is_ascii_digit).count();
+        let bad = format!("{}{}{}", &payload[..at], 10_000_000, &payload[at + digits..]);
+        assert!(Certifier::restore(&reseal(bad)).is_err(), "an epoch after the columns seen");
+    }
+    assert!(whole.anchored_look().0.is_some(), "the anchored window looked");
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
 

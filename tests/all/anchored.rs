@@ -206,6 +206,36 @@ fn the_anchored_window_checkpoints_and_is_checked() {
     assert!(whole.anchored_look().0.is_some(), "the anchored window looked");
 }
 
+/// With `max_window = 1200` the anchored window looks at sizes up to 1200 columns only (30,
+/// 43, …, 240 blocks: seven looks), and from the block past the cap on no anchored look
+/// stands; the sliding windows above the cap are dropped as before.
+#[test]
+fn max_window_caps_the_anchored_window() {
+    let traj = run_scenario(&short_window_plant(), 8);
+    let mut cfg = calibrated(1, vec![-1.2], 150, 10);
+    cfg.calibration = cfg.calibration.map(|c| Calibration { max_window: Some(1200), ..c });
+    let mut cert = Certifier::new(cfg).expect("valid");
+    assert_eq!(cert.calibrated_looks().len(), 4, "150 to 1200 columns");
+    let (mut looks, mut last, mut after) = (0, 0, 0);
+    for i in 0..traj.len() {
+        cert.push(traj.t[i], traj.output(i), traj.input(i)).expect("valid");
+        let columns = cert.regression().columns_built() as usize;
+        match cert.anchored_look().0 {
+            Some(look) => {
+                assert!(look.window <= 1200, "{look:?}");
+                // Columns are instrumented from the seventh on (h + lag + 1).
+                assert!(columns <= 1200 + 2 * H + 1, "a look stands at {columns} columns");
+                if look.look != last {
+                    (last, looks) = (look.look, looks + 1);
+                }
+            }
+            None => after += usize::from(columns > 1300),
+        }
+    }
+    assert_eq!(looks, 7, "anchored looks up to the cap");
+    assert!(after > 2000, "no anchored look past the cap ({after} samples)");
+}
+
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(64))]
 

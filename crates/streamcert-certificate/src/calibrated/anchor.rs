@@ -87,7 +87,13 @@ impl CalibratedState {
     /// look's size: `true` when it looked.
     pub(super) fn anchored_block(&mut self, t: f64, margin: f64) -> bool {
         let base = self.base_blocks();
+        let (cap, horizon) = (self.cal.max_window, self.horizon as u64);
         let Some(a) = &mut self.anchored else { return false };
+        // Past `max_window` the anchored window holds data no window may: its look is dropped
+        // (once) and it takes no more blocks until its epoch restarts.
+        if cap.is_some_and(|c| (a.window.blocks() + 1) * horizon > c as u64) {
+            return a.latest.take().is_some();
+        }
         a.window.push_newest(&self.windows);
         if a.window.blocks() < a.next {
             return false;

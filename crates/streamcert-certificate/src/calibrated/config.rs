@@ -19,7 +19,10 @@ pub struct Calibration {
     /// exactly `n` (`1..=16`).
     #[serde(default)]
     pub windows: Option<usize>,
-    /// Cap on the window length in columns: windows above it are dropped (default none).
+    /// Cap on the window length in columns: windows above it are dropped (default none), and
+    /// the anchored window ([`anchored_share`](Self::anchored_share)) looks only at sizes up
+    /// to it, its latest look dropped once it holds more (data older than the cap are then
+    /// in no standing look).
     #[serde(default)]
     pub max_window: Option<usize>,
     /// A window looks every `⌈look_spacing · B_w⌉` blocks of `h` columns once full

@@ -10,7 +10,7 @@ use streamcert::dynamics::{LinearScenario, Process};
 use streamcert::regression::Model;
 
 use crate::calibrated::{calibrated, short_window_plant};
-use crate::support::{run as run_scenario, scalar};
+use crate::support::{resume_matches, run as run_scenario, scalar};
 
 const H: usize = 5;
 
@@ -177,16 +177,7 @@ fn the_anchored_window_checkpoints_and_is_checked() {
         .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
         .collect();
     for split in [1777, 3003] {
-        let mut first = Certifier::new(cfg.clone()).expect("valid");
-        for k in 0..split {
-            first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
-        }
-        let text = first.checkpoint().expect("serialises");
-        let mut second = Certifier::restore(&text).expect("restores");
-        for k in split..traj.len() {
-            let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
-            assert_eq!(ev, all[k], "row {k} after a restore at {split}");
-        }
+        let (text, second) = resume_matches(&cfg, &traj, &all, split);
         assert_eq!(second.anchored_look(), whole.anchored_look());
         let payload = streamcert::certificate::unseal::<streamcert::certificate::CertifierConfig>(
             &text, None,

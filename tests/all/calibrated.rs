@@ -461,17 +461,7 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
     let all: Vec<_> = (0..traj.len())
         .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
         .collect();
-    let split = 2345;
-    let mut first = Certifier::new(cfg.clone()).expect("valid");
-    for k in 0..split {
-        first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
-    }
-    let text = first.checkpoint().expect("serialises");
-    let mut second = Certifier::restore(&text).expect("restores");
-    for k in split..traj.len() {
-        let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
-        assert_eq!(ev, all[k]);
-    }
+    let (text, _) = crate::support::resume_matches(&cfg, &traj, &all, 2345);
     assert!(all.iter().any(|e| e.calibrated.value.is_some()), "the calibrated looks ran");
     let payload = streamcert::certificate::unseal::<CertifierConfig>(&text, None).expect("sealed");
     // The calibrated windows' (the model guard's larger fit keeps batches of one block).

@@ -1,10 +1,33 @@
 //! Shared helpers for the known-answer tests.
 
+use streamcert::certificate::{Certifier, CertifierConfig, Evidence};
 use streamcert::dynamics::{LinearScenario, Process, Trajectory};
 
 /// Run a scenario that is valid by construction.
 pub(crate) fn run(scenario: &LinearScenario, seed: u64) -> Trajectory {
     scenario.run(seed).expect("valid scenario")
+}
+
+/// Run `cfg` on `traj` up to row `split`, checkpoint, restore, and check that every later
+/// row's evidence equals `all`'s (the uninterrupted run's), bit for bit; the checkpoint's text
+/// and the restored certifier at the end.
+pub(crate) fn resume_matches(
+    cfg: &CertifierConfig,
+    traj: &Trajectory,
+    all: &[Evidence],
+    split: usize,
+) -> (String, Certifier) {
+    let mut first = Certifier::new(cfg.clone()).expect("valid");
+    for k in 0..split {
+        first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+    }
+    let text = first.checkpoint().expect("serialises");
+    let mut second = Certifier::restore(&text).expect("restores");
+    for k in split..traj.len() {
+        let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+        assert_eq!(ev, all[k], "row {k} after a restore at {split}");
+    }
+    (text, second)
 }
 
 /// True closed-loop rate `−λ_max(sym(A + B K))` with nalgebra's dense eigensolver (the oracle).

@@ -119,8 +119,9 @@ fn the_anchored_window_certifies_beyond_the_longest_sliding_window() {
 }
 
 /// A plant change from β* = 3 to −0.2 at 20 s (dt = 0.01, 10 seeds): the anchored window
-/// starts a new epoch after the change in every run, the looks of the new epoch hold no
-/// column from before it, and none of them certifies the new plant.
+/// starts a new epoch within 1.5 shortest-window spans after the change in every run, the
+/// looks of the new epoch hold no column from before it, and none of them certifies the new
+/// plant.
 #[test]
 fn a_plant_change_starts_a_new_anchored_epoch() {
     use streamcert::dynamics::PlantSwitch;
@@ -156,8 +157,8 @@ fn a_plant_change_starts_a_new_anchored_epoch() {
         let at = restarted.unwrap_or_else(|| panic!("seed {seed}: no new epoch"));
         delays.push(at - 20.0);
     }
-    // Measured: the restarts 0.9 to 2.3 s after the change.
-    assert!(delays.iter().all(|&d| d < 10.0), "{delays:?}");
+    // Within 1.5 shortest-window spans (2.3 s) of the change; measured 0.7 to 1.1 s.
+    assert!(delays.iter().all(|&d| d < 1.5 * 1.54), "{delays:?}");
     // An anchored look's risk never exceeds the first look's of one window holding all of δ
     // (both are parts of one union bound).
     let cal = Calibration::new(0.01);

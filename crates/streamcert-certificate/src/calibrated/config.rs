@@ -184,8 +184,10 @@ pub struct Calibration {
     /// keep closing the gate as before, and the anchored look stands only where every guard
     /// admits it (`NotCertified` names the reason as for a window).
     ///
-    /// Measured (`cargo xtask validity --only-power 400`, the power table's seeds; the 5× loop
-    /// certified / median first opening, then the median first opening of the 20×, `p = 2`,
+    /// Measured (`cargo xtask validity --only-power 400`, the power table's seeds, with these
+    /// settings as the defaults; the first epoch's share is fixed in
+    /// [`anchored_look_risk`](crate::anchored_look_risk) and was edited there for its row; the
+    /// 5× loop certified / median first opening, then the median first opening of the 20×, `p = 2`,
     /// sensor-noise and sensor-noise-in-batches-of-4 and -of-8 loops, in s):
     ///
     /// | `a`, first epoch's share, `K`, `g` | 5× loop | 20× | `p = 2` | sensor | `b = 4` | `b = 8` |

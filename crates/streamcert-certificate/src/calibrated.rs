@@ -229,6 +229,7 @@
 
 mod access;
 mod anchor;
+mod build;
 mod check;
 mod config;
 mod coupling;
@@ -252,10 +253,11 @@ use streamcert_regression::{
     InstrumentedWindows, Interval, RegressionConfig, WindowEstimate, linalg,
 };
 
-use crate::guard::{ChangeGuard, Groups, ModelGuard};
+use crate::guard::{ChangeGuard, ModelGuard};
 use crate::nonlinear::{NonlinearLook, NonlinearState};
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use anchor::AnchoredState;
+use build::{change_guard, closed_loop_map, model_guards};
 use streamcert_regression::Model;
 
 fn one() -> f64 {
@@ -382,18 +384,7 @@ impl CalibratedState {
                 )
             })
             .transpose()?;
-        let tmat = (0..d * p)
-            .map(|idx| {
-                let (r, c) = (idx / p, idx % p);
-                if r < p {
-                    f64::from(u8::from(r == c))
-                } else if r < p + m {
-                    gain[(r - p) * p + c]
-                } else {
-                    0.0
-                }
-            })
-            .collect();
+        let tmat = closed_loop_map(p, m, d, gain);
         let anchored = (cal.anchored_share > 0.0)
             .then(|| AnchoredState::new(&windows, &cal, p, reg.horizon))
             .transpose()?;
@@ -425,28 +416,8 @@ impl CalibratedState {
             affine,
             zaug: vec![0.0; d],
             nl_origin: 0.0,
-            model: [
-                Groups { order: cal.hidden_dynamics, curvature: false },
-                Groups { order: false, curvature: cal.nonlinearity },
-            ]
-            .into_iter()
-            .filter(|g| g.order || g.curvature)
-            .map(|groups| {
-                // Batches of one block: see `Calibration::guard_unknowns`.
-                let shape = (cal.instrument_lag, cal.instrument_intervals, 1);
-                // A window's rejection closes it and every shorter window: by default δ
-                // split over the windows keeps the false closings of a look at about δ.
-                let alpha = cal.guard_risk(lengths.len());
-                ModelGuard::new((p, d, reg.horizon), groups, shape, &lengths, alpha)
-                    .map(|g| g.with_variance(cal.guard_variance))
-            })
-            .collect::<Result<_, _>>()?,
-            change: cal.plant_change.then(|| {
-                let blocks: Vec<usize> = lengths.iter().map(|&w| w / reg.horizon).collect();
-                let w = lengths.len();
-                let pairs = (w * (w + 1) / 2 + w).max(1);
-                ChangeGuard::new(&blocks, cal.delta / pairs as f64, cal.change_risk())
-            }),
+            model: model_guards(&cal, (p, d, reg.horizon), &lengths)?,
+            change: change_guard(&cal, reg.horizon, &lengths),
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],

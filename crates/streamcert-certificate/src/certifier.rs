@@ -12,7 +12,7 @@ use streamcert_ambiguity::AmbiguityRadius;
 use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, linalg};
 
 use crate::calibrated::CalibratedState;
-use crate::gap::GapDetector;
+use crate::gap::{Gap, GapDetector};
 use crate::{
     AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, Evidence, Fit,
     Gate, GateState, NotCertified, Verdict, certificate_value,
@@ -183,18 +183,17 @@ impl Certifier {
         let (ready, columns, blocked, fused) = self.evaluate(scale);
         // The p = 1 step's snapshot was taken as the residual went in (see `evaluate`).
         let amb = if fused.is_some() { fused } else { self.ambiguity_snapshot() };
-        let rho_wass = match (ready, amb) {
-            (Some(r), Some(a)) => Some(r.rho * (1.0 + 2.0 * a.eps)),
-            _ => None,
-        };
         let cert_gauss = ready.map(|r| certificate_value(r.beta_hat, r.rho, 0.0));
-        let cert_wass = match (ready, amb) {
-            (Some(r), Some(a)) => Some(certificate_value(r.beta_hat, r.rho, a.eps)),
-            _ => None,
+        let (rho_wass, cert_wass) = match (ready, amb) {
+            (Some(r), Some(a)) => (
+                Some(r.rho * (1.0 + 2.0 * a.eps)),
+                Some(certificate_value(r.beta_hat, r.rho, a.eps)),
+            ),
+            _ => (None, None),
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let (calibrated_gate, calibrated_reason, best, nl) = self.calibrated_step(t);
+        let (calibrated_gate, mut calibrated_reason, best, nl) = self.calibrated_step(t);
         let (nonlinear_gate, mut nonlinear_reason, nl_best) = nl;
         let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let mut wass_reason = if amb.is_none() {
@@ -202,19 +201,10 @@ impl Certifier {
         } else {
             closed_reason(blocked, cert_wass, &wass_gate, &self.wass)
         };
-        let mut calibrated_reason = calibrated_reason;
         if let Some(g) = gap {
-            let why = Some(NotCertified::Gap { dt: g.dt, reference: g.reference });
-            reason = why;
-            if amb.is_some() {
-                wass_reason = why;
-            }
-            if self.calibrated.is_some() {
-                calibrated_reason = why;
-            }
-            if self.cfg.nonlinear.is_some() {
-                nonlinear_reason = why;
-            }
+            let reasons =
+                [&mut reason, &mut wass_reason, &mut calibrated_reason, &mut nonlinear_reason];
+            self.gap_reasons(g, amb.is_some(), reasons);
         }
         Ok(Evidence {
             t,
@@ -253,6 +243,22 @@ impl Certifier {
             nonlinear_window: nl_best.map(|b| b.window),
             nonlinear_region: nl_best.map(|b| b.region),
         })
+    }
+
+    /// A gap closes every verdict this certifier computes (the Wasserstein one where an
+    /// ambiguity model is, `wass`) with the gap as its reason: `reasons` are the Gaussian,
+    /// Wasserstein, calibrated and nonlinear verdicts' reasons.
+    fn gap_reasons(&self, g: Gap, wass: bool, reasons: [&mut Option<NotCertified>; 4]) {
+        let [gauss, wasserstein, calibrated, nonlinear] = reasons;
+        let computed = [
+            Some(gauss),
+            wass.then_some(wasserstein),
+            self.calibrated.is_some().then_some(calibrated),
+            self.cfg.nonlinear.is_some().then_some(nonlinear),
+        ];
+        for r in computed.into_iter().flatten() {
+            *r = Some(NotCertified::Gap { dt: g.dt, reference: g.reference });
+        }
     }
 
     /// A sample that cannot be used (a NaN or infinite value, a time not after the previous

@@ -25,3 +25,10 @@ pub enum CertifyError {
     #[error("checkpoint: {0}")]
     Checkpoint(String),
 }
+
+impl CertifyError {
+    /// `Err(InvalidConfig)` for `field`, with what is wrong and what would be valid.
+    pub(crate) fn refuse<T>(field: &'static str, reason: String) -> Result<T, Self> {
+        Err(Self::InvalidConfig { field, reason })
+    }
+}

@@ -110,7 +110,9 @@ pub use config::NonlinearConfig;
 pub use features::{Feature, FeatureSet};
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, Interval, RegressionConfig, WindowEstimate};
+use streamcert_regression::{
+    InstrumentedWindows, Interval, RegressionConfig, Solve, WindowEstimate,
+};
 
 pub use crate::look::hotelling::{NonlinearityTest, f_quantile, simultaneous_multiplier};
 use crate::look::quantile::t_quantile;
@@ -358,7 +360,12 @@ impl NonlinearState {
         }
         self.dir[dg..d].copy_from_slice(&self.gain);
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
+        if !windows.estimate_coefficients(
+            w,
+            Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot },
+            est,
+            cov,
+        ) {
             return None;
         }
         let blocks = (self.est.columns / self.horizon) as f64;

@@ -7,6 +7,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{ComposeError, Network};
 
+mod perron;
+use perron::perron;
+
 /// The network guarantee computed from the full gain matrix.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct NetworkCertificate {
@@ -173,146 +176,6 @@ fn transposed(net: &Network) -> Vec<Vec<(usize, f64)>> {
         }
     }
     t
-}
-
-/// The Perron path; `None` when a bracket does not close and the eigendecomposition should
-/// take over.
-fn perron(net: &Network, opts: &DenseOptions) -> Result<Option<NetworkCertificate>, ComposeError> {
-    use crate::sparse::{collatz_wielandt, collatz_wielandt_from};
-    let n = net.len();
-    let beta = net.rates();
-    let gmax = (0..n).flat_map(|i| net.row(i).map(|(_, g)| g)).fold(0.0f64, f64::max);
-    let bmax = beta.iter().fold(f64::NEG_INFINITY, |a, &b| a.max(b));
-    let c = bmax + 0.1 * gmax.max(f64::MIN_POSITIVE);
-    let scale = bmax.abs().max(gmax).max(1.0);
-    let tol = opts.tolerance * scale;
-    let it = opts.max_iterations;
-    let fallback = n <= opts.eigen_limit;
-    let mut iterations = 0;
-    let mut converged = true;
-    let mut closed = |upper: f64, lower: f64, k: usize| {
-        iterations += k;
-        let ok = upper - lower <= tol;
-        converged &= ok;
-        ok
-    };
-    let tr = transposed(net);
-    // Network rate: ρ(Γ + cI), right vector; the rate is recomputed from the vector.
-    let (upper, lower, v, k) =
-        collatz_wielandt(n, |i, x| net.row_dot(i, x) + (c - beta[i]) * x[i], it, tol);
-    if !closed(upper, lower, k) && fallback {
-        return Ok(None);
-    }
-    let rate = crate::metzler_rate(net, &v)?.min(c - upper);
-    let rate_upper = c - lower;
-    // Left vector: the same root for Γᵀ.
-    let row_t = |i: usize, x: &[f64]| {
-        tr[i].iter().map(|&(r, g)| g * x[r]).sum::<f64>() + (c - beta[i]) * x[i]
-    };
-    let (ul, ll, w, k) = collatz_wielandt(n, row_t, it, tol);
-    if !closed(ul, ll, k) && fallback {
-        return Ok(None);
-    }
-    // Weights η = w/v; a vector with (near) zeros means a reducible Γ: regularise as the
-    // eigendecomposition does.
-    let positive = |x: &[f64]| {
-        let max = x.iter().fold(0.0f64, |a, &y| a.max(y));
-        max > 0.0 && x.iter().all(|&y| y > 1e-12 * max)
-    };
-    let mut delta = 0.0;
-    let (mut vr, mut wl) = (v, w);
-    while !(positive(&vr) && positive(&wl)) {
-        delta = if delta == 0.0 { 1e-9 * scale } else { delta * 100.0 };
-        if delta > 1e-3 * scale {
-            return Err(ComposeError::Numerical("no positive Perron vectors".into()));
-        }
-        let d = delta;
-        let (u1, l1, v1, k1) = collatz_wielandt(
-            n,
-            |i, x| {
-                let sum: f64 = x.iter().sum();
-                net.row_dot(i, x) + (c - beta[i]) * x[i] + d * (sum - x[i])
-            },
-            it,
-            tol,
-        );
-        let (u2, l2, w1, k2) = collatz_wielandt(
-            n,
-            |i, x| {
-                let sum: f64 = x.iter().sum();
-                row_t(i, x) + d * (sum - x[i])
-            },
-            it,
-            tol,
-        );
-        if !(closed(u1, l1, k1) & closed(u2, l2, k2)) && fallback {
-            return Ok(None);
-        }
-        (vr, wl) = (v1, w1);
-    }
-    let eta: Vec<f64> = wl.iter().zip(&vr).map(|(a, b)| a / b).collect();
-    let emax = eta.iter().fold(0.0f64, |a, &x| a.max(x));
-    let weights: Vec<f64> = eta.iter().map(|x| x / emax).collect();
-    let sq: Vec<f64> = weights.iter().map(|x| x.sqrt()).collect();
-    // Weighted rate: λ_max(sym(P^½ Γ P^−½)), started at √(v ∘ w).
-    let start: Vec<f64> =
-        vr.iter().zip(&wl).map(|(a, b)| (a * b).sqrt().max(f64::MIN_POSITIVE)).collect();
-    let row_w = |i: usize, x: &[f64]| {
-        let mut acc = (c - beta[i]) * x[i];
-        for (j, g) in net.row(i) {
-            acc += 0.5 * sq[i] * g / sq[j] * x[j];
-        }
-        for &(r, g) in &tr[i] {
-            acc += 0.5 * sq[r] * g / sq[i] * x[r];
-        }
-        acc
-    };
-    let (uw, lw, _, k) = collatz_wielandt_from(start, row_w, it, tol);
-    if !closed(uw, lw, k) && fallback {
-        return Ok(None);
-    }
-    let weighted_rate = c - uw;
-    // Symmetric bound: λ_max(sym Γ).
-    let row_s = |i: usize, x: &[f64]| {
-        let mut acc = (c - beta[i]) * x[i];
-        for (j, g) in net.row(i) {
-            acc += 0.5 * g * x[j];
-        }
-        for &(r, g) in &tr[i] {
-            acc += 0.5 * g * x[r];
-        }
-        acc
-    };
-    let (us, ls, _, k) = collatz_wielandt(n, row_s, it, tol);
-    if !closed(us, ls, k) && fallback {
-        return Ok(None);
-    }
-    let symmetric_rate = c - us;
-    // Critical scale: ρ(D⁻¹Γ_off) <= u − 1 for the iteration on D⁻¹Γ_off + I.
-    let critical_scale = if beta.iter().any(|&b| b <= 0.0) {
-        0.0
-    } else if net.edges() == 0 {
-        f64::INFINITY
-    } else {
-        let (u, l, _, k) =
-            collatz_wielandt(n, |i, x| net.row_dot(i, x) / beta[i] + x[i], it, opts.tolerance);
-        if !closed(u, l, k) && fallback {
-            return Ok(None);
-        }
-        if u > 1.0 { 1.0 / (u - 1.0) } else { f64::INFINITY }
-    };
-    Ok(Some(NetworkCertificate {
-        rate,
-        weights,
-        weighted_rate,
-        symmetric_rate: symmetric_rate.min(rate),
-        critical_scale,
-        weight_regularization: delta,
-        rate_upper,
-        method: DenseMethod::Perron,
-        iterations,
-        converged,
-    }))
 }
 
 /// The eigendecomposition path (`O(N³)`).

@@ -131,6 +131,21 @@ pub struct Trajectory {
 }
 
 impl Trajectory {
+    /// An empty trajectory of the dimensions `(n, m, p, q)` with room for `steps` steps.
+    fn with_capacity((n, m, p, q): (usize, usize, usize, usize), steps: usize) -> Self {
+        Self {
+            n,
+            m,
+            p,
+            q,
+            t: Vec::with_capacity(steps + 1),
+            x: Vec::with_capacity((steps + 1) * n),
+            y: Vec::with_capacity((steps + 1) * p),
+            u: Vec::with_capacity((steps + 1) * m),
+            eta: Vec::with_capacity(steps * q),
+        }
+    }
+
     /// Number of samples `K + 1`.
     #[must_use]
     pub fn len(&self) -> usize {
@@ -207,17 +222,7 @@ where
     let scale = cfg.noise_scaling.factor(dt);
     let held = cfg.noise_scaling == NoiseScaling::HeldInput;
 
-    let mut traj = Trajectory {
-        n,
-        m,
-        p,
-        q,
-        t: Vec::with_capacity(k_max + 1),
-        x: Vec::with_capacity((k_max + 1) * n),
-        y: Vec::with_capacity((k_max + 1) * p),
-        u: Vec::with_capacity((k_max + 1) * m),
-        eta: Vec::with_capacity(k_max * q),
-    };
+    let mut traj = Trajectory::with_capacity((n, m, p, q), k_max);
     // Scratch, allocated once: x, y, u, random parts, impulse parts, 4 RK stages, stage state.
     let mut x = cfg.x0.clone();
     let mut y = vec![0.0; p];
@@ -259,33 +264,9 @@ where
             traj.eta.push(r[j] + d.periodic(t));
             held_r[j] = if held { r[j] } else { 0.0 };
         }
-        match cfg.integrator {
-            Integrator::EulerMaruyama => {
-                full_drift(t, &x, &u, &held_r, disturbances, &mut k[0]);
-                for i in 0..n {
-                    x[i] += dt * k[0][i];
-                }
-            }
-            Integrator::Rk4 => {
-                let [k1, k2, k3, k4] = &mut k[..] else { unreachable!("four stages") };
-                full_drift(t, &x, &u, &held_r, disturbances, k1);
-                for i in 0..n {
-                    xs[i] = x[i] + 0.5 * dt * k1[i];
-                }
-                full_drift(t + 0.5 * dt, &xs, &u, &held_r, disturbances, k2);
-                for i in 0..n {
-                    xs[i] = x[i] + 0.5 * dt * k2[i];
-                }
-                full_drift(t + 0.5 * dt, &xs, &u, &held_r, disturbances, k3);
-                for i in 0..n {
-                    xs[i] = x[i] + dt * k3[i];
-                }
-                full_drift(t + dt, &xs, &u, &held_r, disturbances, k4);
-                for i in 0..n {
-                    x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-                }
-            }
-        }
+        let drift =
+            |t: f64, x: &[f64], dx: &mut [f64]| full_drift(t, x, &u, &held_r, disturbances, dx);
+        integrate(cfg.integrator, drift, (t, dt), &mut x, (&mut k, &mut xs));
         for j in 0..q {
             let w = if held { 0.0 } else { scale * r[j] } + imp[j];
             if w != 0.0 {
@@ -298,4 +279,43 @@ where
         t = cfg.t0 + (step + 1) as f64 * dt;
     }
     Ok(traj)
+}
+
+/// One step of `dt` from `t` of `ẋ = drift(t, x)` by `integrator`, in place, with the stages
+/// `k` (four of `n`) and the stage state `xs` as scratch.
+fn integrate(
+    integrator: Integrator,
+    drift: impl Fn(f64, &[f64], &mut [f64]),
+    (t, dt): (f64, f64),
+    x: &mut [f64],
+    (k, xs): (&mut [Vec<f64>], &mut [f64]),
+) {
+    let n = x.len();
+    match integrator {
+        Integrator::EulerMaruyama => {
+            drift(t, x, &mut k[0]);
+            for i in 0..n {
+                x[i] += dt * k[0][i];
+            }
+        }
+        Integrator::Rk4 => {
+            let [k1, k2, k3, k4] = k else { unreachable!("four stages") };
+            drift(t, x, k1);
+            for i in 0..n {
+                xs[i] = x[i] + 0.5 * dt * k1[i];
+            }
+            drift(t + 0.5 * dt, xs, k2);
+            for i in 0..n {
+                xs[i] = x[i] + 0.5 * dt * k2[i];
+            }
+            drift(t + 0.5 * dt, xs, k3);
+            for i in 0..n {
+                xs[i] = x[i] + dt * k3[i];
+            }
+            drift(t + dt, xs, k4);
+            for i in 0..n {
+                x[i] += dt / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+            }
+        }
+    }
 }

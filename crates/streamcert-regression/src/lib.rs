@@ -79,5 +79,5 @@ pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{
     AnchoredWindow, BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MIN_LEVERAGE_PIVOT,
-    MIN_RESIDUAL_SHARE, WindowEstimate,
+    MIN_RESIDUAL_SHARE, Solve, WindowEstimate,
 };

@@ -53,7 +53,7 @@ mod scores;
 pub use anchored::AnchoredWindow;
 pub use jackknife::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
 pub use moments::MAX_MOMENT_ENTRIES;
-pub use outcome::{BatchedCovariance, WindowEstimate};
+pub use outcome::{BatchedCovariance, Solve, WindowEstimate};
 
 use crate::{Interval, RegressionError};
 

@@ -5,7 +5,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::regression::{InstrumentedWindows, WindowEstimate};
+use streamcert::regression::{InstrumentedWindows, Solve, WindowEstimate};
 
 /// A loop-like column stream for `p` outputs and `m` inputs, the inputs AR(1) so that the
 /// lagged regressors are relevant instruments.
@@ -113,9 +113,18 @@ fn the_fresh_estimate_equals_the_first_order_pass() {
             continue;
         }
         for w in 0..windows.len() {
-            win.fresh_estimate(w, 0, 1e-12, &t, 1e-12, &mut fresh);
-            let ready =
-                win.estimate_coefficients_first_order(w, 1e-12, &t, 1e-12, &mut pass, &mut cov);
+            win.fresh_estimate(
+                w,
+                0,
+                Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                &mut fresh,
+            );
+            let ready = win.estimate_coefficients_first_order(
+                w,
+                Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                &mut pass,
+                &mut cov,
+            );
             assert_eq!(fresh.ready, ready, "window {w}");
             if !ready {
                 continue;
@@ -164,8 +173,18 @@ fn rebuilt_epoch_sums_are_the_same_bits() {
         assert_eq!(kept.push_column(&z, &dy), restored.push_column(&z, &dy));
         for w in 0..windows.len() {
             for skip in [0, 4] {
-                kept.fresh_estimate(w, skip, 1e-12, &t, 1e-12, &mut a);
-                restored.fresh_estimate(w, skip, 1e-12, &t, 1e-12, &mut b);
+                kept.fresh_estimate(
+                    w,
+                    skip,
+                    Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                    &mut a,
+                );
+                restored.fresh_estimate(
+                    w,
+                    skip,
+                    Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                    &mut b,
+                );
                 assert_eq!(a, b);
             }
         }
@@ -196,10 +215,23 @@ fn the_batched_covariance_of_the_fused_pass_equals_a_second_estimate() {
             }
             for w in 0..windows.len() {
                 for b in [2, 3] {
-                    win.estimate_batched(w, b, 1e-12, &t, 1e-12, &mut fused);
-                    win.estimate(w, 1e-12, &t, 1e-12, &mut one);
+                    win.estimate_batched(
+                        w,
+                        b,
+                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        &mut fused,
+                    );
+                    win.estimate(
+                        w,
+                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        &mut one,
+                    );
                     win.set_batch(b);
-                    win.estimate(w, 1e-12, &t, 1e-12, &mut two);
+                    win.estimate(
+                        w,
+                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        &mut two,
+                    );
                     win.set_batch(1);
                     assert_eq!(fused.ready, one.ready);
                     assert_eq!(fused.theta, one.theta);

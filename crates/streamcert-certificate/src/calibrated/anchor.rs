@@ -3,7 +3,9 @@
 //! epoch.
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{AnchoredWindow, InstrumentedWindows, Interval, RegressionError};
+use streamcert_regression::{
+    AnchoredWindow, InstrumentedWindows, Interval, RegressionError, Solve,
+};
 
 use super::{CalibratedState, WindowLook, anchored_look_risk};
 use crate::Calibration;
@@ -103,16 +105,16 @@ impl CalibratedState {
         a.next = self.cal.anchored_size(base, look + 1);
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
-        let (ridge, pivot) = (self.ridge, self.min_pivot);
         // The second covariance where about `auto_batches` batches of at least two records
         // fit, as for a sliding window of as many blocks.
         let records = a.window.records();
         let b = self.cal.auto_batch_blocks(records, d);
         let auto = self.cal.batch_blocks == 1 && b >= 2;
+        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
         if auto {
-            a.window.estimate_batched(b, ridge, &self.tmat, pivot, &mut self.est);
+            a.window.estimate_batched(b, solve, &mut self.est);
         } else {
-            a.window.estimate(ridge, &self.tmat, pivot, &mut self.est);
+            a.window.estimate(solve, &mut self.est);
         }
         let columns = a.window.columns();
         let batched = if auto { self.batched_rate() } else { None };

@@ -8,7 +8,7 @@ use super::{
 };
 use crate::NotCertified;
 use crate::nonlinear::LookAt;
-use streamcert_regression::linalg;
+use streamcert_regression::{Solve, linalg};
 
 /// What a look's radius needs besides its estimate: the risk it spends, the margin (for the
 /// upper bound of a rate below it) and whether it carries the second covariance.
@@ -49,8 +49,9 @@ impl CalibratedState {
         // The estimate, and where the window carries it the covariance in batches, in one
         // solve and one pass over the blocks.
         let (rate, batched) = if self.auto_applies(w) {
-            let (ridge, pivot, b) = (self.ridge, self.min_pivot, self.auto_blocks(w));
-            self.windows.estimate_batched(w, b, ridge, &self.tmat, pivot, &mut self.est);
+            let b = self.auto_blocks(w);
+            let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+            self.windows.estimate_batched(w, b, solve, &mut self.est);
             let batched = self.batched_rate();
             (self.rate_of_estimate(), batched)
         } else {
@@ -186,8 +187,8 @@ impl CalibratedState {
     /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest
     /// `skip`: `(β̂_w, σ²_max, ν)` of the module docs, `None` when the fit is not ready.
     pub(super) fn rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let (ridge, pivot) = (self.ridge, self.min_pivot);
-        self.windows.estimate_older(w, skip, ridge, &self.tmat, pivot, &mut self.est);
+        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+        self.windows.estimate_older(w, skip, solve, &mut self.est);
         self.rate_of_estimate()
     }
 
@@ -197,8 +198,8 @@ impl CalibratedState {
     /// `O(1)` in the window's length). A fresh estimate spends no risk and only closes looks,
     /// so its variance need not carry the jackknife's leverage.
     pub(super) fn fresh_rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let (ridge, pivot) = (self.ridge, self.min_pivot);
-        self.windows.fresh_estimate(w, skip, ridge, &self.tmat, pivot, &mut self.est);
+        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+        self.windows.fresh_estimate(w, skip, solve, &mut self.est);
         self.rate_of_estimate()
     }
 

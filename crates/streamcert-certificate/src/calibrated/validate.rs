@@ -12,14 +12,21 @@ impl Calibration {
     /// # Errors
     /// [`CertifyError::InvalidConfig`] with what would be valid.
     pub fn validate(&self, reg: &RegressionConfig, margin: f64) -> Result<(), CertifyError> {
-        let bad = |field: &'static str, reason: String| {
-            Err(CertifyError::InvalidConfig { field, reason })
-        };
+        self.check_risks(margin)?;
+        self.check_shape()?;
+        self.check_window(reg)
+    }
+
+    /// The risks, the margin and the ridge.
+    fn check_risks(&self, margin: f64) -> Result<(), CertifyError> {
         if !(self.delta > 0.0 && self.delta < 1.0) {
-            return bad("calibration.delta", format!("must lie in (0, 1), got {}", self.delta));
+            return CertifyError::refuse(
+                "calibration.delta",
+                format!("must lie in (0, 1), got {}", self.delta),
+            );
         }
         if !(margin > 0.0) {
-            return bad(
+            return CertifyError::refuse(
                 "margin",
                 format!(
                     "must be > 0 for the calibrated certificate, got {margin}: a certified rate \
@@ -29,18 +36,48 @@ impl Calibration {
             );
         }
         if !(0.0..=1e-3).contains(&self.relative_ridge) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.relative_ridge",
                 format!("must lie in [0, 1e-3], got {}", self.relative_ridge),
             );
         }
+        if let Some(r) = self.change_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return CertifyError::refuse(
+                    "calibration.change_risk",
+                    format!("must lie in (0, 1), got {r}"),
+                );
+            }
+        }
+        if let Some(r) = self.guard_risk {
+            if !(r > 0.0 && r < 1.0) {
+                return CertifyError::refuse(
+                    "calibration.guard_risk",
+                    format!("must lie in (0, 1), got {r}"),
+                );
+            }
+        }
+        if !(self.auto_batch_risk > 0.0 && self.auto_batch_risk < 1.0) {
+            return CertifyError::refuse(
+                "calibration.auto_batch_risk",
+                format!("must lie in (0, 1), got {}", self.auto_batch_risk),
+            );
+        }
+        Ok(())
+    }
+
+    /// The windows' count, the anchored window's rule, the looks' spacing and the batches.
+    fn check_shape(&self) -> Result<(), CertifyError> {
         if let Some(n) = self.windows {
             if !(1..=16).contains(&n) {
-                return bad("calibration.windows", format!("must lie in 1..=16, got {n}"));
+                return CertifyError::refuse(
+                    "calibration.windows",
+                    format!("must lie in 1..=16, got {n}"),
+                );
             }
         }
         if !(0.0..1.0).contains(&self.anchored_share) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.anchored_share",
                 format!(
                     "must lie in [0, 1) (0 turns the anchored window off), got {}",
@@ -49,31 +86,31 @@ impl Calibration {
             );
         }
         if !(self.anchored_growth > 1.0 && self.anchored_growth <= 4.0) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.anchored_growth",
                 format!("must lie in (1, 4], got {}", self.anchored_growth),
             );
         }
         if !(1..=64).contains(&self.anchored_looks) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.anchored_looks",
                 format!("must lie in 1..=64, got {}", self.anchored_looks),
             );
         }
         if !(self.look_spacing > 0.0 && self.look_spacing <= 1.0) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.look_spacing",
                 format!("must lie in (0, 1], got {}", self.look_spacing),
             );
         }
         if !(1..=8).contains(&self.instrument_intervals) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.instrument_intervals",
                 format!("must lie in 1..=8, got {}", self.instrument_intervals),
             );
         }
         if !(1..=8).contains(&self.batch_blocks) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.batch_blocks",
                 format!(
                     "must lie in 1..=8 (the settings `cargo xtask validity` measures reach 8), \
@@ -82,24 +119,8 @@ impl Calibration {
                 ),
             );
         }
-        if let Some(r) = self.change_risk {
-            if !(r > 0.0 && r < 1.0) {
-                return bad("calibration.change_risk", format!("must lie in (0, 1), got {r}"));
-            }
-        }
-        if let Some(r) = self.guard_risk {
-            if !(r > 0.0 && r < 1.0) {
-                return bad("calibration.guard_risk", format!("must lie in (0, 1), got {r}"));
-            }
-        }
-        if !(self.auto_batch_risk > 0.0 && self.auto_batch_risk < 1.0) {
-            return bad(
-                "calibration.auto_batch_risk",
-                format!("must lie in (0, 1), got {}", self.auto_batch_risk),
-            );
-        }
         if !(self.auto_batches == 0 || self.auto_batches >= 8) {
-            return bad(
+            return CertifyError::refuse(
                 "calibration.auto_batches",
                 format!(
                     "must be 0 (off) or at least 8 (on fewer batches the Student-t quantile \
@@ -108,6 +129,11 @@ impl Calibration {
                 ),
             );
         }
+        Ok(())
+    }
+
+    /// The window against the fits it must hold.
+    fn check_window(&self, reg: &RegressionConfig) -> Result<(), CertifyError> {
         // The affine model's intercept is one more unknown; the model guard's larger fit has
         // its extra regressors (in batches of one block: see `guard_unknowns`).
         let d = reg.outputs
@@ -118,7 +144,7 @@ impl Calibration {
         let guarded = Self::min_window(reg.horizon, d + g);
         let counted = "p + m, + 1 for the affine model's intercept";
         if reg.window < guarded && guarded >= min {
-            return bad(
+            return CertifyError::refuse(
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with its guards with h = {}: \
@@ -133,7 +159,7 @@ impl Calibration {
             );
         }
         if reg.window < min && self.batch_blocks == 1 {
-            return bad(
+            return CertifyError::refuse(
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with h = {} and {d} unknowns \
@@ -144,7 +170,7 @@ impl Calibration {
             );
         }
         if reg.window < min {
-            return bad(
+            return CertifyError::refuse(
                 "window",
                 format!(
                     "M = {} is too short for a calibrated bound with h = {}, {d} unknowns per \
@@ -157,7 +183,7 @@ impl Calibration {
         }
         if let Some(cap) = self.max_window {
             if cap < reg.window {
-                return bad(
+                return CertifyError::refuse(
                     "calibration.max_window",
                     format!("must be at least the window M = {}, got {cap}", reg.window),
                 );

@@ -75,7 +75,7 @@
 //! [`Calibration::nonlinearity`]: crate::Calibration::nonlinearity
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, WindowEstimate};
+use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
 
 use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
 use crate::look::same_windows;
@@ -257,13 +257,12 @@ impl ModelGuard {
         self.dir.fill(0.0);
         self.dir[d * p..].fill(1.0);
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
+        let solve = Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot };
         let ok = match self.variance {
             GuardVariance::FirstOrder => {
-                windows.estimate_coefficients_first_order(w, ridge, &self.dir, min_pivot, est, cov)
+                windows.estimate_coefficients_first_order(w, solve, est, cov)
             }
-            GuardVariance::Jackknife => {
-                windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov)
-            }
+            GuardVariance::Jackknife => windows.estimate_coefficients(w, solve, est, cov),
         };
         if !ok {
             return;

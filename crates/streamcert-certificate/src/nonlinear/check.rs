@@ -26,7 +26,7 @@
 //! [`NonlinearConfig::check_terms`]: super::NonlinearConfig::check_terms
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, WindowEstimate};
+use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
 
 use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
 use crate::{CertifyError, NotCertified};
@@ -191,7 +191,12 @@ impl LackOfFit {
         self.dir[dg..dg + e + o].fill(0.0);
         self.dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        if !windows.estimate_coefficients(w, ridge, &self.dir, min_pivot, est, cov) {
+        if !windows.estimate_coefficients(
+            w,
+            Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot },
+            est,
+            cov,
+        ) {
             return None;
         }
         let blocks = (self.est.columns / self.horizon) as f64;

@@ -110,41 +110,9 @@ impl NonlinearConfig {
             .collect()
     }
 
-    /// Check the settings against the regression (one output) and the calibration (which
-    /// must be present) and its smallest window for the larger fit's `D + e + m` unknowns
-    /// (`e`: the lack-of-fit terms, and the past increment when
-    /// [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics) is on).
-    ///
-    /// # Errors
-    /// [`CertifyError::InvalidConfig`] saying what would be valid.
-    pub fn validate(
-        &self,
-        reg: &RegressionConfig,
-        calibration: Option<&crate::Calibration>,
-    ) -> Result<(), CertifyError> {
-        let bad = |field: &'static str, reason: String| {
-            Err(CertifyError::InvalidConfig { field, reason })
-        };
-        let Some(calibration) = calibration else {
-            return bad(
-                "nonlinear",
-                "the nonlinear certificate is calibrated: it needs a calibration (set \
-                 [calibration] delta, for example 0.01)"
-                    .into(),
-            );
-        };
-        if reg.outputs != 1 {
-            return bad(
-                "nonlinear",
-                format!(
-                    "the nonlinear certificate is built for one output (p = 1), got p = {}: \
-                     certify each output's loop separately, or drop [nonlinear] and rely on \
-                     the linear calibrated certificate, which assumes the Jacobian is constant \
-                     over the window",
-                    reg.outputs
-                ),
-            );
-        }
+    /// The degree, the cells, the test's risk and the lack-of-fit terms in their ranges.
+    fn check_settings(&self) -> Result<(), CertifyError> {
+        let bad = CertifyError::refuse::<()>;
         if self.features.is_none() && !(1..=FeatureSet::CAPACITY).contains(&self.degree) {
             return bad(
                 "nonlinear.degree",
@@ -165,6 +133,43 @@ impl NonlinearConfig {
                 format!("must lie in 0..=7 (powers up to y^8), got {}", self.check_terms),
             );
         }
+        Ok(())
+    }
+
+    /// Check the settings against the regression (one output) and the calibration (which
+    /// must be present) and its smallest window for the larger fit's `D + e + m` unknowns
+    /// (`e`: the lack-of-fit terms, and the past increment when
+    /// [`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics) is on).
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] saying what would be valid.
+    pub fn validate(
+        &self,
+        reg: &RegressionConfig,
+        calibration: Option<&crate::Calibration>,
+    ) -> Result<(), CertifyError> {
+        let bad = CertifyError::refuse::<()>;
+        let Some(calibration) = calibration else {
+            return bad(
+                "nonlinear",
+                "the nonlinear certificate is calibrated: it needs a calibration (set \
+                 [calibration] delta, for example 0.01)"
+                    .into(),
+            );
+        };
+        if reg.outputs != 1 {
+            return bad(
+                "nonlinear",
+                format!(
+                    "the nonlinear certificate is built for one output (p = 1), got p = {}: \
+                     certify each output's loop separately, or drop [nonlinear] and rely on \
+                     the linear calibrated certificate, which assumes the Jacobian is constant \
+                     over the window",
+                    reg.outputs
+                ),
+            );
+        }
+        self.check_settings()?;
         // The larger fits: the lack-of-fit terms, and (a fit of its own) the hidden-dynamics
         // test's past increment.
         let e = self.check_features().len().max(usize::from(calibration.hidden_dynamics));

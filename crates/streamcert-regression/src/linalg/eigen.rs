@@ -319,6 +319,19 @@ fn laguerre_tops<const S: usize>(
     laguerre_runs([(d, e, inv); S], signs, from_zero)
 }
 
+/// Gershgorin's upper bound on the eigenvalues of the tridiagonal `sign · inv · (d, e)`.
+#[inline(always)]
+fn gershgorin_top(d: &[f64], e: &[f64], inv: f64, sign: f64) -> f64 {
+    let n = d.len();
+    let mut x = f64::NEG_INFINITY;
+    for i in 0..n {
+        let off =
+            if i > 0 { e[i - 1].abs() } else { 0.0 } + if i + 1 < n { e[i].abs() } else { 0.0 };
+        x = x.max(sign * d[i] * inv + off * inv);
+    }
+    x
+}
+
 /// [`laguerre_tops`] with each run on its own tridiagonal `(d, e, inv)` (the runs of two
 /// matrices advance side by side as those of one do); each run's arithmetic is what it
 /// would be alone.
@@ -332,14 +345,7 @@ pub(super) fn laguerre_runs<const S: usize>(
     let mut gershgorin = [0.0f64; S];
     for s in 0..S {
         let (d, e, inv) = mats[s];
-        let n = d.len();
-        let mut x = f64::NEG_INFINITY;
-        for i in 0..n {
-            let off =
-                if i > 0 { e[i - 1].abs() } else { 0.0 } + if i + 1 < n { e[i].abs() } else { 0.0 };
-            x = x.max(signs[s] * d[i] * inv + off * inv);
-        }
-        gershgorin[s] = x + 1e-12;
+        gershgorin[s] = gershgorin_top(d, e, inv, signs[s]) + 1e-12;
     }
     let mut x = gershgorin;
     // Runs whose start is still to be checked (started at 1e-12 below Gershgorin's bound).

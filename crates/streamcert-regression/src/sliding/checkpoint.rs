@@ -12,6 +12,26 @@ impl SlidingRegression {
     pub fn check_state(&self) -> Result<(), RegressionError> {
         self.cfg.validate()?;
         let fresh = Self::new(self.cfg)?;
+        self.check_sizes(&fresh)?;
+        let cap = self.cfg.horizon + 1;
+        let ok = self.hist_len <= cap
+            && self.hist_head < cap
+            && self.zhist_len <= cap
+            && self.zhist_head < cap
+            && self.col_len <= self.cfg.window
+            && self.col_next < self.cfg.window
+            && self.since_refresh < self.cfg.refresh_period.max(1)
+            && self.inv_window == fresh.inv_window
+            && (self.affine() || (!self.origin_set && self.origin.iter().all(|&o| o == 0.0)));
+        if !ok {
+            return Err(RegressionError::CorruptState("ring counters out of range".into()));
+        }
+        self.range.check_state(self.d(), self.cfg.window + self.cfg.horizon)?;
+        self.check_finite()
+    }
+
+    /// Every buffer of the size a fresh state of the same configuration has.
+    fn check_sizes(&self, fresh: &Self) -> Result<(), RegressionError> {
         let sizes = [
             ("hist_t", self.hist_t.len(), fresh.hist_t.len()),
             ("hist_y", self.hist_y.len(), fresh.hist_y.len()),
@@ -55,20 +75,11 @@ impl SlidingRegression {
                 "{name} has {got} entries, expected {want}"
             )));
         }
-        let cap = self.cfg.horizon + 1;
-        let ok = self.hist_len <= cap
-            && self.hist_head < cap
-            && self.zhist_len <= cap
-            && self.zhist_head < cap
-            && self.col_len <= self.cfg.window
-            && self.col_next < self.cfg.window
-            && self.since_refresh < self.cfg.refresh_period.max(1)
-            && self.inv_window == fresh.inv_window
-            && (self.affine() || (!self.origin_set && self.origin.iter().all(|&o| o == 0.0)));
-        if !ok {
-            return Err(RegressionError::CorruptState("ring counters out of range".into()));
-        }
-        self.range.check_state(self.d(), self.cfg.window + self.cfg.horizon)?;
+        Ok(())
+    }
+
+    /// Every value that carries state from one sample to the next is finite.
+    fn check_finite(&self) -> Result<(), RegressionError> {
         // Every buffer that carries state from one sample to the next (the scratch buffers
         // `theta`, `work`, `work2`, `z`, `dy` are overwritten before they are read).
         let state = [

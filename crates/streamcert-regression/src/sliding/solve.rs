@@ -261,7 +261,15 @@ impl SlidingRegression {
                 }
             }
         }
-        // RSS = tr S − 2 tr(Θ Cᵀ) + tr(Θ G Θᵀ).
+        let rss = self.rss(p, d);
+        out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
+        out
+    }
+
+    /// The residual sum of squares of the solved `Θ` from the running sums,
+    /// `RSS = tr S − 2 tr(Θ Cᵀ) + tr(Θ G Θᵀ)`.
+    #[inline(always)]
+    fn rss(&self, p: usize, d: usize) -> f64 {
         // Views of exactly the configured lengths (no bounds checks with literal p, d).
         let (g, c, s) = (&self.g[..d * d], &self.c[..p * d], &self.s[..p * p]);
         let mut rss = 0.0;
@@ -278,8 +286,7 @@ impl SlidingRegression {
             }
             rss += quad;
         }
-        out.rms_residual = (rss.max(0.0) * inv_n / p as f64).sqrt();
-        out
+        rss
     }
 
     /// [`estimate`](Self::estimate), and `λ_max` of the symmetric `m × m` matrix that `form`

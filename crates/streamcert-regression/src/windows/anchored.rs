@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{InstrumentedWindows, WindowEstimate};
+use super::{InstrumentedWindows, Solve, WindowEstimate};
 use crate::{Interval, RegressionError};
 
 /// A window of every block since its last [`reset`](Self::reset), for a bound that tightens as
@@ -143,22 +143,15 @@ impl AnchoredWindow {
 
     /// The estimate on every closed record, as [`InstrumentedWindows::estimate`] on a window
     /// of those records (see the type's docs for the covariance).
-    pub fn estimate(&self, ridge: f64, t: &[f64], min_pivot_ratio: f64, out: &mut WindowEstimate) {
-        self.ring.estimate(0, ridge, t, min_pivot_ratio, out);
+    pub fn estimate(&self, solve: Solve<'_>, out: &mut WindowEstimate) {
+        self.ring.estimate(0, solve, out);
     }
 
     /// As [`estimate`](Self::estimate), and the covariance in batches of `batch >= 2` records
     /// into `out.batched` from the same pass
     /// ([`InstrumentedWindows::estimate_batched`]).
-    pub fn estimate_batched(
-        &self,
-        batch: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
-        out: &mut WindowEstimate,
-    ) {
-        self.ring.estimate_batched(0, batch, ridge, t, min_pivot_ratio, out);
+    pub fn estimate_batched(&self, batch: usize, solve: Solve<'_>, out: &mut WindowEstimate) {
+        self.ring.estimate_batched(0, batch, solve, out);
     }
 
     /// The hull of the closed records' regions (see [`InstrumentedWindows::window_range`]).

@@ -4,7 +4,7 @@
 use super::batch::Batches;
 use super::estimate::block_weight;
 use super::jackknife::{JackScratch, Jackknife, MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
-use super::{InstrumentedWindows, Layout, WindowEstimate};
+use super::{InstrumentedWindows, Layout, Solve, WindowEstimate};
 
 impl InstrumentedWindows {
     /// The batch-means covariance of the coefficients, after a ready
@@ -55,13 +55,11 @@ impl InstrumentedWindows {
     pub fn estimate_coefficients(
         &self,
         w: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
         cov: &mut [f64],
     ) -> bool {
-        self.fused_coefficients::<true>(w, (ridge, t, min_pivot_ratio), out, cov)
+        self.fused_coefficients::<true>(w, solve, out, cov)
     }
 
     /// The solve and the coefficient pass of [`estimate_coefficients`](Self::estimate_coefficients)
@@ -69,11 +67,11 @@ impl InstrumentedWindows {
     fn fused_coefficients<const JACK: bool>(
         &self,
         w: usize,
-        (ridge, t, min_pivot_ratio): (f64, &[f64], f64),
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
         cov: &mut [f64],
     ) -> bool {
-        if !self.solve_span(self.span(w, 0), ridge, t, min_pivot_ratio, out) {
+        if !self.solve_span(self.span(w, 0), solve, out) {
             return false;
         }
         let (sum_w, sum_w2) = self.influence_pass::<true, JACK>(w, out, cov);
@@ -109,13 +107,11 @@ impl InstrumentedWindows {
     pub fn estimate_coefficients_first_order(
         &self,
         w: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
         cov: &mut [f64],
     ) -> bool {
-        self.fused_coefficients::<false>(w, (ridge, t, min_pivot_ratio), out, cov)
+        self.fused_coefficients::<false>(w, solve, out, cov)
     }
 
     /// The pass over window `w`'s blocks behind both: `Ω_θ` into `cov`, and with `WEIGHTS` the
@@ -157,20 +153,8 @@ impl InstrumentedWindows {
         let blocks = self.windows[w].min(self.block_len);
         let stride = lay.stride();
         let (older, newer) = self.window_blocks(w);
-        let jack = Jackknife {
-            theta: &out.theta[..p * d],
-            qa: &out.qa[..k * d],
-            root: &out.diag[..d],
-            p,
-            d,
-            k,
-        };
-        let mut scratch = JackScratch::new(
-            &mut out.jack[..d * d],
-            &mut out.jack_piv[..d],
-            &mut out.gj[..n],
-            &out.diag[..d],
-        );
+        let jack = Jackknife::of(&out.theta, &out.qa, &out.diag, (p, d, k));
+        let mut scratch = JackScratch::new(&jack, &mut out.jack, &mut out.jack_piv, &mut out.gj);
         let x = &out.x[..p * k];
         // Batches of `b > 1` blocks: the batch's influence sum in `sums` (free after the
         // estimate; `stride >= p d` values), its weight in `batch_w`.

@@ -3,7 +3,7 @@
 //! number of blocks.
 
 use super::jackknife::MIN_LEVERAGE_PIVOT;
-use super::outcome::WindowEstimate;
+use super::outcome::{Solve, WindowEstimate};
 use super::{InstrumentedWindows, Layout};
 use crate::linalg;
 
@@ -100,15 +100,8 @@ impl InstrumentedWindows {
     /// ratio of `A` equilibrated to a unit diagonal at most `min_pivot_ratio`, the same in any
     /// units of the regressors), a block alone identifies a direction (the equilibrated
     /// pivot ratio of `I − L_j` at most [`MIN_LEVERAGE_PIVOT`]), or a value is not finite.
-    pub fn estimate(
-        &self,
-        w: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
-        out: &mut WindowEstimate,
-    ) {
-        self.estimate_span(self.span(w, 0), ridge, t, min_pivot_ratio, out);
+    pub fn estimate(&self, w: usize, solve: Solve<'_>, out: &mut WindowEstimate) {
+        self.estimate_span(self.span(w, 0), solve, out);
     }
 
     /// As [`estimate`](Self::estimate), on window `w`'s blocks older than its newest `skip`
@@ -117,12 +110,10 @@ impl InstrumentedWindows {
         &self,
         w: usize,
         skip: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
     ) {
-        self.estimate_span(self.span(w, skip), ridge, t, min_pivot_ratio, out);
+        self.estimate_span(self.span(w, skip), solve, out);
     }
 
     /// As [`estimate`](Self::estimate) (batches of one block, which this structure must
@@ -134,9 +125,7 @@ impl InstrumentedWindows {
         &self,
         w: usize,
         batch: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
     ) {
         let pp = self.p * self.p;
@@ -155,41 +144,32 @@ impl InstrumentedWindows {
         } else {
             0
         };
-        self.estimate_span_second(span, ridge, t, min_pivot_ratio, out, second);
+        self.estimate_span_second(span, solve, out, second);
     }
 
-    fn estimate_span(
-        &self,
-        span: (usize, usize),
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
-        out: &mut WindowEstimate,
-    ) {
-        self.estimate_span_second(span, ridge, t, min_pivot_ratio, out, 0);
+    fn estimate_span(&self, span: (usize, usize), solve: Solve<'_>, out: &mut WindowEstimate) {
+        self.estimate_span_second(span, solve, out, 0);
     }
 
     fn estimate_span_second(
         &self,
         span: (usize, usize),
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
         second: usize,
     ) {
-        if !self.solve_span(span, ridge, t, min_pivot_ratio, out) {
+        if !self.solve_span(span, solve, out) {
             return;
         }
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(span, t, out, (1, 2, 2), second),
-            (1, 3, 3) => self.block_scores(span, t, out, (1, 3, 3), second),
-            (1, 4, 4) => self.block_scores(span, t, out, (1, 4, 4), second),
-            (1, 5, 5) => self.block_scores(span, t, out, (1, 5, 5), second),
-            (1, 6, 6) => self.block_scores(span, t, out, (1, 6, 6), second),
-            _ => self.block_scores(span, t, out, (p, d, k), second),
+            (1, 2, 2) => self.block_scores(span, solve.t, out, (1, 2, 2), second),
+            (1, 3, 3) => self.block_scores(span, solve.t, out, (1, 3, 3), second),
+            (1, 4, 4) => self.block_scores(span, solve.t, out, (1, 4, 4), second),
+            (1, 5, 5) => self.block_scores(span, solve.t, out, (1, 5, 5), second),
+            (1, 6, 6) => self.block_scores(span, solve.t, out, (1, 6, 6), second),
+            _ => self.block_scores(span, solve.t, out, (p, d, k), second),
         };
         out.effective_blocks =
             if sum_w2 > 0.0 && out.leverage_pivot > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
@@ -218,9 +198,7 @@ impl InstrumentedWindows {
     pub(super) fn solve_span(
         &self,
         span: (usize, usize),
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
     ) -> bool {
         let blocks = span.0.saturating_sub(span.1);
@@ -230,7 +208,7 @@ impl InstrumentedWindows {
             // a direct sum.
             self.span_sums(span, &mut out.sums);
         }
-        self.solve_sums(blocks, ridge, t, min_pivot_ratio, out)
+        self.solve_sums(blocks, solve, out)
     }
 
     /// [`solve_span`](Self::solve_span) on `blocks` blocks whose sums are in `out.sums`
@@ -238,18 +216,16 @@ impl InstrumentedWindows {
     pub(super) fn solve_sums(
         &self,
         blocks: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
     ) -> bool {
         let lay = self.layout();
         match (lay.p, lay.d, lay.k) {
-            (1, 2, 2) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 2, 2)),
-            (1, 3, 3) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 3, 3)),
-            (1, 4, 4) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 4, 4)),
-            (1, 5, 5) => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, (1, 5, 5)),
-            dims => self.solve_dims(blocks, ridge, t, min_pivot_ratio, out, dims),
+            (1, 2, 2) => self.solve_dims(blocks, solve, out, (1, 2, 2)),
+            (1, 3, 3) => self.solve_dims(blocks, solve, out, (1, 3, 3)),
+            (1, 4, 4) => self.solve_dims(blocks, solve, out, (1, 4, 4)),
+            (1, 5, 5) => self.solve_dims(blocks, solve, out, (1, 5, 5)),
+            dims => self.solve_dims(blocks, solve, out, dims),
         }
     }
 
@@ -260,12 +236,11 @@ impl InstrumentedWindows {
     fn solve_dims(
         &self,
         blocks: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
         (p, d, k): (usize, usize, usize),
     ) -> bool {
+        let Solve { ridge, t, min_pivot_ratio } = solve;
         out.ready = false;
         (out.pivot_ratio, out.effective_blocks, out.leverage_pivot) = (0.0, 0.0, 0.0);
         out.columns = blocks * self.coarse * self.horizon;
@@ -305,25 +280,16 @@ impl InstrumentedWindows {
                 out.lu[i * d + j] = if i == j { v * (1.0 + ridge) } else { v };
             }
         }
-        // The instruments' strength is the pivot ratio of A equilibrated, `S A S` with
-        // `S = diag(A)^(−1/2)` (factored in the free Cholesky buffer, `d <= k`): in no unit, so
-        // that an output logged in mK instead of K (its powers in the guards' fits then span
-        // twelve more decades) is not refused for its unit. The solve factors A itself.
-        for i in 0..d {
-            let a = out.lu[i * d + i];
-            if !(a > 0.0 && a.is_finite()) {
-                out.pivot_ratio = 0.0;
-                return false;
-            }
-            out.row[i] = 1.0 / a.sqrt();
-            out.diag[i] = a.sqrt();
-        }
-        for i in 0..d {
-            for j in 0..d {
-                out.hfac[i * d + j] = out.lu[i * d + j] * out.row[i] * out.row[j];
-            }
-        }
-        let ratio = linalg::lu_in_place(&mut out.hfac[..d * d], d, &mut out.piv);
+        let Some(ratio) = equilibrated_pivot(
+            &out.lu,
+            (&mut out.hfac, &mut out.piv),
+            &mut out.diag,
+            &mut out.row,
+            d,
+        ) else {
+            out.pivot_ratio = 0.0;
+            return false;
+        };
         out.pivot_ratio = ratio;
         if !(ratio > min_pivot_ratio) {
             return false;
@@ -363,4 +329,33 @@ impl InstrumentedWindows {
         }
         true
     }
+}
+
+/// The instruments' strength: the pivot ratio of `A` (in `out.lu`, `d × d`) equilibrated,
+/// `S A S` with `S = diag(A)^(−1/2)` (factored in `factor`, the free Cholesky buffer, `d <= k`), with
+/// `√A_aa` into `diag`; `None` where a diagonal entry is not positive and finite. In no unit,
+/// so that an output logged in mK instead of K (its powers in the guards' fits then span
+/// twelve more decades) is not refused for its unit. The solve factors `A` itself.
+#[inline(always)]
+fn equilibrated_pivot(
+    lu: &[f64],
+    (factor, piv): (&mut [f64], &mut [usize]),
+    diag: &mut [f64],
+    inv: &mut [f64],
+    d: usize,
+) -> Option<f64> {
+    for i in 0..d {
+        let a = lu[i * d + i];
+        if !(a > 0.0 && a.is_finite()) {
+            return None;
+        }
+        inv[i] = 1.0 / a.sqrt();
+        diag[i] = a.sqrt();
+    }
+    for i in 0..d {
+        for j in 0..d {
+            factor[i * d + j] = lu[i * d + j] * inv[i] * inv[j];
+        }
+    }
+    Some(linalg::lu_in_place(&mut factor[..d * d], d, piv))
 }

@@ -4,7 +4,7 @@
 //! sums ([`InstrumentedWindows::fresh_estimate`]).
 
 use super::moments::{Moments, upper};
-use super::{InstrumentedWindows, WindowEstimate};
+use super::{InstrumentedWindows, Solve, WindowEstimate};
 
 /// A span's first-order statistics fell below this share of their magnitude (the sum of the
 /// absolute terms of the quadratic form): the difference of the segment sums may have lost
@@ -59,14 +59,12 @@ impl InstrumentedWindows {
         &mut self,
         w: usize,
         skip: usize,
-        ridge: f64,
-        t: &[f64],
-        min_pivot_ratio: f64,
+        solve: Solve<'_>,
         out: &mut WindowEstimate,
     ) {
         let span = self.span(w, skip);
         if self.batch != 1 || self.moments.is_none() {
-            self.estimate_older(w, skip, ridge, t, min_pivot_ratio, out);
+            self.estimate_older(w, skip, solve, out);
             return;
         }
         let Some(mut mo) = self.moments.take() else { return };
@@ -76,11 +74,11 @@ impl InstrumentedWindows {
         let stride = self.layout().stride();
         out.sums.copy_from_slice(&mo.span[..stride]);
         let blocks = span.0.saturating_sub(span.1);
-        let solved = self.solve_sums(blocks, ridge, t, min_pivot_ratio, out);
-        let exact = solved && !self.first_order(&mut mo, blocks, t, out);
+        let solved = self.solve_sums(blocks, solve, out);
+        let exact = solved && !self.first_order(&mut mo, blocks, solve.t, out);
         self.moments = Some(mo);
         if exact {
-            self.estimate_older(w, skip, ridge, t, min_pivot_ratio, out);
+            self.estimate_older(w, skip, solve, out);
         }
     }
 
@@ -101,15 +99,7 @@ impl InstrumentedWindows {
         let m2 = &mo.span[stride..stride + nv * (nv + 1) / 2];
         let mh = stride + nv * (nv + 1) / 2;
         // X' = Q A⁻¹ T (k × p), as the block pass forms `G_j T` (the raw `T`).
-        for b in 0..k {
-            for j in 0..p {
-                let mut v = 0.0;
-                for a in 0..d {
-                    v += out.qa[b * d + a] * t[a * p + j];
-                }
-                mo.xt[b * p + j] = v;
-            }
-        }
+        product(&out.qa[..k * d], t, &mut mo.xt, (k, d, p));
         // C: row (i, jj) of sym(G T); G T[i][jj] = Σ_b r[i][b] X'[b][jj].
         mo.coef.fill(0.0);
         for i in 0..p {
@@ -142,26 +132,7 @@ impl InstrumentedWindows {
                 out.score_cov[r * pp + s] = v * scale;
             }
         }
-        // The exact-identity refusal: Σ_j ‖r_j‖² against Σ_j ‖Cw_j‖², each `r_{j,ib}` the
-        // combination of `Cw_{j,ib}` (coefficient 1) and `N_{j,cb}` (coefficient −θ̂_ic).
-        let (mut residual, mut raw, mut mag) = (0.0, 0.0, 0.0);
-        for i in 0..p {
-            for b in 0..k {
-                let ci = d * k + i * k + b;
-                let th = &out.theta[i * d..(i + 1) * d];
-                // Σ_a c_a M2[a][·] c over the d + 1 entries (a = N_cb for c < d, then Cw_ib).
-                for a in 0..=d {
-                    let (ia, ca) = if a < d { (a * k + b, -th[a]) } else { (ci, 1.0) };
-                    for bb in 0..=d {
-                        let (ib, cb) = if bb < d { (bb * k + b, -th[bb]) } else { (ci, 1.0) };
-                        let term = ca * m2[upper(ia.min(ib), ia.max(ib), nv)] * cb;
-                        residual += term;
-                        mag += term.abs();
-                    }
-                }
-                raw += m2[upper(ci, ci, nv)];
-            }
-        }
+        let (residual, raw, mag) = residual_moments(m2, nv, &out.theta, (p, d, k));
         if !(residual > CANCELLATION * mag) {
             return false;
         }
@@ -200,5 +171,50 @@ impl InstrumentedWindows {
         let finite = out.theta.iter().chain(&out.score_cov[..pp * pp]).all(|v| v.is_finite());
         out.ready = finite && residual > super::MIN_RESIDUAL_SHARE * raw;
         true
+    }
+}
+
+/// The exact-identity refusal's moments from the span's `Σ v vᵀ` (`m2`, upper triangle of
+/// `nv`): `(Σ_j ‖r_j‖², Σ_j ‖Cw_j‖², the residual's magnitude)`, each `r_{j,ib}` the
+/// combination of `Cw_{j,ib}` (coefficient 1) and `N_{j,cb}` (coefficient −θ̂_ic).
+#[inline]
+fn residual_moments(
+    m2: &[f64],
+    nv: usize,
+    theta: &[f64],
+    (p, d, k): (usize, usize, usize),
+) -> (f64, f64, f64) {
+    let (mut residual, mut raw, mut mag) = (0.0, 0.0, 0.0);
+    for i in 0..p {
+        for b in 0..k {
+            let ci = d * k + i * k + b;
+            let th = &theta[i * d..(i + 1) * d];
+            // Σ_a c_a M2[a][·] c over the d + 1 entries (a = N_cb for c < d, then Cw_ib).
+            for a in 0..=d {
+                let (ia, ca) = if a < d { (a * k + b, -th[a]) } else { (ci, 1.0) };
+                for bb in 0..=d {
+                    let (ib, cb) = if bb < d { (bb * k + b, -th[bb]) } else { (ci, 1.0) };
+                    let term = ca * m2[upper(ia.min(ib), ia.max(ib), nv)] * cb;
+                    residual += term;
+                    mag += term.abs();
+                }
+            }
+            raw += m2[upper(ci, ci, nv)];
+        }
+    }
+    (residual, raw, mag)
+}
+
+/// `out = a b` for `a` (`k × d`) and `b` (`d × p`), row-major.
+#[inline]
+fn product(a: &[f64], b: &[f64], out: &mut [f64], (k, d, p): (usize, usize, usize)) {
+    for r in 0..k {
+        for j in 0..p {
+            let mut v = 0.0;
+            for c in 0..d {
+                v += a[r * d + c] * b[c * p + j];
+            }
+            out[r * p + j] = v;
+        }
     }
 }

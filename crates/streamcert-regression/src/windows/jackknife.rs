@@ -24,6 +24,20 @@ pub(super) struct Jackknife<'a> {
     pub(super) k: usize,
 }
 
+impl<'a> Jackknife<'a> {
+    /// The view of a solved window with `(p, d, k)` outputs, regressors and instrument
+    /// columns: `Θ̂`, `Q A⁻¹` and `√A_aa` from the estimate's buffers (each at least its
+    /// shape's length).
+    pub(super) fn of(
+        theta: &'a [f64],
+        qa: &'a [f64],
+        root: &'a [f64],
+        (p, d, k): (usize, usize, usize),
+    ) -> Self {
+        Self { theta: &theta[..p * d], qa: &qa[..k * d], root: &root[..d], p, d, k }
+    }
+}
+
 /// Scratch and sums for [`Jackknife::block`].
 pub(super) struct JackScratch<'a> {
     /// The LU factor of `I − L_j` (`d × d`) and its pivots.
@@ -42,11 +56,13 @@ impl<'a> JackScratch<'a> {
     /// Scratch over the given buffers, `residual` and `raw` at zero, and the reciprocals of
     /// `root` (`√A_aa`, the first eight) for the shaped blocks.
     pub(super) fn new(
+        view: &Jackknife<'_>,
         lu: &'a mut [f64],
         piv: &'a mut [usize],
         g: &'a mut [f64],
-        root: &[f64],
     ) -> Self {
+        let (p, d, root) = (view.p, view.d, view.root);
+        let (lu, piv, g) = (&mut lu[..d * d], &mut piv[..d], &mut g[..p * d]);
         let mut inv_root = [0.0; 8];
         for (o, r) in inv_root.iter_mut().zip(root) {
             *o = 1.0 / r;

@@ -8,6 +8,21 @@ use super::Layout;
 #[cfg(doc)]
 use super::InstrumentedWindows;
 
+/// How a window is solved and what its rate is read through: the settings every estimate of
+/// [`InstrumentedWindows`] takes (`Copy`; the calibrated certificate holds one per state).
+#[derive(Debug, Clone, Copy)]
+pub struct Solve<'a> {
+    /// The ridge `λ`, relative to each diagonal entry: the first stage solves
+    /// `H + λ diag H`, so the estimate is the same in any units of the regressors.
+    pub ridge: f64,
+    /// `T` (`d × p`, row-major): the rate's matrix is `sym(Θ̂ T)` (for the closed loop
+    /// `T = [I; K]`, with a zero row for the affine model's intercept).
+    pub t: &'a [f64],
+    /// The smallest accepted pivot ratio of `A` equilibrated to a unit diagonal: at or below
+    /// it the window is singular to working precision and not ready.
+    pub min_pivot_ratio: f64,
+}
+
 /// The outcome of [`InstrumentedWindows::estimate`](super::InstrumentedWindows::estimate) for one window, in buffers the caller owns
 /// (make one with [`WindowEstimate::new`] and reuse it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -38,6 +38,27 @@ fn batch_step(
     }
 }
 
+/// `block = sym(G T)` (`p × p`) for the influence rows `G` (`p × d`) and `T` (`d × p`).
+#[inline(always)]
+fn sym_product(g: &[f64], t: &[f64], block: &mut [f64], p: usize, d: usize) {
+    for i in 0..p {
+        for jj in 0..p {
+            let mut v = 0.0;
+            for a in 0..d {
+                v += g[i * d + a] * t[a * p + jj];
+            }
+            block[i * p + jj] = v;
+        }
+    }
+    for i in 0..p {
+        for jj in i + 1..p {
+            let s = 0.5 * (block[i * p + jj] + block[jj * p + i]);
+            block[i * p + jj] = s;
+            block[jj * p + i] = s;
+        }
+    }
+}
+
 impl InstrumentedWindows {
     /// The block sums of the scores of window `w`, each block's delete-one-block change of
     /// `sym(Θ̂ T)` ([`Jackknife::block`]), added as `Σ_j vec(S_j) vec(S_j)ᵀ` into
@@ -65,20 +86,8 @@ impl InstrumentedWindows {
         let batched = &mut out.batched;
         let second_cov = &mut batched.score_cov[..if second >= 2 { pp * pp } else { 0 }];
         second_cov.fill(0.0);
-        let jack = Jackknife {
-            theta: &out.theta[..p * d],
-            qa: &out.qa[..k * d],
-            root: &out.diag[..d],
-            p,
-            d,
-            k,
-        };
-        let mut scratch = JackScratch::new(
-            &mut out.jack[..d * d],
-            &mut out.jack_piv[..d],
-            &mut out.gj[..p * d],
-            &out.diag[..d],
-        );
+        let jack = Jackknife::of(&out.theta, &out.qa, &out.diag, (p, d, k));
+        let mut scratch = JackScratch::new(&jack, &mut out.jack, &mut out.jack_piv, &mut out.gj);
         let x = &out.x[..p * k];
         let block = &mut out.block[..pp];
         let (mut sum_w, mut sum_w2, mut cov) = (0.0, 0.0, 0.0);
@@ -101,23 +110,7 @@ impl InstrumentedWindows {
         for blk in older.chunks_exact(stride).chain(newer.chunks_exact(stride)) {
             let (bn, bcw, bh) = (&blk[..lay.cw()], &blk[lay.cw()..lay.h()], &blk[lay.h()..stride]);
             least = least.min(jack.block_shaped(bn, bcw, &mut scratch));
-            let g = &scratch.g;
-            for i in 0..p {
-                for jj in 0..p {
-                    let mut v = 0.0;
-                    for a in 0..d {
-                        v += g[i * d + a] * t[a * p + jj];
-                    }
-                    block[i * p + jj] = v;
-                }
-            }
-            for i in 0..p {
-                for jj in i + 1..p {
-                    let s = 0.5 * (block[i * p + jj] + block[jj * p + i]);
-                    block[i * p + jj] = s;
-                    block[jj * p + i] = s;
-                }
-            }
+            sym_product(scratch.g, t, block, p, d);
             let weight = block_weight(bh, x, k);
             if batch == 1 {
                 if pp == 1 {

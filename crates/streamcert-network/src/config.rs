@@ -155,9 +155,7 @@ impl NetworkConfig {
     /// # Errors
     /// [`NetworkError::InvalidConfig`].
     pub fn validate(&self) -> Result<(), NetworkError> {
-        let bad = |field: &'static str, reason: String| {
-            Err(NetworkError::InvalidConfig { field, reason })
-        };
+        let bad = NetworkError::refuse::<()>;
         let n = self.subsystems.len();
         if n == 0 {
             return bad("subsystems", "at least one subsystem is needed".into());
@@ -191,6 +189,38 @@ impl NetworkConfig {
                 return bad("couplings", format!("({i}, {j}): γ must be finite and >= 0, got {g}"));
             }
         }
+        self.check_estimated()?;
+        if self.certificate == CertificateKind::Calibrated {
+            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none()) {
+                return bad(
+                    "certificate",
+                    format!(
+                        "the calibrated certificate composes, but subsystem `{}` has no \
+                         calibration (use split_risk, or the Gaussian certificate)",
+                        s.name
+                    ),
+                );
+            }
+        }
+        if self.certificate == CertificateKind::Wasserstein {
+            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.ambiguity.is_none()) {
+                return bad(
+                    "certificate",
+                    format!(
+                        "the Wasserstein certificate composes, but subsystem `{}` has no \
+                         ambiguity model",
+                        s.name
+                    ),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The estimated couplings: indices in range, a block that exists, none given twice.
+    fn check_estimated(&self) -> Result<(), NetworkError> {
+        let bad = NetworkError::refuse::<()>;
+        let n = self.subsystems.len();
         for e in &self.estimated {
             if e.to >= n || e.from >= n || e.to == e.from {
                 return bad(
@@ -220,30 +250,6 @@ impl NetworkConfig {
                         "({}, {}): a coupling or block is given twice (estimated and given, or \
                          estimated twice)",
                         e.to, e.from
-                    ),
-                );
-            }
-        }
-        if self.certificate == CertificateKind::Calibrated {
-            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none()) {
-                return bad(
-                    "certificate",
-                    format!(
-                        "the calibrated certificate composes, but subsystem `{}` has no \
-                         calibration (use split_risk, or the Gaussian certificate)",
-                        s.name
-                    ),
-                );
-            }
-        }
-        if self.certificate == CertificateKind::Wasserstein {
-            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.ambiguity.is_none()) {
-                return bad(
-                    "certificate",
-                    format!(
-                        "the Wasserstein certificate composes, but subsystem `{}` has no \
-                         ambiguity model",
-                        s.name
                     ),
                 );
             }

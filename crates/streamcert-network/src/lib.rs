@@ -125,3 +125,10 @@ pub enum NetworkError {
     #[error("composition: {0}")]
     Compose(#[from] streamcert_compose::ComposeError),
 }
+
+impl NetworkError {
+    /// `Err(InvalidConfig)` for `field`, with what is wrong and what would be valid.
+    pub(crate) fn refuse<T>(field: &'static str, reason: String) -> Result<T, Self> {
+        Err(Self::InvalidConfig { field, reason })
+    }
+}

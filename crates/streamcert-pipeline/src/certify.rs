@@ -200,16 +200,7 @@ pub fn run<R: Read + Send, W: Write>(
     out: &mut W,
     opts: &Options,
 ) -> Result<Summary, CliError> {
-    let (mut cert, mut summary) = match &opts.resume {
-        Some(path) => load(path, cfg)?,
-        None => (
-            Certifier::new(cfg.certifier.clone()).map_err(|e| CliError::Config {
-                path: "configuration".into(),
-                message: e.to_string(),
-            })?,
-            Summary::default(),
-        ),
-    };
+    let (mut cert, mut summary) = start(cfg, opts)?;
     if opts.plot.is_some() {
         summary.trace = Some(crate::picture::Trace::new());
     }
@@ -235,63 +226,11 @@ pub fn run<R: Read + Send, W: Write>(
     // crash) and are passed over, counted; from the first later row on, times must increase
     // as usual, so an out-of-order row later in the input is still an error.
     let replay = summary.last_time;
-    // A checkpoint's text is made on the certifying side (only when a path is set).
-    let write_checkpoint = |text: &str| match &opts.checkpoint {
-        Some(path) => write_atomic(path, text),
-        None => Ok(()),
-    };
-    let mut step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
+    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
     if opts.flush == Flush::EachRow {
-        let mut s = Sample::default();
-        let mut region = Vec::with_capacity(channels.len());
-        while let Some(next) = reader.next_into(&mut s) {
-            region.clear();
-            if let Some(ev) = step.row(next, &s, &mut region)? {
-                writer.write_with_region(&ev, &region).map_err(io)?;
-                if let Some(text) = step.due_checkpoint()? {
-                    // The rows a checkpoint holds are on the output before it is written.
-                    writer.flush().map_err(io)?;
-                    write_checkpoint(&text)?;
-                }
-            }
-        }
+        run_live(step, &mut reader, &mut writer, channels.len())?;
     } else {
-        std::thread::scope(|scope| -> Result<(), CliError> {
-            let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
-            let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Batch>();
-            scope.spawn(move || {
-                let mut s = Sample::default();
-                loop {
-                    let mut batch = empty_rx.try_recv().unwrap_or_else(|_| Batch::new());
-                    batch.clear();
-                    let done = step.fill(&mut reader, &mut s, &mut batch);
-                    // A closed channel means the writing side stopped (an error): stop too.
-                    if full_tx.send(batch).is_err() || done {
-                        return;
-                    }
-                }
-            });
-            for mut batch in full_rx {
-                let mut from = 0;
-                let mut checkpoints = batch.checkpoints.drain(..).peekable();
-                for (i, ev) in batch.evidence.iter().enumerate() {
-                    let to = batch.region_ends[i];
-                    writer.write_with_region(ev, &batch.regions[from..to]).map_err(io)?;
-                    from = to;
-                    while let Some((_, text)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
-                        writer.flush().map_err(io)?;
-                        write_checkpoint(&text)?;
-                    }
-                }
-                drop(checkpoints);
-                if let Some(e) = batch.error.take() {
-                    return Err(e);
-                }
-                // The certifying thread may have finished: a failed return is harmless.
-                let _ = empty_tx.send(batch);
-            }
-            Ok(())
-        })?;
+        run_batched(step, &mut reader, &mut writer)?;
     }
     writer.flush().map_err(io)?;
     finish(&cert, &mut summary);
@@ -303,6 +242,99 @@ pub fn run<R: Read + Send, W: Write>(
         trace.draw_certify(path, cfg.certifier.margin, &name)?;
     }
     Ok(summary)
+}
+
+/// The configured certifier and an empty summary, or the checkpoint's to resume from.
+fn start(cfg: &Config, opts: &Options) -> Result<(Certifier, Summary), CliError> {
+    match &opts.resume {
+        Some(path) => load(path, cfg),
+        None => {
+            let cert = Certifier::new(cfg.certifier.clone()).map_err(|e| CliError::Config {
+                path: "configuration".into(),
+                message: e.to_string(),
+            })?;
+            Ok((cert, Summary::default()))
+        }
+    }
+}
+
+/// Write a due checkpoint's text (made on the certifying side) where `opts` says, if it does.
+fn write_checkpoint(opts: &Options, text: &str) -> Result<(), CliError> {
+    match &opts.checkpoint {
+        Some(path) => write_atomic(path, text),
+        None => Ok(()),
+    }
+}
+
+/// A live input: each row read, certified and written on the calling thread.
+fn run_live<R: Read, W: Write>(
+    mut step: Step<'_>,
+    reader: &mut SampleReader<R>,
+    writer: &mut EvidenceWriter<W>,
+    channels: usize,
+) -> Result<(), CliError> {
+    let io = |e| CliError::io("writing output", e);
+    let mut s = Sample::default();
+    let mut region = Vec::with_capacity(channels);
+    while let Some(next) = reader.next_into(&mut s) {
+        region.clear();
+        if let Some(ev) = step.row(next, &s, &mut region)? {
+            writer.write_with_region(&ev, &region).map_err(io)?;
+            if let Some(text) = step.due_checkpoint()? {
+                // The rows a checkpoint holds are on the output before it is written.
+                writer.flush().map_err(io)?;
+                write_checkpoint(step.opts, &text)?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// A file: a second thread reads, parses and certifies in batches while this one formats
+/// and writes, in input order.
+fn run_batched<R: Read + Send, W: Write>(
+    mut step: Step<'_>,
+    reader: &mut SampleReader<R>,
+    writer: &mut EvidenceWriter<W>,
+) -> Result<(), CliError> {
+    let io = |e| CliError::io("writing output", e);
+    let opts = step.opts;
+    std::thread::scope(|scope| -> Result<(), CliError> {
+        let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
+        let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Batch>();
+        scope.spawn(move || {
+            let mut s = Sample::default();
+            loop {
+                let mut batch = empty_rx.try_recv().unwrap_or_else(|_| Batch::new());
+                batch.clear();
+                let done = step.fill(reader, &mut s, &mut batch);
+                // A closed channel means the writing side stopped (an error): stop too.
+                if full_tx.send(batch).is_err() || done {
+                    return;
+                }
+            }
+        });
+        for mut batch in full_rx {
+            let mut from = 0;
+            let mut checkpoints = batch.checkpoints.drain(..).peekable();
+            for (i, ev) in batch.evidence.iter().enumerate() {
+                let to = batch.region_ends[i];
+                writer.write_with_region(ev, &batch.regions[from..to]).map_err(io)?;
+                from = to;
+                while let Some((_, text)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
+                    writer.flush().map_err(io)?;
+                    write_checkpoint(opts, &text)?;
+                }
+            }
+            drop(checkpoints);
+            if let Some(e) = batch.error.take() {
+                return Err(e);
+            }
+            // The certifying thread may have finished: a failed return is harmless.
+            let _ = empty_tx.send(batch);
+        }
+        Ok(())
+    })
 }
 
 /// The certifying side of one `certify` run: every accepted row updates it.

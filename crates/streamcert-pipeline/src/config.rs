@@ -384,25 +384,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
         return Err(bad(required_message(&unset)));
     }
     let f: File = toml::from_str(text).map_err(|e| bad(toml_message(&e, text, place)))?;
-    let (p, m) = (f.columns.outputs.len(), f.columns.inputs.len());
-    if p == 0 || m == 0 {
-        return Err(bad(
-            "columns.outputs and columns.inputs must each name at least one column".into()
-        ));
-    }
-    let mut names: Vec<&String> = f.columns.outputs.iter().chain(&f.columns.inputs).collect();
-    names.push(&f.columns.time);
-    names.sort();
-    if names.windows(2).any(|w| w[0] == w[1]) {
-        return Err(bad("a column is named twice in [columns]".into()));
-    }
-    if f.controller.gain.len() != m || f.controller.gain.iter().any(|r| r.len() != p) {
-        return Err(bad(format!(
-            "controller.gain must be m × p = {m} × {p} (one row per input, one value per output), got {} rows of lengths {:?}",
-            f.controller.gain.len(),
-            f.controller.gain.iter().map(Vec::len).collect::<Vec<_>>()
-        )));
-    }
+    let (p, m) = check_shape(&f).map_err(&bad)?;
     let r = &f.regression;
     let reg = RegressionConfig {
         min_columns: r.min_columns.unwrap_or(r.window),
@@ -423,51 +405,85 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     }
     certifier.metric.clone_from(&f.certificate.metric);
     let a = &f.ambiguity;
-    if a.enabled {
-        certifier.ambiguity = Some(AmbiguityConfig {
-            tail_window: a.tail_window,
-            eps_floor: a.eps_floor,
-            eps_cap: a.eps_cap,
-            alpha_kurtosis: a.alpha_kurtosis,
-            alpha_spike: a.alpha_spike,
-            spike_scale: match a.sigma0 {
-                Some(sigma0) => SpikeScale::Fixed { sigma0 },
-                None => SpikeScale::Calibrated { samples: a.tail_window },
-            },
-        });
-    }
+    certifier.ambiguity = a.config();
     certifier.residuals = a.residuals;
     if f.calibration.enabled {
         certifier.calibration = Some(f.calibration.calibration());
     }
-    let nl = &f.nonlinear;
-    if nl.enabled {
-        let d = NonlinearConfig::default();
-        let features = match &nl.features {
-            Features::Library(name) if name == "polynomial" => None,
-            Features::Library(name) => {
-                return Err(bad(format!(
-                    "[nonlinear] features: `{name}` is no library: use \"polynomial\" (with \
-                     degree) or a list of features such as [\"y\", \"y*tanh(y)\"]"
-                )));
-            }
-            Features::Named(names) => Some(
-                FeatureSet::from_names(names)
-                    .map_err(|e| bad(format!("[nonlinear] features: {e}")))?,
-            ),
-        };
-        certifier.nonlinear = Some(NonlinearConfig {
-            degree: nl.degree.unwrap_or(d.degree),
-            features,
-            cells: nl.cells.unwrap_or(d.cells),
-            test_risk: nl.test_risk,
-            check_terms: nl.check_terms.unwrap_or(d.check_terms),
-        });
-    }
+    certifier.nonlinear = f.nonlinear.config().map_err(&bad)?;
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
     Ok(Config { columns: f.columns, certifier })
+}
+
+/// The columns named once each, at least one output and one input, and a gain of `m × p`:
+/// `(p, m)`, or what is wrong.
+fn check_shape(f: &File) -> Result<(usize, usize), String> {
+    let (p, m) = (f.columns.outputs.len(), f.columns.inputs.len());
+    if p == 0 || m == 0 {
+        return Err("columns.outputs and columns.inputs must each name at least one column".into());
+    }
+    let mut names: Vec<&String> = f.columns.outputs.iter().chain(&f.columns.inputs).collect();
+    names.push(&f.columns.time);
+    names.sort();
+    if names.windows(2).any(|w| w[0] == w[1]) {
+        return Err("a column is named twice in [columns]".into());
+    }
+    if f.controller.gain.len() != m || f.controller.gain.iter().any(|r| r.len() != p) {
+        return Err(format!(
+            "controller.gain must be m × p = {m} × {p} (one row per input, one value per output), got {} rows of lengths {:?}",
+            f.controller.gain.len(),
+            f.controller.gain.iter().map(Vec::len).collect::<Vec<_>>()
+        ));
+    }
+    Ok((p, m))
+}
+
+impl Ambiguity {
+    /// The ambiguity model this section configures, if enabled.
+    fn config(&self) -> Option<AmbiguityConfig> {
+        self.enabled.then_some(AmbiguityConfig {
+            tail_window: self.tail_window,
+            eps_floor: self.eps_floor,
+            eps_cap: self.eps_cap,
+            alpha_kurtosis: self.alpha_kurtosis,
+            alpha_spike: self.alpha_spike,
+            spike_scale: match self.sigma0 {
+                Some(sigma0) => SpikeScale::Fixed { sigma0 },
+                None => SpikeScale::Calibrated { samples: self.tail_window },
+            },
+        })
+    }
+}
+
+impl NonlinearSection {
+    /// The nonlinear certificate this section configures, if enabled, or what is wrong.
+    fn config(&self) -> Result<Option<NonlinearConfig>, String> {
+        if !self.enabled {
+            return Ok(None);
+        }
+        let d = NonlinearConfig::default();
+        let features = match &self.features {
+            Features::Library(name) if name == "polynomial" => None,
+            Features::Library(name) => {
+                return Err(format!(
+                    "[nonlinear] features: `{name}` is no library: use \"polynomial\" (with \
+                     degree) or a list of features such as [\"y\", \"y*tanh(y)\"]"
+                ));
+            }
+            Features::Named(names) => Some(
+                FeatureSet::from_names(names).map_err(|e| format!("[nonlinear] features: {e}"))?,
+            ),
+        };
+        Ok(Some(NonlinearConfig {
+            degree: self.degree.unwrap_or(d.degree),
+            features,
+            cells: self.cells.unwrap_or(d.cells),
+            test_risk: self.test_risk,
+            check_terms: self.check_terms.unwrap_or(d.check_terms),
+        }))
+    }
 }
 
 #[cfg(test)]

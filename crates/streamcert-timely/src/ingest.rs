@@ -206,6 +206,28 @@ where
         self.flush().or(stopped)
     }
 
+    /// The epochs a row at `t` (input line `line`) makes due: the first row starts the site
+    /// at its first epoch; a later one crosses the boundaries up to it.
+    fn advance_epochs(&mut self, t: f64, line: u64) -> Option<(u64, Failure<E>)> {
+        let first = self.site.next_epoch().is_none();
+        match self.site.due(&self.sh.cfg, t) {
+            Ok(_) if first => {
+                if let Some(f) = self.site.next_epoch() {
+                    self.give(Msg::Start { first: f });
+                    if *self.input.time() < f {
+                        self.input.advance_to(f);
+                    }
+                }
+                None
+            }
+            Ok(due) if due.is_empty() => None,
+            Ok(due) => self.boundary(due.start, due.end, line),
+            Err(source) => Some((line, Failure::Network { line, source })),
+        }
+    }
+
+    /// The reading loop of [`read`](Self::read): each row certified into the pending samples,
+    /// the epochs it makes due composed; replayed rows passed over after a resume.
     fn read_rows(
         &mut self,
         mut next: impl FnMut() -> Next<E>,
@@ -258,24 +280,8 @@ where
             if bad == Some(0) {
                 return Some(refuse(r.samples[0].0));
             }
-            let first = self.site.next_epoch().is_none();
-            match self.site.due(cfg, r.t) {
-                Ok(due) if first => {
-                    if let Some(f) = self.site.next_epoch() {
-                        self.give(Msg::Start { first: f });
-                        if *self.input.time() < f {
-                            self.input.advance_to(f);
-                        }
-                    }
-                    let _ = due;
-                }
-                Ok(due) if due.is_empty() => {}
-                Ok(due) => {
-                    if let Some(f) = self.boundary(due.start, due.end, r.line) {
-                        return Some(f);
-                    }
-                }
-                Err(source) => return Some((r.line, Failure::Network { line: r.line, source })),
+            if let Some(f) = self.advance_epochs(r.t, r.line) {
+                return Some(f);
             }
             let refused = bad.map(|b| refuse(r.samples[b].0));
             let (line, t) = (r.line, r.t);

@@ -58,6 +58,7 @@ mod compose;
 mod events;
 mod handshake;
 mod ingest;
+mod operator;
 mod run;
 mod site;
 mod wire;

@@ -1,7 +1,7 @@
 //! [`SiteState`]: the subsystems one process reads and certifies, with its epoch clock.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, CertifyError};
+use streamcert_certificate::{CertificateKind, Certifier, CertifyError};
 use streamcert_network::{Composer, LocalSnapshot, NetworkConfig, NetworkError};
 
 use crate::wire::WireSnapshot;
@@ -261,18 +261,7 @@ impl SiteState {
         }
         pending.sort_by_key(|p| (p.pos, p.seq));
         let parts = threads.clamp(1, 64).min(pending.len().div_ceil(64)).max(1);
-        // Cut `pending` into `parts` runs at subsystem boundaries.
-        let mut cuts = vec![0];
-        for k in 1..parts {
-            let mut at = pending.len() * k / parts;
-            while at > 0 && at < pending.len() && pending[at].pos == pending[at - 1].pos {
-                at += 1;
-            }
-            if at > *cuts.last().unwrap_or(&0) && at < pending.len() {
-                cuts.push(at);
-            }
-        }
-        cuts.push(pending.len());
+        let cuts = cuts(pending, parts);
         let kind = cfg.certificate;
         let mut results: Vec<(Vec<u32>, Option<Rejected>)> = Vec::with_capacity(cuts.len());
         {
@@ -287,43 +276,7 @@ impl SiteState {
                 jobs.push((part, offset, c, sn));
                 (certs, snaps, offset) = (rest_c, rest_s, last);
             }
-            let run = |(part, offset, c, sn): (
-                &[Pending],
-                usize,
-                &mut [Certifier],
-                &mut [Option<LocalSnapshot>],
-            )| {
-                let mut pushed = Vec::new();
-                let mut failed: Option<Rejected> = None;
-                for p in part {
-                    let k = p.pos as usize - offset;
-                    if failed.as_ref().is_some_and(|f| f.pos == p.pos) {
-                        continue;
-                    }
-                    let cert = &mut c[k];
-                    let m = cert.config().regression.outputs.min(p.values.len());
-                    let (y, u) = p.values.split_at(m);
-                    match cert.push(p.t, y, u) {
-                        Ok(ev) => {
-                            let v = *ev.verdict(kind);
-                            match &mut sn[k] {
-                                Some(snap) => snap.update(p.t, v, cert),
-                                None => sn[k] = Some(LocalSnapshot::new(p.t, v, cert)),
-                            }
-                            if pushed.last() != Some(&p.pos) {
-                                pushed.push(p.pos);
-                            }
-                        }
-                        Err(e) => {
-                            let r = Rejected { seq: p.seq, line: p.line, pos: p.pos, error: e };
-                            if failed.as_ref().is_none_or(|f| r.seq < f.seq) {
-                                failed = Some(r);
-                            }
-                        }
-                    }
-                }
-                (pushed, failed)
-            };
+            let run = |(part, offset, c, sn)| certify_part(part, offset, c, sn, kind);
             if jobs.len() == 1 {
                 results.extend(jobs.into_iter().map(run));
             } else {
@@ -394,4 +347,63 @@ impl SiteState {
         }
         self.touched.clear();
     }
+}
+
+/// Where `pending` (sorted by subsystem) is cut into at most `parts` runs at subsystem
+/// boundaries: the runs' starts, then its length.
+fn cuts(pending: &[Pending], parts: usize) -> Vec<usize> {
+    let mut cuts = vec![0];
+    for k in 1..parts {
+        let mut at = pending.len() * k / parts;
+        while at > 0 && at < pending.len() && pending[at].pos == pending[at - 1].pos {
+            at += 1;
+        }
+        if at > *cuts.last().unwrap_or(&0) && at < pending.len() {
+            cuts.push(at);
+        }
+    }
+    cuts.push(pending.len());
+    cuts
+}
+
+/// Certify one run of pending samples (`part`, subsystems from `offset` on) with their
+/// certifiers `c` and snapshots `sn`: the positions pushed, in order, and the first sample
+/// rejected (a subsystem's later samples are passed over after its rejection).
+fn certify_part(
+    part: &[Pending],
+    offset: usize,
+    c: &mut [Certifier],
+    sn: &mut [Option<LocalSnapshot>],
+    kind: CertificateKind,
+) -> (Vec<u32>, Option<Rejected>) {
+    let mut pushed = Vec::new();
+    let mut failed: Option<Rejected> = None;
+    for p in part {
+        let k = p.pos as usize - offset;
+        if failed.as_ref().is_some_and(|f| f.pos == p.pos) {
+            continue;
+        }
+        let cert = &mut c[k];
+        let m = cert.config().regression.outputs.min(p.values.len());
+        let (y, u) = p.values.split_at(m);
+        match cert.push(p.t, y, u) {
+            Ok(ev) => {
+                let v = *ev.verdict(kind);
+                match &mut sn[k] {
+                    Some(snap) => snap.update(p.t, v, cert),
+                    None => sn[k] = Some(LocalSnapshot::new(p.t, v, cert)),
+                }
+                if pushed.last() != Some(&p.pos) {
+                    pushed.push(p.pos);
+                }
+            }
+            Err(e) => {
+                let r = Rejected { seq: p.seq, line: p.line, pos: p.pos, error: e };
+                if failed.as_ref().is_none_or(|f| r.seq < f.seq) {
+                    failed = Some(r);
+                }
+            }
+        }
+    }
+    (pushed, failed)
 }

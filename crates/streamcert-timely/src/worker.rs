@@ -1,7 +1,6 @@
 //! One timely worker: the start's handshake, the dataflow with its composing operator (worker
 //! 0), and the site (the first worker of every process, `ingest.rs`).
 
-use std::collections::BTreeMap;
 use timely::container::CapacityContainerBuilder;
 use timely::dataflow::ProbeHandle;
 use timely::dataflow::channels::pact::Exchange;
@@ -9,9 +8,10 @@ use timely::dataflow::operators::generic::operator::Operator;
 use timely::dataflow::operators::{Input, Probe};
 
 use crate::ingest::Site;
+use crate::operator::ComposeOp;
 use crate::wire::{Msg, MsgInput};
 use crate::{
-    ComposerState, Event, Failure, Outcome, Row, Shared, SiteState, Tx, ask, handshake, send,
+    ComposerState, Event, Failure, Outcome, Resume, Row, Shared, SiteState, Tx, handshake, send,
 };
 
 /// One worker of the run.
@@ -24,39 +24,13 @@ where
     let index = worker.index();
     let site_worker = index == sh.place.process * sh.place.workers.max(1);
     let resume = if site_worker { sh.resume.lock().ok().and_then(|mut r| r.take()) } else { None };
-    let site_resumed = resume.as_ref().and_then(|r| r.site.as_ref());
-    let composer_resumed = resume.as_ref().and_then(|r| r.composer.as_ref());
-    let hello = site_worker.then(|| handshake::Hello {
-        process: u32::try_from(sh.place.process).unwrap_or(u32::MAX),
-        fingerprint: sh.fingerprint,
-        run: composer_resumed
-            .map(ComposerState::run_id)
-            .or_else(|| site_resumed.map(SiteState::run_id))
-            .unwrap_or_else(new_run_id),
-        composer_next: composer_resumed.and_then(ComposerState::next_epoch),
-        resumed: resume.is_some(),
-        valid_from: site_resumed.map(SiteState::valid_from),
-        restarted: resume.as_ref().is_some_and(|r| !r.rejoin),
-    });
+    let hello = site_worker.then(|| hello(sh, resume.as_ref()));
     let hellos = handshake::exchange(worker, hello);
     let plan = match handshake::decide(&hellos, sh.place.processes.max(1)) {
         Ok(plan) => plan,
         Err(r) => {
             if site_worker {
-                let mine = r.refused.iter().find(|(p, _)| *p == sh.place.process);
-                send(
-                    tx,
-                    Event::Failed(match mine {
-                        Some((_, m)) => Failure::Checkpoint(m.clone()),
-                        None => Failure::PeerRefused(
-                            r.refused
-                                .iter()
-                                .map(|(_, m)| m.as_str())
-                                .collect::<Vec<_>>()
-                                .join("; "),
-                        ),
-                    }),
-                );
+                send(tx, Event::Failed(refusal(&r, sh.place.process)));
             }
             return;
         }
@@ -88,80 +62,14 @@ where
                 Exchange::new(|_: &Msg| 0),
                 "Compose",
                 move |cap, _| {
-                    let mut state = composer;
-                    // Worker 0 holds a capability at its next epoch; the others none.
-                    let mut cap = state.as_ref().map(|s| {
-                        let mut cap = cap;
-                        if let Some(k) = s.next_epoch() {
-                            cap.downgrade(&k);
-                        }
-                        cap
-                    });
-                    let mut stash: BTreeMap<u64, Vec<Msg>> = BTreeMap::new();
+                    let mut op = ComposeOp::new(composer, cap, cfg, checkpoints, tx);
                     move |(input, frontier), _output| {
                         input.for_each_stamp(|c, data| {
                             if let Some(&t) = c.least() {
-                                let q = stash.entry(t).or_default();
-                                for batch in data {
-                                    q.append(batch);
-                                }
+                                op.stash(t, data);
                             }
                         });
-                        let (Some(st), Some(_)) = (state.as_mut(), cap.as_ref()) else {
-                            stash.clear();
-                            return;
-                        };
-                        let complete = |k: u64| !frontier.less_equal(&k);
-                        let every = checkpoints.unwrap_or(u64::MAX);
-                        let failed: Option<Failure<E>> = loop {
-                            let epoch = |r| send(&tx, Event::Epoch(Box::new(r)));
-                            match st.advance(&cfg, &mut stash, &complete, every, epoch) {
-                                Ok((progressed, paused, failed)) => {
-                                    // The epochs' reports were handed out; a due checkpoint
-                                    // is written before the probe shows the next epoch.
-                                    let written = !(paused && checkpoints.is_some())
-                                        || ask(&tx, |a| Event::Composer(Box::new(st.clone()), a));
-                                    if !written {
-                                        cap = None;
-                                        state = None;
-                                        return;
-                                    }
-                                    if let (Some(c), Some(k), true) =
-                                        (cap.as_mut(), st.next_epoch(), progressed)
-                                    {
-                                        c.downgrade(&k);
-                                    }
-                                    if failed.is_some() || !paused {
-                                        break failed.map(|f| Failure::Remote {
-                                            process: f.process,
-                                            line: f.line,
-                                            message: f.message,
-                                        });
-                                    }
-                                }
-                                Err(e) => break Some(Failure::Compose(e)),
-                            }
-                        };
-                        if let Some(f) = failed {
-                            send(&tx, Event::Failed(f));
-                            let (rows, last) = st.rows();
-                            send(&tx, Event::Network(rows, last));
-                            cap = None;
-                            state = None;
-                            return;
-                        }
-                        if frontier.is_empty() {
-                            if let Some(f) = st.drain(&mut stash) {
-                                let (process, line, message) = (f.process, f.line, f.message);
-                                send(
-                                    &tx,
-                                    Event::Failed(Failure::Remote { process, line, message }),
-                                );
-                            }
-                            let (rows, last) = st.rows();
-                            send(&tx, Event::Network(rows, last));
-                            cap = None;
-                        }
+                        op.step(|k| !frontier.less_equal(&k), frontier.is_empty());
                     }
                 },
             )
@@ -193,6 +101,36 @@ where
     // The rest of the run: park between events instead of spinning.
     while !probe.done() {
         worker.step_or_park(Some(std::time::Duration::from_millis(10)));
+    }
+}
+
+/// This process's hello for the start's handshake: its run (the checkpoint's, else a new
+/// one), what it resumes from, and whether it was started again after a crash.
+fn hello<S>(sh: &Shared<S>, resume: Option<&Resume>) -> handshake::Hello {
+    let site_resumed = resume.and_then(|r| r.site.as_ref());
+    let composer_resumed = resume.and_then(|r| r.composer.as_ref());
+    handshake::Hello {
+        process: u32::try_from(sh.place.process).unwrap_or(u32::MAX),
+        fingerprint: sh.fingerprint,
+        run: composer_resumed
+            .map(ComposerState::run_id)
+            .or_else(|| site_resumed.map(SiteState::run_id))
+            .unwrap_or_else(new_run_id),
+        composer_next: composer_resumed.and_then(ComposerState::next_epoch),
+        resumed: resume.is_some(),
+        valid_from: site_resumed.map(SiteState::valid_from),
+        restarted: resume.is_some_and(|r| !r.rejoin),
+    }
+}
+
+/// The failure a refused start reports on `process`: its own checkpoint's refusal, or the
+/// peers' refusals.
+fn refusal<E>(r: &handshake::Refusal, process: usize) -> Failure<E> {
+    match r.refused.iter().find(|(p, _)| *p == process) {
+        Some((_, m)) => Failure::Checkpoint(m.clone()),
+        None => Failure::PeerRefused(
+            r.refused.iter().map(|(_, m)| m.as_str()).collect::<Vec<_>>().join("; "),
+        ),
     }
 }
 

@@ -223,57 +223,9 @@ pub fn template() -> String {
 pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     let bad = |message: String| CliError::Config { path: path.to_string(), message };
     let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
-    let mut unset = Vec::new();
-    placeholders(&toml::Value::Table(table.clone()), "", &mut unset);
-    if !unset.is_empty() {
-        return Err(bad(format!(
-            "required {} not set: {} (your plant's columns, each subsystem's candidate gain and \
-             the margins have no default; `streamcert network --print-config` marks them \
-             \"{REQUIRED_VALUE}\")",
-            if unset.len() == 1 { "key" } else { "keys" },
-            unset.join(", ")
-        )));
-    }
-    let take = |table: &mut toml::Table, key: &str| table.remove(key);
-    let section: NetworkSection = take(&mut table, "network")
-        .ok_or_else(|| bad("missing [network]".into()))?
-        .try_into()
-        .map_err(|e: toml::de::Error| bad(format!("[network]: {e}")))?;
-    let subsystems: Vec<SubsystemEntry> = take(&mut table, "subsystem")
-        .ok_or_else(|| bad("no [[subsystem]]".into()))?
-        .try_into()
-        .map_err(|e: toml::de::Error| bad(format!("[[subsystem]]: {e}")))?;
-    let couplings: Vec<CouplingEntry> = match take(&mut table, "coupling") {
-        Some(v) => v.try_into().map_err(|e: toml::de::Error| bad(format!("[[coupling]]: {e}")))?,
-        None => Vec::new(),
-    };
-    let index = |name: &str| {
-        subsystems
-            .iter()
-            .position(|s| s.name == name)
-            .ok_or_else(|| bad(format!("[[coupling]] names `{name}`, which is no [[subsystem]]")))
-    };
-    // Estimated couplings: (to, from) in file order; each adds `from`'s outputs to `to`'s
-    // inputs (one coupling block, a zero row of the gain per channel).
-    let mut estimated = Vec::new();
-    for c in &couplings {
-        match (c.gamma, c.estimate) {
-            (Some(_), true) => {
-                return Err(bad(format!(
-                    "[[coupling]] {} -> {}: give `gamma` or `estimate = true`, not both",
-                    c.from, c.to
-                )));
-            }
-            (None, false) => {
-                return Err(bad(format!(
-                    "[[coupling]] {} -> {}: needs `gamma` (a given bound) or `estimate = true`",
-                    c.from, c.to
-                )));
-            }
-            (None, true) => estimated.push((index(&c.to)?, index(&c.from)?)),
-            (Some(_), false) => {}
-        }
-    }
+    check_required(&table).map_err(bad)?;
+    let (section, subsystems, couplings) = sections(&mut table).map_err(bad)?;
+    let estimated = estimated_pairs(&couplings, &subsystems).map_err(bad)?;
     let calibrated = section.certificate == CertificateKind::Calibrated;
     if !estimated.is_empty() && section.risk.is_none() && !calibrated {
         return Err(bad(
@@ -288,65 +240,166 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     };
     let mut specs = Vec::with_capacity(subsystems.len());
     let mut dims = Vec::with_capacity(subsystems.len());
-    let (mut outputs, mut inputs) = (Vec::new(), Vec::new());
-    let mut time = String::new();
-    let mut delimiter = ",".to_string();
-    let mut blocks = Vec::new();
-    for (i, s) in subsystems.iter().enumerate() {
-        // The subsystem as a `certify` configuration: its columns and gain, the shared rest;
-        // the outputs of the subsystems whose couplings into it are estimated join its inputs.
-        let (mut s_inputs, mut s_gain) = (s.inputs.clone(), s.gain.clone());
-        let p = s.outputs.len();
-        let mut own = Vec::new();
-        for &(_, from) in estimated.iter().filter(|&&(to, _)| to == i) {
-            let first = s_inputs.len();
-            s_inputs.extend(subsystems[from].outputs.iter().cloned());
-            s_gain.extend(subsystems[from].outputs.iter().map(|_| vec![0.0; p]));
-            own.push(CouplingBlock { first, len: subsystems[from].outputs.len() });
-        }
-        blocks.push(own);
-        let s = &SubsystemEntry {
-            name: s.name.clone(),
-            outputs: s.outputs.clone(),
-            inputs: s_inputs,
-            gain: s_gain,
-            process: s.process,
-        };
-        let mut t = table.clone();
-        let mut cols = columns_table.clone();
-        cols.insert(
-            "outputs".into(),
-            toml::Value::try_from(&s.outputs).map_err(|e| bad(e.to_string()))?,
-        );
-        cols.insert(
-            "inputs".into(),
-            toml::Value::try_from(&s.inputs).map_err(|e| bad(e.to_string()))?,
-        );
-        t.insert("columns".into(), toml::Value::Table(cols));
-        let mut controller = toml::Table::new();
-        controller
-            .insert("gain".into(), toml::Value::try_from(&s.gain).map_err(|e| bad(e.to_string()))?);
-        t.insert("controller".into(), toml::Value::Table(controller));
-        let text = toml::to_string(&t).map_err(|e| bad(e.to_string()))?;
+    let mut columns =
+        Columns { time: String::new(), outputs: vec![], inputs: vec![], delimiter: ",".into() };
+    for i in 0..subsystems.len() {
+        let (s, blocks) = with_estimated(&subsystems, i, &estimated);
+        let text = subsystem_text(&table, &columns_table, &s).map_err(bad)?;
         let c = config::parse(&text, &format!("{path} (subsystem `{}`)", s.name))?;
-        time.clone_from(&c.columns.time);
-        delimiter.clone_from(&c.columns.delimiter);
-        outputs.extend(c.columns.outputs.iter().cloned());
-        inputs.extend(c.columns.inputs.iter().cloned());
+        columns.time.clone_from(&c.columns.time);
+        columns.delimiter.clone_from(&c.columns.delimiter);
+        columns.outputs.extend(c.columns.outputs.iter().cloned());
+        columns.inputs.extend(c.columns.inputs.iter().cloned());
         dims.push((c.columns.outputs.len(), c.columns.inputs.len()));
         let mut certifier = c.certifier;
-        if !blocks[i].is_empty() {
+        if !blocks.is_empty() {
             // The risk is set by `split_risk` below.
-            let blocks = std::mem::take(&mut blocks[i]);
             certifier.couplings = Some(CouplingConfig { blocks, delta: 0.5 });
         }
         specs.push(SubsystemSpec::new(&s.name, certifier));
     }
-    let edges = match &section.gains {
+    let edges = coupling_edges(&section, &couplings, &subsystems, path).map_err(bad)?;
+    let network = network_config(&section, specs, edges, &estimated).map_err(bad)?;
+    // Build once: every check of the network and of each certifier.
+    NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
+    let process_of = subsystems.iter().map(|s| s.process).collect();
+    Ok(NetConfig { columns, dims, network, layout: section.input, process_of })
+}
+
+/// Every key the user must set is set (none is left at the template's placeholder).
+fn check_required(table: &toml::Table) -> Result<(), String> {
+    let mut unset = Vec::new();
+    placeholders(&toml::Value::Table(table.clone()), "", &mut unset);
+    if unset.is_empty() {
+        return Ok(());
+    }
+    Err(format!(
+        "required {} not set: {} (your plant's columns, each subsystem's candidate gain and \
+         the margins have no default; `streamcert network --print-config` marks them \
+         \"{REQUIRED_VALUE}\")",
+        if unset.len() == 1 { "key" } else { "keys" },
+        unset.join(", ")
+    ))
+}
+
+/// `[network]`, `[[subsystem]]` and `[[coupling]]` taken out of `table` (the rest is the
+/// `certify` sections every subsystem shares).
+fn sections(
+    table: &mut toml::Table,
+) -> Result<(NetworkSection, Vec<SubsystemEntry>, Vec<CouplingEntry>), String> {
+    let section: NetworkSection = table
+        .remove("network")
+        .ok_or("missing [network]")?
+        .try_into()
+        .map_err(|e: toml::de::Error| format!("[network]: {e}"))?;
+    let subsystems: Vec<SubsystemEntry> = table
+        .remove("subsystem")
+        .ok_or("no [[subsystem]]")?
+        .try_into()
+        .map_err(|e: toml::de::Error| format!("[[subsystem]]: {e}"))?;
+    let couplings: Vec<CouplingEntry> = match table.remove("coupling") {
+        Some(v) => v.try_into().map_err(|e: toml::de::Error| format!("[[coupling]]: {e}"))?,
+        None => Vec::new(),
+    };
+    Ok((section, subsystems, couplings))
+}
+
+/// The index of the subsystem a `[[coupling]]` names.
+fn index_of(subsystems: &[SubsystemEntry], name: &str) -> Result<usize, String> {
+    subsystems
+        .iter()
+        .position(|s| s.name == name)
+        .ok_or_else(|| format!("[[coupling]] names `{name}`, which is no [[subsystem]]"))
+}
+
+/// The estimated couplings `(to, from)` in file order (each coupling gives `gamma` or
+/// `estimate = true`, not both).
+fn estimated_pairs(
+    couplings: &[CouplingEntry],
+    subsystems: &[SubsystemEntry],
+) -> Result<Vec<(usize, usize)>, String> {
+    let mut estimated = Vec::new();
+    for c in couplings {
+        match (c.gamma, c.estimate) {
+            (Some(_), true) => {
+                return Err(format!(
+                    "[[coupling]] {} -> {}: give `gamma` or `estimate = true`, not both",
+                    c.from, c.to
+                ));
+            }
+            (None, false) => {
+                return Err(format!(
+                    "[[coupling]] {} -> {}: needs `gamma` (a given bound) or `estimate = true`",
+                    c.from, c.to
+                ));
+            }
+            (None, true) => {
+                estimated.push((index_of(subsystems, &c.to)?, index_of(subsystems, &c.from)?));
+            }
+            (Some(_), false) => {}
+        }
+    }
+    Ok(estimated)
+}
+
+/// Subsystem `i` with the outputs of the subsystems whose couplings into it are estimated
+/// among its inputs (a zero row of the gain per channel), and those coupling blocks.
+fn with_estimated(
+    subsystems: &[SubsystemEntry],
+    i: usize,
+    estimated: &[(usize, usize)],
+) -> (SubsystemEntry, Vec<CouplingBlock>) {
+    let s = &subsystems[i];
+    let (mut inputs, mut gain) = (s.inputs.clone(), s.gain.clone());
+    let p = s.outputs.len();
+    let mut blocks = Vec::new();
+    for &(_, from) in estimated.iter().filter(|&&(to, _)| to == i) {
+        let first = inputs.len();
+        inputs.extend(subsystems[from].outputs.iter().cloned());
+        gain.extend(subsystems[from].outputs.iter().map(|_| vec![0.0; p]));
+        blocks.push(CouplingBlock { first, len: subsystems[from].outputs.len() });
+    }
+    let entry = SubsystemEntry {
+        name: s.name.clone(),
+        outputs: s.outputs.clone(),
+        inputs,
+        gain,
+        process: s.process,
+    };
+    (entry, blocks)
+}
+
+/// The subsystem as a `certify` configuration's text: its columns and gain, the shared rest.
+fn subsystem_text(
+    shared: &toml::Table,
+    columns: &toml::Table,
+    s: &SubsystemEntry,
+) -> Result<String, String> {
+    fn value<T: Serialize>(v: &T) -> Result<toml::Value, String> {
+        toml::Value::try_from(v).map_err(|e| e.to_string())
+    }
+    let mut t = shared.clone();
+    let mut cols = columns.clone();
+    cols.insert("outputs".into(), value(&s.outputs)?);
+    cols.insert("inputs".into(), value(&s.inputs)?);
+    t.insert("columns".into(), toml::Value::Table(cols));
+    let mut controller = toml::Table::new();
+    controller.insert("gain".into(), value(&s.gain)?);
+    t.insert("controller".into(), toml::Value::Table(controller));
+    toml::to_string(&t).map_err(|e| e.to_string())
+}
+
+/// The given coupling bounds as edges `(to, from, γ)`: from `[network] gains` (a file beside
+/// the configuration) or from the `[[coupling]]` entries, not both.
+fn coupling_edges(
+    section: &NetworkSection,
+    couplings: &[CouplingEntry],
+    subsystems: &[SubsystemEntry],
+    path: &str,
+) -> Result<Vec<(usize, usize, f64)>, String> {
+    match &section.gains {
         Some(_) if !couplings.is_empty() => {
-            return Err(bad(
-                "[network] gains and [[coupling]] both give coupling bounds: keep one".into(),
-            ));
+            Err("[network] gains and [[coupling]] both give coupling bounds: keep one".into())
         }
         Some(file) => {
             let file = std::path::Path::new(path)
@@ -355,17 +408,31 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
                 .map_or_else(|| std::path::PathBuf::from(file), |dir| dir.join(file));
             let shown = file.display().to_string();
             let text = std::fs::read_to_string(&file)
-                .map_err(|e| bad(format!("[network] gains: cannot read {shown}: {e}")))?;
+                .map_err(|e| format!("[network] gains: cannot read {shown}: {e}"))?;
             compose::gain_edges(&text, &shown, subsystems.len(), section.gains_format)
-                .map_err(|e| bad(format!("[network] gains: {e}")))?
+                .map_err(|e| format!("[network] gains: {e}"))
         }
         None => couplings
             .iter()
-            .filter_map(|c| c.gamma.map(|g| Ok((index(&c.to)?, index(&c.from)?, g))))
-            .collect::<Result<Vec<_>, CliError>>()?,
-    };
+            .filter_map(|c| {
+                let at = |name: &str| index_of(subsystems, name);
+                c.gamma.map(|g| Ok((at(&c.to)?, at(&c.from)?, g)))
+            })
+            .collect(),
+    }
+}
+
+/// The network of the subsystems' certifiers, its edges and estimated couplings, with
+/// `[network]`'s settings and its risk split over the certificates.
+fn network_config(
+    section: &NetworkSection,
+    specs: Vec<SubsystemSpec>,
+    edges: Vec<(usize, usize, f64)>,
+    estimated: &[(usize, usize)],
+) -> Result<NetworkConfig, String> {
+    let n = specs.len();
     let mut network = NetworkConfig::new(specs, edges, section.epoch);
-    let mut seen = vec![0; subsystems.len()];
+    let mut seen = vec![0; n];
     network.estimated = estimated
         .iter()
         .map(|&(to, from)| {
@@ -385,28 +452,24 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     if let Some(m) = section.max_epoch_jump {
         network.max_epoch_jump = m;
     }
+    let calibrated = section.certificate == CertificateKind::Calibrated;
     if calibrated && network.subsystems.iter().any(|s| s.certifier.calibration.is_none()) {
-        return Err(bad(
-            "[network] certificate = \"calibrated\" composes the calibrated certificates, but \
-             [calibration] enabled = false leaves no calibration: enable it, or choose the \
-             paper-only certificate = \"gaussian\" (no stated risk)"
-                .into(),
-        ));
+        return Err("[network] certificate = \"calibrated\" composes the calibrated \
+                    certificates, but [calibration] enabled = false leaves no calibration: \
+                    enable it, or choose the paper-only certificate = \"gaussian\" (no stated \
+                    risk)"
+            .into());
     }
     if let Some(delta) = section.risk.or(calibrated.then_some(DEFAULT_RISK)) {
         if !(delta > 0.0 && delta < 1.0) {
-            return Err(bad(format!("[network] risk must be in (0, 1), got {delta}")));
+            return Err(format!("[network] risk must be in (0, 1), got {delta}"));
         }
         // `split_risk` selects the calibrated certificate; the paper-only choice stands (its
         // subsystems' calibrations still run at their share, for comparison).
         network = network.split_risk(delta);
         network.certificate = section.certificate;
     }
-    // Build once: every check of the network and of each certifier.
-    NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
-    let columns = Columns { time, outputs, inputs, delimiter };
-    let process_of = subsystems.iter().map(|s| s.process).collect();
-    Ok(NetConfig { columns, dims, network, layout: section.input, process_of })
+    Ok(network)
 }
 
 #[cfg(test)]

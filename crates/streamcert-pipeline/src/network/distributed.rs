@@ -92,6 +92,21 @@ struct SiteFile {
     summary: Option<NetSummary>,
 }
 
+impl SiteFile {
+    /// What a process started again after a crash resumes from, and the summary of the rows
+    /// written when it was checkpointed.
+    fn restart(self) -> (Option<Resume>, NetSummary) {
+        let summary = self.summary.clone().unwrap_or_default();
+        (Some(self.resume(false)), summary)
+    }
+
+    /// What timely resumes from: this file's site and composer; `rejoin` when this process
+    /// stayed up and rejoins after a lost peer (else it was started again after a crash).
+    fn resume(self, rejoin: bool) -> Resume {
+        Resume { site: self.site, composer: self.composer, rejoin }
+    }
+}
+
 fn sealed_config<'a>(
     cfg: &'a NetConfig,
     place: &'a Placement,
@@ -151,6 +166,24 @@ struct RowIter<R: Read> {
     items: Vec<(usize, usize, usize, usize)>,
 }
 
+impl<R: Read> RowIter<R> {
+    /// The rows of `input` this process reads (its subsystems' columns); a refused input is
+    /// the iterator's first item.
+    fn for_site(
+        cfg: &NetConfig,
+        process_of: &[usize],
+        process: usize,
+        input: R,
+        name: &str,
+    ) -> Self {
+        let (rows, first) = match Rows::for_site(cfg, process_of, process, input, name) {
+            Ok(rows) => (Some(rows), None),
+            Err(e) => (None, Some(e)),
+        };
+        Self { rows, first, values: Vec::new(), items: Vec::new() }
+    }
+}
+
 impl<R: Read> Iterator for RowIter<R> {
     type Item = Result<Row, CliError>;
 
@@ -206,6 +239,22 @@ fn quiet_timely_panics() {
     });
 }
 
+/// Say on standard error that every process is back and the run resumes at epoch `k`, and
+/// which processes were started again from their checkpoints.
+fn announce_resume(process: usize, k: u64, restarted: &[usize]) {
+    let who: Vec<String> = restarted.iter().map(ToString::to_string).collect();
+    let again = if who.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (process {} started again from its checkpoint; no epoch was composed while it \
+             was down)",
+            who.join(", ")
+        )
+    };
+    eprintln!("process {process}: every process is back; the run resumes at epoch {k}{again}");
+}
+
 /// Opens this process's input again (the run reads it from the start after a restart).
 pub type Reopen = dyn Fn() -> Result<Box<dyn Read + Send>, CliError>;
 
@@ -237,96 +286,46 @@ pub fn run_timely<W: Write>(
     }
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
     let (mut resume, mut summary) = match &opts.resume {
-        Some(path) => {
-            let file = load(path, cfg, &place)?;
-            let summary = file.summary.clone().unwrap_or_default();
-            (Some(Resume { site: file.site, composer: file.composer, rejoin: false }), summary)
-        }
+        Some(path) => load(path, cfg, &place)?.restart(),
         None => (None, NetSummary::default()),
     };
-    let mut writer = EpochWriter::new(
+    let writer = EpochWriter::new(
         out,
         opts.format,
         opts.flush,
         Header::when_fresh(opts.resume.as_ref()),
         estimated_columns(&cfg.network, &names),
     );
+    let mut h = Handler {
+        writer,
+        names,
+        written: None,
+        site: None,
+        composer: None,
+        checkpoint: opts.checkpoint.clone(),
+        cfg,
+        place: &place,
+    };
     let mut report = SiteReport::default();
-    // The newest epoch whose row was written (no row twice after a rejoin).
-    let mut written: Option<u64> = None;
     loop {
-        let mut site_latest: Option<SiteState> = resume.as_ref().and_then(|r| r.site.clone());
+        h.site = resume.as_ref().and_then(|r| r.site.clone());
+        h.composer = None;
         let (rows_cfg, name, process) = (cfg.clone(), input_name.to_string(), place.process);
         let process_of = place.process_of.clone();
         let input = open()?;
-        let source = move || {
-            let (rows, first) = match Rows::for_site(&rows_cfg, &process_of, process, input, &name)
-            {
-                Ok(rows) => (Some(rows), None),
-                Err(e) => (None, Some(e)),
-            };
-            RowIter { rows, first, values: Vec::new(), items: Vec::new() }
-        };
-        let checkpoint = opts.checkpoint.clone();
-        // Process 0's file holds its site and the composer with the summary of the rows
-        // written when the composer was checkpointed; either event rewrites it whole.
-        let mut composer_latest: Option<(ComposerState, NetSummary)> = None;
+        let source = move || RowIter::for_site(&rows_cfg, &process_of, process, input, &name);
+        let every = opts.checkpoint.as_ref().map(|_| cluster.checkpoint_epochs.unwrap_or(1).max(1));
         let result = streamcert_timely::run(
             cfg.network.clone(),
             &place,
             resume.take(),
-            checkpoint.as_ref().map(|_| cluster.checkpoint_epochs.unwrap_or(1).max(1)),
+            every,
             source,
-            |o| {
-                match o {
-                    Output::Started { resumed_at: Some(k), restarted } => {
-                        let who: Vec<String> = restarted.iter().map(|p| p.to_string()).collect();
-                        eprintln!(
-                            "process {}: every process is back; the run resumes at epoch {k}{}",
-                            place.process,
-                            if who.is_empty() {
-                                String::new()
-                            } else {
-                                format!(
-                                    " (process {} started again from its checkpoint; no epoch \
-                                     was composed while it was down)",
-                                    who.join(", ")
-                                )
-                            }
-                        );
-                        return Ok(());
-                    }
-                    Output::Started { .. } => return Ok(()),
-                    Output::Epoch(r) => {
-                        if written.is_some_and(|w| r.epoch <= w) {
-                            return Ok(());
-                        }
-                        written = Some(r.epoch);
-                        return writer
-                            .write(r, &names, &mut summary)
-                            .map_err(|e| format!("writing output: {e}"));
-                    }
-                    Output::Site(s) => site_latest = Some(s.clone()),
-                    Output::Composer(c) => {
-                        writer.flush().map_err(|e| format!("writing output: {e}"))?;
-                        composer_latest = Some((c.clone(), summary.clone()));
-                    }
-                }
-                let Some(path) = &checkpoint else { return Ok(()) };
-                let (composer, summary) = composer_latest.clone().unzip();
-                let file = SiteFile {
-                    process: place.process,
-                    processes: place.processes,
-                    site: site_latest.clone(),
-                    composer,
-                    summary,
-                };
-                save(path, cfg, &place, &file)
-            },
+            |o| h.handle(o, &mut summary),
         );
         match result {
             Ok(outcome) => {
-                writer.flush().map_err(|e| CliError::io("writing output", e))?;
+                h.writer.flush().map_err(|e| CliError::io("writing output", e))?;
                 summary.rows = outcome.network_rows;
                 summary.last_time = outcome.network_last_time;
                 report.rows = outcome.rows;
@@ -340,22 +339,72 @@ pub fn run_timely<W: Write>(
                         "{e}; the run is lost (rejoining needs --checkpoint and an input file)"
                     )));
                 };
-                writer.flush().map_err(|e| CliError::io("writing output", e))?;
+                h.writer.flush().map_err(|e| CliError::io("writing output", e))?;
                 report.rejoins += 1;
                 eprintln!(
                     "process {}: {e}; rejoining from {} once every process is back",
                     place.process,
                     path.display()
                 );
-                resume = if path.exists() {
-                    let file = load(path, cfg, &place)?;
-                    Some(Resume { site: file.site, composer: file.composer, rejoin: true })
-                } else {
-                    None
-                };
+                resume =
+                    if path.exists() { Some(load(path, cfg, &place)?.resume(true)) } else { None };
             }
             Err(e) => return Err(map_error(e, input_name, &bad)),
         }
+    }
+}
+
+/// What this process does with timely's outputs: writes the epoch rows (process 0), and
+/// keeps and checkpoints its newest site and composer.
+struct Handler<'a, W: Write> {
+    writer: EpochWriter<W>,
+    names: Vec<String>,
+    /// The newest epoch whose row was written (no row twice after a rejoin).
+    written: Option<u64>,
+    site: Option<SiteState>,
+    /// Process 0's file holds its site and the composer with the summary of the rows
+    /// written when the composer was checkpointed; either event rewrites it whole.
+    composer: Option<(ComposerState, NetSummary)>,
+    checkpoint: Option<PathBuf>,
+    cfg: &'a NetConfig,
+    place: &'a Placement,
+}
+
+impl<W: Write> Handler<'_, W> {
+    /// Handle one output, the rows written counted into `summary`.
+    fn handle(&mut self, o: Output<'_>, summary: &mut NetSummary) -> Result<(), String> {
+        match o {
+            Output::Started { resumed_at: Some(k), restarted } => {
+                announce_resume(self.place.process, k, restarted);
+                return Ok(());
+            }
+            Output::Started { .. } => return Ok(()),
+            Output::Epoch(r) => {
+                if self.written.is_some_and(|w| r.epoch <= w) {
+                    return Ok(());
+                }
+                self.written = Some(r.epoch);
+                return self
+                    .writer
+                    .write(r, &self.names, summary)
+                    .map_err(|e| format!("writing output: {e}"));
+            }
+            Output::Site(s) => self.site = Some(s.clone()),
+            Output::Composer(c) => {
+                self.writer.flush().map_err(|e| format!("writing output: {e}"))?;
+                self.composer = Some((c.clone(), summary.clone()));
+            }
+        }
+        let Some(path) = &self.checkpoint else { return Ok(()) };
+        let (composer, summary) = self.composer.clone().unzip();
+        let file = SiteFile {
+            process: self.place.process,
+            processes: self.place.processes,
+            site: self.site.clone(),
+            composer,
+            summary,
+        };
+        save(path, self.cfg, self.place, &file)
     }
 }
 

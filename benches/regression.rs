@@ -115,6 +115,71 @@ fn regression_update(c: &mut Criterion) {
     group.finish();
 }
 
+/// The certifier of `certifier_step`'s `variant` (see there) with `p` outputs and `m` inputs,
+/// and the benchmark's name.
+fn step_config(p: usize, m: usize, variant: u8) -> (CertifierConfig, &'static str) {
+    let wasserstein = variant == 1 || variant == 3 || variant == 5;
+    let gain: Vec<f64> = (0..m * p).map(|i| if i % (p + 1) == 0 { -1.0 } else { 0.0 }).collect();
+    let mut cfg =
+        CertifierConfig::new(RegressionConfig::new(p, m, 150, 5, 1e-4), gain, 0.2, 0.05, 10);
+    if wasserstein {
+        cfg.ambiguity = Some(AmbiguityConfig::paper(150));
+    }
+    if variant == 2 || variant == 4 {
+        cfg.calibration = Some(Calibration::new(0.01));
+    }
+    if variant == 7 {
+        cfg.calibration = Some(Calibration::new(0.01).unguarded());
+    }
+    if variant == 8 {
+        cfg.calibration = Some(Calibration { plant_change: false, ..Calibration::new(0.01) });
+    }
+    if variant == 9 {
+        let no_model =
+            Calibration { hidden_dynamics: false, nonlinearity: false, ..Calibration::new(0.01) };
+        cfg.calibration = Some(no_model);
+    }
+    if variant == 10 {
+        let jackknife =
+            Calibration { guard_variance: GuardVariance::Jackknife, ..Calibration::new(0.01) };
+        cfg.calibration = Some(jackknife);
+    }
+    if variant == 5 || variant == 6 {
+        cfg.regression.model = Model::ThroughOrigin;
+    }
+    if variant == 6 {
+        // The calibrated step as it was before the intercept, the guards, the default
+        // windows and the anchored window: four windows, the risk split by length.
+        let was = Calibration {
+            windows: Some(4),
+            risk_split: RiskSplit::ByLength,
+            anchored_share: 0.0,
+            ..Calibration::new(0.01).unguarded()
+        };
+        cfg.calibration = Some(was);
+    }
+    if variant == 4 {
+        cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
+    }
+    if variant == 3 {
+        cfg.regression.refresh_period = 1;
+    }
+    let name = [
+        "gaussian",
+        "gaussian_and_wasserstein",
+        "gaussian_and_calibrated",
+        "naive_gaussian_and_wasserstein",
+        "gaussian_calibrated_and_nonlinear_degree3",
+        "through_origin_gaussian_and_wasserstein",
+        "through_origin_gaussian_and_calibrated_unguarded",
+        "gaussian_and_calibrated_unguarded",
+        "gaussian_and_calibrated_without_change_guard",
+        "gaussian_and_calibrated_without_model_guards",
+        "gaussian_and_calibrated_jackknife_guards",
+    ][usize::from(variant)];
+    (cfg, name)
+}
+
 fn certifier_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("certifier_step");
     // Variant 3 is the naive baseline of the full step: the same Gaussian + Wasserstein
@@ -148,72 +213,10 @@ fn certifier_step(c: &mut Criterion) {
         (10, 10, 5),
     ];
     for (p, m, variant) in cases {
-        let wasserstein = variant == 1 || variant == 3 || variant == 5;
         let d = p + m;
         let len = 4096;
         let data = stream(p, m, len);
-        let gain: Vec<f64> =
-            (0..m * p).map(|i| if i % (p + 1) == 0 { -1.0 } else { 0.0 }).collect();
-        let mut cfg =
-            CertifierConfig::new(RegressionConfig::new(p, m, 150, 5, 1e-4), gain, 0.2, 0.05, 10);
-        if wasserstein {
-            cfg.ambiguity = Some(AmbiguityConfig::paper(150));
-        }
-        if variant == 2 || variant == 4 {
-            cfg.calibration = Some(Calibration::new(0.01));
-        }
-        if variant == 7 {
-            cfg.calibration = Some(Calibration::new(0.01).unguarded());
-        }
-        if variant == 8 {
-            cfg.calibration = Some(Calibration { plant_change: false, ..Calibration::new(0.01) });
-        }
-        if variant == 9 {
-            let no_model = Calibration {
-                hidden_dynamics: false,
-                nonlinearity: false,
-                ..Calibration::new(0.01)
-            };
-            cfg.calibration = Some(no_model);
-        }
-        if variant == 10 {
-            let jackknife =
-                Calibration { guard_variance: GuardVariance::Jackknife, ..Calibration::new(0.01) };
-            cfg.calibration = Some(jackknife);
-        }
-        if variant == 5 || variant == 6 {
-            cfg.regression.model = Model::ThroughOrigin;
-        }
-        if variant == 6 {
-            // The calibrated step as it was before the intercept, the guards, the default
-            // windows and the anchored window: four windows, the risk split by length.
-            let was = Calibration {
-                windows: Some(4),
-                risk_split: RiskSplit::ByLength,
-                anchored_share: 0.0,
-                ..Calibration::new(0.01).unguarded()
-            };
-            cfg.calibration = Some(was);
-        }
-        if variant == 4 {
-            cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
-        }
-        if variant == 3 {
-            cfg.regression.refresh_period = 1;
-        }
-        let name = [
-            "gaussian",
-            "gaussian_and_wasserstein",
-            "gaussian_and_calibrated",
-            "naive_gaussian_and_wasserstein",
-            "gaussian_calibrated_and_nonlinear_degree3",
-            "through_origin_gaussian_and_wasserstein",
-            "through_origin_gaussian_and_calibrated_unguarded",
-            "gaussian_and_calibrated_unguarded",
-            "gaussian_and_calibrated_without_change_guard",
-            "gaussian_and_calibrated_without_model_guards",
-            "gaussian_and_calibrated_jackknife_guards",
-        ][usize::from(variant)];
+        let (cfg, name) = step_config(p, m, variant);
         let mut cert = Certifier::new(cfg).expect("valid");
         let mut t = 0.0;
         for s in data.chunks(d).take(200) {

@@ -20,7 +20,12 @@ fn mean_se(v: &[f64]) -> (f64, f64) {
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
-    // 1. Bias: ẏ = −y + u + 0.5 dW, u = −y + PRBS(0.05, 0.5 s); candidate K = −1 (true rate 2).
+    noise_bias()?;
+    validity()
+}
+
+/// 1. Bias: ẏ = −y + u + 0.5 dW, u = −y + PRBS(0.05, 0.5 s); candidate K = −1 (true rate 2).
+fn noise_bias() -> Result<(), Box<dyn std::error::Error>> {
     let scenario = LinearScenario {
         n: 1,
         m: 1,
@@ -61,8 +66,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let (mu, se) = mean_se(&rates);
         println!("| {estimator:?} | {mu:.3} | {se:.3} |");
     }
+    Ok(())
+}
 
-    // 2. Validity of β̂ − ρ on scalar systems with strong dither (M = 150, h = 5).
+/// 2. Validity of β̂ − ρ on scalar systems with strong dither (M = 150, h = 5).
+fn validity() -> Result<(), Box<dyn std::error::Error>> {
     println!(
         "\n## Share of certified steps with β̂ − ρ ≤ true rate (3 systems × 10 seeds, 15 s each)\n"
     );

@@ -194,100 +194,8 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
                 continue;
             }
             last[w] = Some(look.look);
-            let n = [150, 300][w];
-            let window = &cols[cols.len() - n..];
-            let inst = |j: usize| {
-                let at = cols.len() - n + j;
-                let parts: Vec<f64> = (1..=intervals)
-                    .flat_map(|l| cols[at - l * H - lag].0.iter().copied().collect::<Vec<_>>())
-                    .collect();
-                nalgebra::DVector::from_vec(parts)
-            };
-            let k = dd * intervals;
-            let mut nm = nalgebra::DMatrix::zeros(dd, k);
-            let mut cw = nalgebra::DMatrix::zeros(2, k);
-            let mut hm = nalgebra::DMatrix::zeros(k, k);
-            for (j, (z, dy)) in window.iter().enumerate() {
-                let wv = inst(j);
-                nm += z * wv.transpose();
-                cw += dy * wv.transpose();
-                hm += &wv * wv.transpose();
-            }
-            // Two-stage least squares with the ridge relative to each diagonal entry:
-            // Q = (H + λ diag H)⁻¹Nᵀ, A = N Q + λ diag(N Q), Θ̂ = Cw Q A⁻¹, X = Q A⁻¹ T.
-            let lambda =
-                Calibration { instrument_intervals: 3, ..Calibration::new(0.01) }.fit_ridge();
-            let ridged = |m: &nalgebra::DMatrix<f64>| {
-                let mut m = m.clone();
-                for i in 0..m.nrows() {
-                    m[(i, i)] *= 1.0 + lambda;
-                }
-                m
-            };
-            let q = ridged(&hm).try_inverse().expect("invertible") * nm.transpose();
-            let a = ridged(&(&nm * &q));
-            let ainv = a.clone().try_inverse().expect("invertible");
-            let theta = &cw * &q * &ainv;
-            // Block b's sums and its delete-one-block estimate (the second stage without the
-            // block, the first stage `Q` held): `(Cw − Cw_b) Q (A − N_b Q)⁻¹`.
-            let deleted = |b: usize| {
-                let (mut nb, mut cb) =
-                    (nalgebra::DMatrix::zeros(dd, k), nalgebra::DMatrix::zeros(2, k));
-                for j in b * H..(b + 1) * H {
-                    let (z, dy) = &window[j];
-                    let wv = inst(j);
-                    nb += z * wv.transpose();
-                    cb += dy * wv.transpose();
-                }
-                let rest = (&a - &nb * &q).try_inverse().expect("invertible");
-                (&cw - cb) * &q * rest
-            };
-            let x = &q * &ainv * &t_mat;
-            // The radius from the variance in batches of `batch` blocks at risk `risk`.
-            let radius_in = |batch: usize, risk: f64| {
-                let blocks = n / H;
-                let batches = blocks.div_ceil(batch);
-                let c = |b: usize| {
-                    let b = b as f64;
-                    3.0 * b * 25.0 / (3.0 * b * 25.0 - 25.0 + 1.0)
-                };
-                let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
-                let mut weights = Vec::new();
-                // Batch k covers blocks [starts[k], starts[k + 1]), oldest first; the oldest holds
-                // the remainder.
-                let rem = blocks % batch;
-                let mut starts = vec![0];
-                starts.extend((if rem == 0 { batch } else { rem }..=blocks).step_by(batch));
-                for k in 0..batches {
-                    let (b0, b1) = (starts[k], starts[k + 1]);
-                    let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
-                    let mut weight = 0.0;
-                    for j in b0 * H..b1 * H {
-                        weight += (x.transpose() * inst(j)).norm_squared();
-                    }
-                    for b in b0..b1 {
-                        let change = (&theta - deleted(b)) * &t_mat;
-                        sum += (&change + change.transpose()) * 0.5;
-                    }
-                    let v = nalgebra::DVector::from_column_slice(sum.as_slice());
-                    omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
-                    weights.push(weight);
-                }
-                assert_eq!(starts.len(), batches + 1);
-                assert_eq!(*starts.last().expect("batches"), blocks);
-                // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
-                let ess = weights.iter().sum::<f64>().powi(2)
-                    / weights.iter().map(|w| w * w).sum::<f64>();
-                omega *= c(batch);
-                let nu = ess.min(batches as f64) - dd as f64;
-                let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
-                // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.
-                let lambda = omega.clone().symmetric_eigen().eigenvalues.max();
-                let grid = streamcert::certificate::rank_one_variance_bound(omega.as_slice());
-                t * lambda.min(grid).sqrt()
-            };
-            let j = &theta * &t_mat;
-            let beta = -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max();
+            let o = LookOracle::new(&cols, [150, 300][w], &t_mat, (lag, intervals));
+            let beta = o.beta();
             // Two windows: an equal share of δ each. In batches of one block, the window of
             // 60 blocks also takes the automatic batches (⌊60 / 30⌋ = 2 blocks, 30 batches)
             // at its share of the risk (default a fifth), the smaller radius standing; the
@@ -296,12 +204,12 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
             let sliding = 1.0 - Calibration::new(0.01).anchored_share;
             let risk = look_risk(0.01, sliding * 0.5, look.look);
             let radius = if batch == 1 && w == 1 {
-                let first = radius_in(1, risk * (1.0 - auto_share));
-                let second = radius_in(2, risk * auto_share);
+                let first = o.radius_in(1, risk * (1.0 - auto_share));
+                let second = o.radius_in(2, risk * auto_share);
                 batched += usize::from(second < first);
                 first.min(second)
             } else {
-                radius_in(batch, risk)
+                o.radius_in(batch, risk)
             };
             // `10⁻⁶`: with `J = 3` and the intercept, `H` is singular but for the ridge
             // (`Calibration::fit_ridge`, `10⁻⁸` relative), and both solves carry its condition.
@@ -475,4 +383,155 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
     let plain = Certifier::new(calibrated(1, vec![-0.54], 150, 1)).expect("valid");
     let text = plain.checkpoint().expect("serialises");
     assert!(!text.contains("\"batch\"") && !text.contains("batch_blocks"));
+}
+
+/// A column of the regression: `(z, ΔY)`.
+type Column = (nalgebra::DVector<f64>, nalgebra::DVector<f64>);
+
+/// A calibrated look recomputed by nalgebra from the columns: two-stage least squares on the
+/// newest `n` columns with the ridge relative to each diagonal entry,
+/// `Q = (H + λ diag H)⁻¹Nᵀ`, `A = N Q + λ diag(N Q)`, `Θ̂ = Cw Q A⁻¹`, `X = Q A⁻¹ T`.
+struct LookOracle<'a> {
+    cols: &'a [Column],
+    n: usize,
+    dd: usize,
+    k: usize,
+    lag: usize,
+    intervals: usize,
+    t_mat: &'a nalgebra::DMatrix<f64>,
+    q: nalgebra::DMatrix<f64>,
+    a: nalgebra::DMatrix<f64>,
+    cw: nalgebra::DMatrix<f64>,
+    theta: nalgebra::DMatrix<f64>,
+    x: nalgebra::DMatrix<f64>,
+}
+
+impl<'a> LookOracle<'a> {
+    fn new(
+        cols: &'a [Column],
+        n: usize,
+        t_mat: &'a nalgebra::DMatrix<f64>,
+        (lag, intervals): (usize, usize),
+    ) -> Self {
+        let dd = t_mat.nrows();
+        let k = dd * intervals;
+        let empty = || nalgebra::DMatrix::zeros(0, 0);
+        let mut o = Self {
+            cols,
+            n,
+            dd,
+            k,
+            lag,
+            intervals,
+            t_mat,
+            q: empty(),
+            a: empty(),
+            cw: nalgebra::DMatrix::zeros(2, k),
+            theta: empty(),
+            x: empty(),
+        };
+        let mut nm = nalgebra::DMatrix::zeros(dd, k);
+        let mut hm = nalgebra::DMatrix::zeros(k, k);
+        for j in 0..n {
+            let (z, dy) = &o.window()[j];
+            let wv = o.inst(j);
+            nm += z * wv.transpose();
+            o.cw += dy * wv.transpose();
+            hm += &wv * wv.transpose();
+        }
+        let lambda = Calibration { instrument_intervals: 3, ..Calibration::new(0.01) }.fit_ridge();
+        let ridged = |m: &nalgebra::DMatrix<f64>| {
+            let mut m = m.clone();
+            for i in 0..m.nrows() {
+                m[(i, i)] *= 1.0 + lambda;
+            }
+            m
+        };
+        o.q = ridged(&hm).try_inverse().expect("invertible") * nm.transpose();
+        o.a = ridged(&(&nm * &o.q));
+        let ainv = o.a.clone().try_inverse().expect("invertible");
+        o.theta = &o.cw * &o.q * &ainv;
+        o.x = &o.q * &ainv * t_mat;
+        o
+    }
+
+    /// The window's columns, oldest first.
+    fn window(&self) -> &'a [Column] {
+        &self.cols[self.cols.len() - self.n..]
+    }
+
+    /// The instruments of the window's column `j`: the intervals' regressors `l h + lag`
+    /// columns back.
+    fn inst(&self, j: usize) -> nalgebra::DVector<f64> {
+        let at = self.cols.len() - self.n + j;
+        let parts: Vec<f64> = (1..=self.intervals)
+            .flat_map(|l| self.cols[at - l * H - self.lag].0.iter().copied().collect::<Vec<_>>())
+            .collect();
+        nalgebra::DVector::from_vec(parts)
+    }
+
+    /// `β̂ = −λ_max(sym(Θ̂ T))`.
+    fn beta(&self) -> f64 {
+        let j = &self.theta * self.t_mat;
+        -((&j + j.transpose()) * 0.5).symmetric_eigen().eigenvalues.max()
+    }
+
+    /// Block b's delete-one-block estimate (the second stage without the block, the first
+    /// stage `Q` held): `(Cw − Cw_b) Q (A − N_b Q)⁻¹`.
+    fn deleted(&self, b: usize) -> nalgebra::DMatrix<f64> {
+        let (mut nb, mut cb) =
+            (nalgebra::DMatrix::zeros(self.dd, self.k), nalgebra::DMatrix::zeros(2, self.k));
+        for j in b * H..(b + 1) * H {
+            let (z, dy) = &self.window()[j];
+            let wv = self.inst(j);
+            nb += z * wv.transpose();
+            cb += dy * wv.transpose();
+        }
+        let rest = (&self.a - &nb * &self.q).try_inverse().expect("invertible");
+        (&self.cw - cb) * &self.q * rest
+    }
+
+    /// The radius from the variance in batches of `batch` blocks at risk `risk`.
+    fn radius_in(&self, batch: usize, risk: f64) -> f64 {
+        let (n, dd, x, theta, t_mat) = (self.n, self.dd, &self.x, &self.theta, self.t_mat);
+        let blocks = n / H;
+        let batches = blocks.div_ceil(batch);
+        let c = |b: usize| {
+            let b = b as f64;
+            3.0 * b * 25.0 / (3.0 * b * 25.0 - 25.0 + 1.0)
+        };
+        let mut omega = nalgebra::DMatrix::<f64>::zeros(4, 4);
+        let mut weights = Vec::new();
+        // Batch k covers blocks [starts[k], starts[k + 1]), oldest first; the oldest holds
+        // the remainder.
+        let rem = blocks % batch;
+        let mut starts = vec![0];
+        starts.extend((if rem == 0 { batch } else { rem }..=blocks).step_by(batch));
+        for k in 0..batches {
+            let (b0, b1) = (starts[k], starts[k + 1]);
+            let mut sum = nalgebra::DMatrix::<f64>::zeros(2, 2);
+            let mut weight = 0.0;
+            for j in b0 * H..b1 * H {
+                weight += (x.transpose() * self.inst(j)).norm_squared();
+            }
+            for b in b0..b1 {
+                let change = (theta - self.deleted(b)) * t_mat;
+                sum += (&change + change.transpose()) * 0.5;
+            }
+            let v = nalgebra::DVector::from_column_slice(sum.as_slice());
+            omega += &v * v.transpose() * (c(b1 - b0) / c(batch));
+            weights.push(weight);
+        }
+        assert_eq!(starts.len(), batches + 1);
+        assert_eq!(*starts.last().expect("batches"), blocks);
+        // Welch–Satterthwaite: effective batches (Σw)²/Σw², at most their number.
+        let ess = weights.iter().sum::<f64>().powi(2) / weights.iter().map(|w| w * w).sum::<f64>();
+        omega *= c(batch);
+        let nu = ess.min(batches as f64) - dd as f64;
+        let t = -StudentsT::new(0.0, 1.0, nu).expect("valid").inverse_cdf(risk);
+        // The largest variance over unit v (p = 2): λ_max(Ω̂), or the rank-one grid bound.
+        let lambda = omega.clone().symmetric_eigen().eigenvalues.max();
+        let grid = streamcert::certificate::rank_one_variance_bound(omega.as_slice());
+        t * lambda.min(grid).sqrt()
+    }
 }

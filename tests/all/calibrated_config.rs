@@ -106,6 +106,10 @@ fn configurations_without_a_valid_bound_are_refused_with_what_is_valid() {
         assert!(err.to_string().contains(&text), "{p} {origin} {guards}: {err}");
         assert!(model(p, smallest, origin, guards).is_ok());
     }
+}
+
+#[test]
+fn settings_out_of_range_are_refused_naming_the_field() {
     for margin in [0.0, -0.1] {
         let cfg = CertifierConfig { margin, ..calibrated(1, vec![-0.54], 150, 1) };
         let err = Certifier::new(cfg).unwrap_err();

@@ -53,30 +53,34 @@ struct Batch {
     cond: f64,
 }
 
+/// Column `k` recomputed from the raw samples: `(z, ΔY)` over the `h` intervals before it
+/// (the trapezoid for `y`; for `u` the configured integral).
+fn batch_column(samples: &[Sample], cfg: &RegressionConfig, k: usize) -> (Vec<f64>, Vec<f64>) {
+    let (p, m, h) = (cfg.outputs, cfg.inputs, cfg.horizon);
+    let d = p + m;
+    let mut z = vec![0.0; d];
+    for j in k - h..k {
+        let dt = samples[j + 1].0 - samples[j].0;
+        for i in 0..p {
+            z[i] += 0.5 * dt * (samples[j].1[i] + samples[j + 1].1[i]);
+        }
+        for i in 0..m {
+            z[p + i] += match cfg.input_integral {
+                InputIntegral::Trapezoidal => 0.5 * dt * (samples[j].2[i] + samples[j + 1].2[i]),
+                InputIntegral::ZeroOrderHold => dt * samples[j].2[i],
+            };
+        }
+    }
+    let dy: Vec<f64> = (0..p).map(|i| samples[k].1[i] - samples[k - h].1[i]).collect();
+    (z, dy)
+}
+
 /// Batch recompute from the raw samples: builds every column from scratch, keeps the last
 /// `M` usable ones, and solves with nalgebra.
 fn batch(samples: &[Sample], cfg: &RegressionConfig) -> Option<Batch> {
     let (p, m, h) = (cfg.outputs, cfg.inputs, cfg.horizon);
     let d = p + m;
-    let column = |k: usize| {
-        let mut z = vec![0.0; d];
-        for j in k - h..k {
-            let dt = samples[j + 1].0 - samples[j].0;
-            for i in 0..p {
-                z[i] += 0.5 * dt * (samples[j].1[i] + samples[j + 1].1[i]);
-            }
-            for i in 0..m {
-                z[p + i] += match cfg.input_integral {
-                    InputIntegral::Trapezoidal => {
-                        0.5 * dt * (samples[j].2[i] + samples[j + 1].2[i])
-                    }
-                    InputIntegral::ZeroOrderHold => dt * samples[j].2[i],
-                };
-            }
-        }
-        let dy: Vec<f64> = (0..p).map(|i| samples[k].1[i] - samples[k - h].1[i]).collect();
-        (z, dy)
-    };
+    let column = |k: usize| batch_column(samples, cfg, k);
     let first = match cfg.estimator {
         Estimator::Ordinary => h,
         Estimator::Instrumented => 2 * h,

@@ -147,36 +147,9 @@ fn setting_name((r, i): Setting) -> String {
     format!("{reading}, {integral}")
 }
 
-/// The REPORT.md section, `dither/bias.csv` and `fig9_dither_bias`; `p` holds the defaults.
-pub(crate) fn section(study: &Study, p: &Params, out: &Path) -> Result<String> {
-    let default = p.dither;
-    let f = |x: f64| if x.is_finite() { format!("{:+.0} %", 100.0 * x) } else { "n/a".into() };
-    let header = [
-        "noise reading, ∫u",
-        "dither ±",
-        "A R1",
-        "A R2",
-        "A R3",
-        "B R1",
-        "B R2",
-        "B R3",
-        "diverged A / B",
-    ];
-    let mut rows = Vec::new();
-    for (ri, r) in study.settings.iter().enumerate() {
-        for (ai, a) in study.amplitudes.iter().enumerate() {
-            let c = &study.cells[ri][ai];
-            let mut row = vec![setting_name(*r), format!("{a}")];
-            for i in 0..2 {
-                for reg in 0..3 {
-                    row.push(f(c.rel[i][reg]));
-                }
-            }
-            row.push(format!("{} / {}", c.diverged[0], c.diverged[1]));
-            rows.push(row);
-        }
-    }
-    write(&out.join("dither").join("bias.csv"), &csv(&header, &rows))?;
+/// `fig9_dither_bias`: the relative bias of β̂ against the dither amplitude, one panel per
+/// noise reading and ∫u rule, the `default` amplitude marked.
+fn figure(study: &Study, default: f64, out: &Path) -> Result<()> {
     let mut panels = Vec::new();
     for (ri, r) in study.settings.iter().enumerate() {
         let series = |i: usize, reg: usize| -> Vec<(f64, f64)> {
@@ -214,6 +187,40 @@ pub(crate) fn section(study: &Study, p: &Params, out: &Path) -> Result<String> {
         out,
         "fig9_dither_bias",
     )?;
+    Ok(())
+}
+
+/// The REPORT.md section, `dither/bias.csv` and `fig9_dither_bias`; `p` holds the defaults.
+pub(crate) fn section(study: &Study, p: &Params, out: &Path) -> Result<String> {
+    let default = p.dither;
+    let f = |x: f64| if x.is_finite() { format!("{:+.0} %", 100.0 * x) } else { "n/a".into() };
+    let header = [
+        "noise reading, ∫u",
+        "dither ±",
+        "A R1",
+        "A R2",
+        "A R3",
+        "B R1",
+        "B R2",
+        "B R3",
+        "diverged A / B",
+    ];
+    let mut rows = Vec::new();
+    for (ri, r) in study.settings.iter().enumerate() {
+        for (ai, a) in study.amplitudes.iter().enumerate() {
+            let c = &study.cells[ri][ai];
+            let mut row = vec![setting_name(*r), format!("{a}")];
+            for i in 0..2 {
+                for reg in 0..3 {
+                    row.push(f(c.rel[i][reg]));
+                }
+            }
+            row.push(format!("{} / {}", c.diverged[0], c.diverged[1]));
+            rows.push(row);
+        }
+    }
+    write(&out.join("dither").join("bias.csv"), &csv(&header, &rows))?;
+    figure(study, default, out)?;
     let picked = rule(study, p);
     let mut s = String::new();
     let _ = writeln!(

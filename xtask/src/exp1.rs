@@ -286,20 +286,58 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
     }
     bar.finish_and_clear();
 
+    let t = tables(&results);
+    write(&dir.join("table2.md"), &markdown(&TABLE2_HEADER, &t.table2))?;
+    write(&dir.join("table2.csv"), &csv(&TABLE2_HEADER, &t.table2))?;
+    write(&dir.join("validity.md"), &markdown(&VALIDITY_HEADER, &t.validity))?;
+    write(&dir.join("validity.csv"), &csv(&VALIDITY_HEADER, &t.validity))?;
+    write(&dir.join("decision.md"), &markdown(&DECISION_HEADER, &t.decision))?;
+    Ok(report(p, &results, &t))
+}
+
+/// Table II's header: the paper's shares beside ours for both subsystems.
+const TABLE2_HEADER: [&str; 8] = [
+    "Regime",
+    "Noise",
+    "paper Gauss",
+    "paper Wass",
+    "ours B Gauss",
+    "ours B Wass",
+    "ours A Gauss",
+    "ours A Wass",
+];
+
+/// Subsystem B's shares over the steps that have an estimate, with the gates and the radius.
+const ESTIMATE_HEADER: [&str; 7] = [
+    "Regime",
+    "B Gauss (steps with an estimate)",
+    "B Wass (steps with an estimate)",
+    "B Gauss gate open",
+    "B Wass gate open",
+    "mean ε (B)",
+    "mean κ_e (B)",
+];
+
+/// The validity table's header (the share of certified steps above the true rate).
+const VALIDITY_HEADER: [&str; 5] = ["Regime", "A Gauss", "A Wass", "B Gauss", "B Wass"];
+
+/// The Regime-3 decision's header.
+const DECISION_HEADER: [&str; 3] = ["Quantity", "paper", "ours (mean ± std over seeds)"];
+
+/// Experiment 1's tables over the seeds, rows under the headers above.
+struct Tables {
+    table2: Vec<Vec<String>>,
+    estimate: Vec<Vec<String>>,
+    validity: Vec<Vec<String>>,
+    decision: Vec<Vec<String>>,
+}
+
+/// The tables from every seed's result.
+fn tables(results: &[SeedResult]) -> Tables {
     let paper = [
         ("Regime 1", "Gaussian (σ0 = 0.08)", "94 %", "100 %"),
         ("Regime 2", "Laplace (κ ≈ 3)", "78 %", "83 %"),
         ("Regime 3", "Spikes (5.5 %, 4.5–7.5 σ0)", "33 %", "73 %"),
-    ];
-    let header = [
-        "Regime",
-        "Noise",
-        "paper Gauss",
-        "paper Wass",
-        "ours B Gauss",
-        "ours B Wass",
-        "ours A Gauss",
-        "ours A Wass",
     ];
     let rows: Vec<Vec<String>> = (0..3)
         .map(|r| {
@@ -309,59 +347,44 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
                 noise.into(),
                 pg.into(),
                 pw.into(),
-                pct(&collect(&results, |s| s.share[1][0][r])),
-                pct(&collect(&results, |s| s.share[1][1][r])),
-                pct(&collect(&results, |s| s.share[0][0][r])),
-                pct(&collect(&results, |s| s.share[0][1][r])),
+                pct(&collect(results, |s| s.share[1][0][r])),
+                pct(&collect(results, |s| s.share[1][1][r])),
+                pct(&collect(results, |s| s.share[0][0][r])),
+                pct(&collect(results, |s| s.share[0][1][r])),
             ]
         })
         .collect();
-    write(&dir.join("table2.md"), &markdown(&header, &rows))?;
-    write(&dir.join("table2.csv"), &csv(&header, &rows))?;
 
     let est_rows: Vec<Vec<String>> = (0..3)
         .map(|r| {
             vec![
                 paper[r].0.into(),
-                pct(&collect(&results, |s| s.share_est[1][0][r])),
-                pct(&collect(&results, |s| s.share_est[1][1][r])),
-                pct(&collect(&results, |s| s.gate[1][0][r])),
-                pct(&collect(&results, |s| s.gate[1][1][r])),
-                pm(&collect(&results, |s| s.eps_b[r]), 3),
-                pm(&collect(&results, |s| s.kurt_b[r]), 2),
+                pct(&collect(results, |s| s.share_est[1][0][r])),
+                pct(&collect(results, |s| s.share_est[1][1][r])),
+                pct(&collect(results, |s| s.gate[1][0][r])),
+                pct(&collect(results, |s| s.gate[1][1][r])),
+                pm(&collect(results, |s| s.eps_b[r]), 3),
+                pm(&collect(results, |s| s.kurt_b[r]), 2),
             ]
         })
         .collect();
-    let est_header = [
-        "Regime",
-        "B Gauss (steps with an estimate)",
-        "B Wass (steps with an estimate)",
-        "B Gauss gate open",
-        "B Wass gate open",
-        "mean ε (B)",
-        "mean κ_e (B)",
-    ];
 
-    let validity_header = ["Regime", "A Gauss", "A Wass", "B Gauss", "B Wass"];
     let validity_rows: Vec<Vec<String>> = (0..3)
         .map(|r| {
             vec![
                 paper[r].0.into(),
-                pct(&collect(&results, |s| s.false_cert[0][0][r])),
-                pct(&collect(&results, |s| s.false_cert[0][1][r])),
-                pct(&collect(&results, |s| s.false_cert[1][0][r])),
-                pct(&collect(&results, |s| s.false_cert[1][1][r])),
+                pct(&collect(results, |s| s.false_cert[0][0][r])),
+                pct(&collect(results, |s| s.false_cert[0][1][r])),
+                pct(&collect(results, |s| s.false_cert[1][0][r])),
+                pct(&collect(results, |s| s.false_cert[1][1][r])),
             ]
         })
         .collect();
-    write(&dir.join("validity.md"), &markdown(&validity_header, &validity_rows))?;
-    write(&dir.join("validity.csv"), &csv(&validity_header, &validity_rows))?;
 
-    let dec = |f: &dyn Fn(&Decision) -> f64| collect(&results, |s| f(&s.decision));
+    let dec = |f: &dyn Fn(&Decision) -> f64| collect(results, |s| f(&s.decision));
     let ratio = dec(&|d| d.cost[0] / d.cost[1]);
     let disagreements =
         results.iter().filter(|s| s.decision.how.starts_with("first Regime-3 step where")).count();
-    let dec_header = ["Quantity", "paper", "ours (mean ± std over seeds)"];
     let dec_rows = vec![
         vec!["decision time t_decide [s]".into(), "24.32".into(), pm(&dec(&|d| d.t_decide), 2)],
         vec![
@@ -382,8 +405,12 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
             format!("{disagreements} of {}", results.len()),
         ],
     ];
-    write(&dir.join("decision.md"), &markdown(&dec_header, &dec_rows))?;
 
+    Tables { table2: rows, estimate: est_rows, validity: validity_rows, decision: dec_rows }
+}
+
+/// The REPORT.md section of Experiment 1.
+fn report(p: &Params, results: &[SeedResult], t: &Tables) -> String {
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -397,24 +424,24 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
     let _ = writeln!(
         s,
         "### Table II: share of steps with β_cert > β_margin (all steps of the regime, including the warm-up)\n\n{}",
-        markdown(&header, &rows)
+        markdown(&TABLE2_HEADER, &t.table2)
     );
     let _ = writeln!(
         s,
         "Same regimes, subsystem B, over the steps that have an estimate, with the gates and the radius:\n\n{}",
-        markdown(&est_header, &est_rows)
+        markdown(&ESTIMATE_HEADER, &t.estimate)
     );
     let _ = writeln!(
         s,
         "### Regime-3 decision and cost (Fig. 5)\n\nDecision point: {} (seed 0: t = {:.2} s). From there the plant is simulated twice with the same noise and an impulse of {IMPULSE} into x4 0.1 s later; each subsystem's controller is switched on when that policy's gate of that subsystem is open in the data run.\n\n{}",
         results[0].decision.how,
         results[0].decision.t_decide,
-        markdown(&dec_header, &dec_rows)
+        markdown(&DECISION_HEADER, &t.decision)
     );
     let _ = writeln!(
         s,
         "### Validity (not reported by the paper): share of certified steps with β_cert above the true rate β*(x(t))\n\nTrue rates: β*_A = tanh x1 + x1 sech² x1 − k1 along the trajectory, β*_B = 1 − k4 = 5.\n\n{}",
-        markdown(&validity_header, &validity_rows)
+        markdown(&VALIDITY_HEADER, &t.validity)
     );
     let _ = writeln!(
         s,
@@ -424,7 +451,7 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
         s,
         "![certificates](fig3_exp1_certificates.png)\n\n![surface](fig4_exp1_surface.png)\n\n![response](fig5_exp1_response.png)\n"
     );
-    Ok(s)
+    s
 }
 
 /// Subsystem B's Table II shares in one seed, `[certificate: 0 Gauss, 1 Wass][regime]`: over

@@ -210,43 +210,42 @@ fn figures(
     )?;
 
     if let Some(levels) = res.gammas {
-        let names = ["γ_safe", "γ_warned", "γ_unsafe"];
-        let colors = [GREEN, ORANGE, RED_];
-        let mut panels = Vec::new();
-        let mut cost_panel = Panel::new("Bidirectional: cumulative cost ∫‖x‖² dt", "t [s]", "cost");
-        cost_panel.y_range = Some((0.0, 20.0));
-        for (c, coupling) in [(0, Coupling::Bidirectional), (1, Coupling::Cascade)] {
-            let mut panel = Panel::new(
-                &format!("{coupling:?} G5: ‖x(t)‖, impulse {IMPULSE} at {IMPULSE_TIME} s"),
-                "t [s]",
-                "‖x‖",
-            );
-            panel.y_range = Some((0.0, 6.0));
-            for (l, g) in levels.iter().enumerate() {
-                let norms = coupled(p, coupling, *g, 0)?;
-                if c == 0 {
-                    let mut acc = 0.0;
-                    let cum = norms.iter().map(|(t, n)| {
-                        acc += n * n * p.dt;
-                        (*t, acc)
-                    });
-                    cost_panel = cost_panel.line(
-                        &format!("{} = {g:.2}", names[l]),
-                        cum.collect(),
-                        colors[l],
-                    );
-                }
-                panel = panel.line(&format!("{} = {g:.2}", names[l]), norms, colors[l]);
-            }
-            panels.push(panel);
-        }
-        panels.push(cost_panel);
-        plot::save(
-            &Figure { panels, rows: 1, cols: 3, size: (1500, 450) },
-            dir,
-            "fig8_exp2_response",
-        )?;
+        response_figure(p, dir, levels)?;
     }
+    Ok(())
+}
+
+/// Fig. 8: the coupled responses at the three coupling levels, and the bidirectional cost.
+fn response_figure(p: &Params, dir: &Path, levels: [f64; 3]) -> Result<()> {
+    let names = ["γ_safe", "γ_warned", "γ_unsafe"];
+    let colors = [GREEN, ORANGE, RED_];
+    let mut panels = Vec::new();
+    let mut cost_panel = Panel::new("Bidirectional: cumulative cost ∫‖x‖² dt", "t [s]", "cost");
+    cost_panel.y_range = Some((0.0, 20.0));
+    for (c, coupling) in [(0, Coupling::Bidirectional), (1, Coupling::Cascade)] {
+        let mut panel = Panel::new(
+            &format!("{coupling:?} G5: ‖x(t)‖, impulse {IMPULSE} at {IMPULSE_TIME} s"),
+            "t [s]",
+            "‖x‖",
+        );
+        panel.y_range = Some((0.0, 6.0));
+        for (l, g) in levels.iter().enumerate() {
+            let norms = coupled(p, coupling, *g, 0)?;
+            if c == 0 {
+                let mut acc = 0.0;
+                let cum = norms.iter().map(|(t, n)| {
+                    acc += n * n * p.dt;
+                    (*t, acc)
+                });
+                cost_panel =
+                    cost_panel.line(&format!("{} = {g:.2}", names[l]), cum.collect(), colors[l]);
+            }
+            panel = panel.line(&format!("{} = {g:.2}", names[l]), norms, colors[l]);
+        }
+        panels.push(panel);
+    }
+    panels.push(cost_panel);
+    plot::save(&Figure { panels, rows: 1, cols: 3, size: (1500, 450) }, dir, "fig8_exp2_response")?;
     Ok(())
 }
 
@@ -269,29 +268,15 @@ pub(crate) fn true_rates() -> Result<[f64; 2]> {
     Ok([r.a, r.b])
 }
 
-/// Run Experiment 2; return the REPORT.md section.
-pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
-    let dir = out.join("exp2");
-    let true_rates = true_rates()?;
+/// Table III's header.
+const TABLE3_HEADER: [&str; 4] = ["Quantity", "Symbol", "paper", "ours (mean ± std)"];
+
+/// Table III over the seeds, beside the paper's values.
+fn table3(results: &[SeedResult], true_rates: [f64; 2]) -> Vec<Vec<String>> {
     let gamma_true = (true_rates[0] * true_rates[1]).sqrt();
-    let bar = progress(p.seeds, "experiment 2");
-    let mut results = Vec::with_capacity(p.seeds);
-    for run in 0..p.seeds {
-        let (res, traj, ev) = run_seed(p, run, true_rates)?;
-        if run == 0 {
-            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj))?;
-            write_evidence(&dir.join("evidence_a_seed0.csv"), &ev[0])?;
-            write_evidence(&dir.join("evidence_b_seed0.csv"), &ev[1])?;
-            figures(p, out, &traj, &ev, &res, true_rates)?;
-        }
-        results.push(res);
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
     let col = |f: &dyn Fn(&SeedResult) -> f64| results.iter().map(f).collect::<Vec<f64>>();
     let level = |l: usize| col(&|s| s.gammas.map_or(f64::NAN, |g| g[l]));
-    let header = ["Quantity", "Symbol", "paper", "ours (mean ± std)"];
-    let rows = vec![
+    vec![
         vec![
             "Subsystem A local cert. rate".into(),
             "β_A_cert".into(),
@@ -362,18 +347,21 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
             "".into(),
             format!("{:.1e}", col(&|s| s.lemma_vs_network).iter().fold(0.0f64, |a, b| a.max(*b))),
         ],
-    ];
-    write(&dir.join("table3.md"), &markdown(&header, &rows))?;
-    write(&dir.join("table3.csv"), &csv(&header, &rows))?;
+    ]
+}
 
-    let out_header = [
-        "Coupling",
-        "level",
-        "paper prediction",
-        "diverged (seeds)",
-        "peak ‖x‖ after impulse",
-        "final ‖x‖ at 14 s",
-    ];
+/// The coupled simulations' header.
+const COUPLED_HEADER: [&str; 6] = [
+    "Coupling",
+    "level",
+    "paper prediction",
+    "diverged (seeds)",
+    "peak ‖x‖ after impulse",
+    "final ‖x‖ at 14 s",
+];
+
+/// The coupled simulations per coupling and level over the seeds.
+fn coupled_rows(results: &[SeedResult]) -> Vec<Vec<String>> {
     let mut out_rows = Vec::new();
     let prediction =
         ["returns near the origin", "slower recovery, higher peak", "grows without bound"];
@@ -394,6 +382,32 @@ pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
             ]);
         }
     }
+    out_rows
+}
+
+/// Run Experiment 2; return the REPORT.md section.
+pub(crate) fn run(p: &Params, out: &Path) -> Result<String> {
+    let dir = out.join("exp2");
+    let true_rates = true_rates()?;
+    let bar = progress(p.seeds, "experiment 2");
+    let mut results = Vec::with_capacity(p.seeds);
+    for run in 0..p.seeds {
+        let (res, traj, ev) = run_seed(p, run, true_rates)?;
+        if run == 0 {
+            write(&dir.join("trace_seed0.csv"), &trace_csv(&traj))?;
+            write_evidence(&dir.join("evidence_a_seed0.csv"), &ev[0])?;
+            write_evidence(&dir.join("evidence_b_seed0.csv"), &ev[1])?;
+            figures(p, out, &traj, &ev, &res, true_rates)?;
+        }
+        results.push(res);
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let (header, rows) = (TABLE3_HEADER, table3(&results, true_rates));
+    write(&dir.join("table3.md"), &markdown(&header, &rows))?;
+    write(&dir.join("table3.csv"), &csv(&header, &rows))?;
+
+    let (out_header, out_rows) = (COUPLED_HEADER, coupled_rows(&results));
     write(&dir.join("coupled.md"), &markdown(&out_header, &out_rows))?;
 
     let mut s = String::new();

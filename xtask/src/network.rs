@@ -149,6 +149,36 @@ fn one_run(n: usize, target: Target, run: usize, threads: usize) -> Result<Outco
     Ok(out)
 }
 
+/// A target's row of NETWORK.md over its runs, and its false openings.
+fn target_row(name: &str, results: &[Outcome]) -> (Vec<String>, usize) {
+    let below = results.iter().filter(|o| o.upper < MARGIN).count();
+    let above = results.iter().filter(|o| o.lower >= MARGIN).count();
+    let false_open = results.iter().filter(|o| o.upper < MARGIN && o.opened).count();
+    let true_open = results.iter().filter(|o| o.lower >= MARGIN && o.opened).count();
+    let (_, cp_hi) = clopper_pearson(false_open, below.max(1));
+    let times: Vec<f64> = results.iter().filter_map(|o| o.first_open).collect();
+    let excess = results.iter().map(|o| o.excess).fold(f64::NEG_INFINITY, f64::max);
+    let share: Vec<f64> =
+        results.iter().map(|o| o.certified as f64 / o.epochs.max(1) as f64).collect();
+    let brackets = results.iter().map(|o| o.upper - o.lower).fold(0.0, f64::max);
+    let row = vec![
+        name.to_string(),
+        format!("{}", results.len()),
+        format!("{below} / {above}"),
+        if below > 0 {
+            format!("{false_open} / {below} (CP upper {cp_hi:.3})")
+        } else {
+            "—".into()
+        },
+        if above > 0 { format!("{true_open} / {above}") } else { "—".into() },
+        if times.is_empty() { "never".into() } else { format!("{:.1}", median(&times)) },
+        format!("{:.1} %", 100.0 * median(&share)),
+        format!("{excess:.4}"),
+        format!("{brackets:.1e}"),
+    ];
+    (row, false_open)
+}
+
 /// Run the study and write NETWORK.md.
 pub(crate) fn run(
     n: usize,
@@ -167,31 +197,8 @@ pub(crate) fn run(
             results.push(one_run(n, target, r, threads)?);
             bar.inc(1);
         }
-        let below = results.iter().filter(|o| o.upper < MARGIN).count();
-        let above = results.iter().filter(|o| o.lower >= MARGIN).count();
-        let false_open = results.iter().filter(|o| o.upper < MARGIN && o.opened).count();
-        let true_open = results.iter().filter(|o| o.lower >= MARGIN && o.opened).count();
-        let (_, cp_hi) = clopper_pearson(false_open, below.max(1));
-        let times: Vec<f64> = results.iter().filter_map(|o| o.first_open).collect();
-        let excess = results.iter().map(|o| o.excess).fold(f64::NEG_INFINITY, f64::max);
-        let share: Vec<f64> =
-            results.iter().map(|o| o.certified as f64 / o.epochs.max(1) as f64).collect();
-        let brackets = results.iter().map(|o| o.upper - o.lower).fold(0.0, f64::max);
-        rows.push(vec![
-            target.name.to_string(),
-            format!("{runs}"),
-            format!("{below} / {above}"),
-            if below > 0 {
-                format!("{false_open} / {below} (CP upper {cp_hi:.3})")
-            } else {
-                "—".into()
-            },
-            if above > 0 { format!("{true_open} / {above}") } else { "—".into() },
-            if times.is_empty() { "never".into() } else { format!("{:.1}", median(&times)) },
-            format!("{:.1} %", 100.0 * median(&share)),
-            format!("{excess:.4}"),
-            format!("{brackets:.1e}"),
-        ]);
+        let (row, false_open) = target_row(target.name, &results);
+        rows.push(row);
         if false_open > 0 {
             let _ = writeln!(
                 notes,

@@ -214,6 +214,50 @@ fn oracle(outs: &[Outcome]) -> Option<(f64, f64)> {
     Some((opened as f64 / n, median(&ratios)))
 }
 
+/// A certificate's row of NONLINEAR.md's table over a cell's runs.
+fn row(cell: &Cell, kind: CertificateKind, label: &str, outs: &[Outcome]) -> Vec<String> {
+    let n = outs.len();
+    let false_open = outs.iter().filter(|o| o.false_open).count();
+    let opened: Vec<f64> = outs.iter().filter_map(|o| o.first_open).collect();
+    let valued: usize = outs.iter().map(|o| o.valued).sum();
+    let above: usize = outs.iter().map(|o| o.above_truth).sum();
+    let (cp_lo, cp_hi) = clopper_pearson(false_open, n);
+    let share = |k: usize, n: usize| {
+        if n == 0 { "–".to_string() } else { format!("{:.1} %", 100.0 * k as f64 / n as f64) }
+    };
+    vec![
+        cell.name.to_string(),
+        if cell.validity { "validity".into() } else { "power".into() },
+        label.to_string(),
+        n.to_string(),
+        if cell.validity {
+            format!("{false_open} ({:.4}–{:.4})", cp_lo, cp_hi)
+        } else {
+            "–".into()
+        },
+        if cell.validity {
+            let pass = matches!(kind, CertificateKind::Gaussian) || cp_hi <= 2.0 * DELTA;
+            if matches!(kind, CertificateKind::Gaussian) {
+                "no claim".into()
+            } else if pass {
+                "yes".into()
+            } else {
+                "NO".into()
+            }
+        } else {
+            "–".into()
+        },
+        share(above, valued),
+        share(opened.len(), n),
+        if opened.is_empty() { "–".into() } else { format!("{:.1} s", median(&opened)) },
+        if cell.validity { "–".into() } else { ninety(&opened, n) },
+        match oracle(outs).filter(|_| !cell.validity) {
+            Some((share, ratio)) => format!("{:.0} % / {ratio:.2}", 100.0 * share),
+            None => "–".into(),
+        },
+    ]
+}
+
 pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let cells = cells();
     let power_runs = (runs / 5).max(runs.min(20));
@@ -235,49 +279,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
         }
         for (ki, (kind, _, label)) in ROWS.iter().enumerate() {
             let outs: Vec<Outcome> = results.iter().map(|o| o[ki]).collect();
-            let false_open = outs.iter().filter(|o| o.false_open).count();
-            let opened: Vec<f64> = outs.iter().filter_map(|o| o.first_open).collect();
-            let valued: usize = outs.iter().map(|o| o.valued).sum();
-            let above: usize = outs.iter().map(|o| o.above_truth).sum();
-            let (cp_lo, cp_hi) = clopper_pearson(false_open, n);
-            let share = |k: usize, n: usize| {
-                if n == 0 {
-                    "–".to_string()
-                } else {
-                    format!("{:.1} %", 100.0 * k as f64 / n as f64)
-                }
-            };
-            rows.push(vec![
-                cell.name.to_string(),
-                if cell.validity { "validity".into() } else { "power".into() },
-                (*label).to_string(),
-                n.to_string(),
-                if cell.validity {
-                    format!("{false_open} ({:.4}–{:.4})", cp_lo, cp_hi)
-                } else {
-                    "–".into()
-                },
-                if cell.validity {
-                    let pass = matches!(kind, CertificateKind::Gaussian) || cp_hi <= 2.0 * DELTA;
-                    if matches!(kind, CertificateKind::Gaussian) {
-                        "no claim".into()
-                    } else if pass {
-                        "yes".into()
-                    } else {
-                        "NO".into()
-                    }
-                } else {
-                    "–".into()
-                },
-                share(above, valued),
-                share(opened.len(), n),
-                if opened.is_empty() { "–".into() } else { format!("{:.1} s", median(&opened)) },
-                if cell.validity { "–".into() } else { ninety(&opened, n) },
-                match oracle(&outs).filter(|_| !cell.validity) {
-                    Some((share, ratio)) => format!("{:.0} % / {ratio:.2}", 100.0 * share),
-                    None => "–".into(),
-                },
-            ]);
+            rows.push(row(cell, *kind, label, &outs));
         }
     }
     let _ = writeln!(

@@ -183,6 +183,47 @@ fn checked(path: &Path, sha256: &str) -> Result<String> {
     Ok(String::from_utf8(bytes)?)
 }
 
+/// The heat exchanger's record in K and in mK against °C (`affine`, its certification): the
+/// same gates at every row and the certificates within 10⁻⁹ relative, else an error; the
+/// paragraph of REAL.md that says so.
+fn units_check(config: &str, csv: &str, affine: &Certified) -> Result<String> {
+    let mut units = String::new();
+    // The same record in K: the same verdict at every row, the same certificates
+    // within 10⁻⁹ relative (the working origin makes both runs integrate the same
+    // excursions; only the rounding of forming them differs).
+    let kelvin =
+        certify_text(config, &add_to_third_column(csv, 273.15, "exchanger")?, "exchanger (K)")?;
+    let mut worst = 0.0f64;
+    for (c, k) in affine.rows.iter().zip(&kelvin.rows) {
+        for col in ["calibrated_open", "gauss_open"] {
+            if c.get(col) != k.get(col) {
+                bail!("°C and K differ at t = {:?}: {col}", c.get("t"));
+            }
+        }
+        for col in ["beta_hat", "rho", "cert_calibrated", "rho_calibrated"] {
+            if let (Some(a), Some(b)) = (number(c, col), number(k, col)) {
+                worst = worst.max((a - b).abs() / (1.0 + a.abs()));
+            } else if number(c, col).is_some() != number(k, col).is_some() {
+                bail!("°C and K differ at t = {:?}: {col} present in one", c.get("t"));
+            }
+        }
+    }
+    if !(worst <= 1e-9) {
+        bail!("°C and K certificates differ by {worst:e} relative");
+    }
+    let _ = writeln!(
+        units,
+        "The heat exchanger in °C and in K (the temperature plus 273.15): the same gates at every one of {} rows, certificates equal to {worst:.1e} relative (the check fails above 1e-9).\n",
+        affine.rows.len()
+    );
+    let (presence, mk_worst) = millikelvin_check(config, csv, affine)?;
+    let _ = writeln!(
+        units,
+        "In mK ((the temperature plus 273.15) × 1000, excursions of about 7000): the same calibrated gate at every row (the check fails otherwise); certificates equal to {mk_worst:.1e} relative where both runs have one, and present in one run only at {presence} rows (every calibrated fit is in no unit: its ridge is relative to each diagonal entry and its refusals are judged equilibrated).\n"
+    );
+    Ok(units)
+}
+
 /// Check and certify every committed record (and, with `from`, check the originals and their
 /// conversion); write `REAL.md` under `out`.
 pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
@@ -223,42 +264,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
             ]);
         }
         if rec.name == "exchanger" {
-            // The same record in K: the same verdict at every row, the same certificates
-            // within 10⁻⁹ relative (the working origin makes both runs integrate the same
-            // excursions; only the rounding of forming them differs).
-            let kelvin = certify_text(
-                &config,
-                &add_to_third_column(&csv, 273.15, rec.name)?,
-                "exchanger (K)",
-            )?;
-            let mut worst = 0.0f64;
-            for (c, k) in affine.rows.iter().zip(&kelvin.rows) {
-                for col in ["calibrated_open", "gauss_open"] {
-                    if c.get(col) != k.get(col) {
-                        bail!("°C and K differ at t = {:?}: {col}", c.get("t"));
-                    }
-                }
-                for col in ["beta_hat", "rho", "cert_calibrated", "rho_calibrated"] {
-                    if let (Some(a), Some(b)) = (number(c, col), number(k, col)) {
-                        worst = worst.max((a - b).abs() / (1.0 + a.abs()));
-                    } else if number(c, col).is_some() != number(k, col).is_some() {
-                        bail!("°C and K differ at t = {:?}: {col} present in one", c.get("t"));
-                    }
-                }
-            }
-            if !(worst <= 1e-9) {
-                bail!("°C and K certificates differ by {worst:e} relative");
-            }
-            let _ = writeln!(
-                units,
-                "The heat exchanger in °C and in K (the temperature plus 273.15): the same gates at every one of {} rows, certificates equal to {worst:.1e} relative (the check fails above 1e-9).\n",
-                affine.rows.len()
-            );
-            let (presence, mk_worst) = millikelvin_check(&config, &csv, &affine)?;
-            let _ = writeln!(
-                units,
-                "In mK ((the temperature plus 273.15) × 1000, excursions of about 7000): the same calibrated gate at every row (the check fails otherwise); certificates equal to {mk_worst:.1e} relative where both runs have one, and present in one run only at {presence} rows (every calibrated fit is in no unit: its ridge is relative to each diagonal entry and its refusals are judged equilibrated).\n"
-            );
+            units.push_str(&units_check(&config, &csv, &affine)?);
         }
     }
     let mut s = String::from(

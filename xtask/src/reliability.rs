@@ -231,6 +231,13 @@ impl Cases {
             "checkpoint: eigenvalue scratch emptied, checksum recomputed",
             resume(&reseal(&|v| v["certifier"]["eig_work"] = serde_json::json!([]))?)?,
         );
+        self.calibrated_checkpoint_cases(rows)
+    }
+
+    /// A calibrated checkpoint's `T = [I; K]` zeroed, and a checkpoint of another
+    /// configuration (the one [`checkpoint_cases`](Self::checkpoint_cases) wrote).
+    fn calibrated_checkpoint_cases(&self, rows: &mut Vec<Vec<String>>) -> Result<()> {
+        let (first, rest, ck) = (self.first(), self.rest(), s(&self.path("state.ckpt"))?);
         // With the calibrated certificate on: its `T = [I; K]` zeroed.
         let cal_cfg = self.path("calibrated.toml");
         std::fs::write(

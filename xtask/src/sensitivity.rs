@@ -295,6 +295,25 @@ fn judge(cell: &PaperCell, v: &Variant, measure: Measure) -> Option<(bool, f64, 
     Some((distance <= (2.0 * s).max(cell.floor), distance, m, s))
 }
 
+/// The closest faithful setting of `cell`: every variant that keeps c, every reading of the
+/// cell; `(distance, variant, reading, reproduces, mean, std)`.
+fn closest<'a>(
+    cell: &PaperCell,
+    faithful: &[&'a Variant],
+) -> Option<(f64, &'a Variant, Measure, bool, f64, f64)> {
+    let mut best: Option<(f64, &Variant, Measure, bool, f64, f64)> = None;
+    for v in faithful {
+        for &measure in &cell.measures {
+            if let Some((ok, distance, m, s)) = judge(cell, v, measure) {
+                if best.is_none_or(|b| distance < b.0) {
+                    best = Some((distance, v, measure, ok, m, s));
+                }
+            }
+        }
+    }
+    best
+}
+
 /// The "what reproduces" table; `gamma_true` is `√(β*_A β*_B)` of Experiment 2.
 pub(crate) fn what_reproduces(variants: &[Variant], c: f64, gamma_true: f64) -> String {
     let faithful: Vec<&Variant> =
@@ -302,17 +321,7 @@ pub(crate) fn what_reproduces(variants: &[Variant], c: f64, gamma_true: f64) -> 
     let all = cells(gamma_true);
     let mut rows = Vec::new();
     for (index, cell) in all.iter().enumerate() {
-        // The closest faithful setting: every variant that keeps c, every reading of the cell.
-        let mut best: Option<(f64, &Variant, Measure, bool, f64, f64)> = None;
-        for v in &faithful {
-            for &measure in &cell.measures {
-                if let Some((ok, distance, m, s)) = judge(cell, v, measure) {
-                    if best.is_none_or(|b| distance < b.0) {
-                        best = Some((distance, v, measure, ok, m, s));
-                    }
-                }
-            }
-        }
+        let best = closest(cell, &faithful);
         // Table II's Wasserstein cells (indices 3 to 5) with their Gaussian cell of the same
         // regime: is there one setting and one reading where both reproduce?
         let pair = (3..6).contains(&index).then(|| {

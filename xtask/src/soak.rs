@@ -122,6 +122,98 @@ struct Proc {
     runs: usize,
 }
 
+/// The three processes' command lines: the binary, the configuration, the host file, process
+/// 0's output and the folder of the sites' files, checkpoints and logs.
+struct Sites {
+    bin: PathBuf,
+    cfg: PathBuf,
+    hosts: PathBuf,
+    output: PathBuf,
+    out: PathBuf,
+}
+
+impl Sites {
+    /// Start process `i` (from its checkpoint when `resume`), its standard error to a log.
+    fn spawn(&self, i: usize, resume: bool) -> Result<Child> {
+        let path = |p: &Path| p.display().to_string();
+        let ck = self.out.join(format!("site-{i}.ckpt"));
+        let mut c = Command::new(&self.bin);
+        c.args(["network", "--config", &path(&self.cfg), "--processes", "3"])
+            .args(["--process", &i.to_string(), "--hostfile", &path(&self.hosts)])
+            .args(["--input", &path(&self.out.join(format!("site-{i}.csv")))])
+            .args(["--checkpoint", &path(&ck), "--checkpoint-epochs", "10"]);
+        if resume {
+            c.args(["--resume", &path(&ck)]);
+        }
+        if i == 0 {
+            c.args(["--output", &path(&self.output)]);
+        }
+        let name = format!("site-{i}-{}.log", u8::from(resume));
+        let log = std::fs::File::create(self.out.join(name))?;
+        Ok(c.stdout(Stdio::null()).stderr(log).spawn()?)
+    }
+
+    /// Run the three processes to the end, killing process 1 when a third of the `total`
+    /// epoch rows are written and process 2 at two thirds (each once its checkpoint exists),
+    /// each restarted with `--resume` 2 s later; polls every process's peak memory. The
+    /// kills `(process, rows written, seconds)`.
+    fn supervise(&self, procs: &mut [Proc], total: usize) -> Result<Vec<(usize, usize, f64)>> {
+        let start = Instant::now();
+        let written = || std::fs::read_to_string(&self.output).map_or(0, |t| t.lines().count());
+        let mut kills: Vec<(usize, usize, f64)> = Vec::new();
+        let plan = [(1usize, total / 3), (2usize, 2 * total / 3)];
+        loop {
+            for p in procs.iter_mut() {
+                if let Some(m) = peak_mib(p.child.id()) {
+                    p.peak = p.peak.max(m);
+                }
+            }
+            if let Some(&(victim, at)) = plan.get(kills.len()) {
+                let done = written();
+                if done >= at && self.out.join(format!("site-{victim}.ckpt")).exists() {
+                    procs[victim].child.kill()?;
+                    procs[victim].child.wait()?;
+                    kills.push((victim, done, start.elapsed().as_secs_f64()));
+                    std::thread::sleep(Duration::from_secs(2));
+                    procs[victim].child = self.spawn(victim, true)?;
+                    procs[victim].runs += 1;
+                }
+            }
+            let mut finished = true;
+            for p in procs.iter_mut() {
+                if p.child.try_wait()?.is_none() {
+                    finished = false;
+                }
+            }
+            if finished {
+                return Ok(kills);
+            }
+            if start.elapsed() > Duration::from_secs(3600) {
+                for p in procs.iter_mut() {
+                    let _ = p.child.kill();
+                }
+                bail!("the soak run did not finish in an hour");
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+}
+
+/// The one-process reference over the merged rows: its standard output and error, and its
+/// time in seconds.
+fn reference(bin: &Path, cfg: &Path, out: &Path) -> Result<(String, String, f64)> {
+    let start = Instant::now();
+    let reference = Command::new(bin)
+        .args(["network", "--config", &cfg.display().to_string(), "--input"])
+        .arg(out.join("merged.csv"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .output()?;
+    let want = String::from_utf8_lossy(&reference.stdout).into_owned();
+    let want_err = String::from_utf8_lossy(&reference.stderr).into_owned();
+    Ok((want, want_err, start.elapsed().as_secs_f64()))
+}
+
 pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out)?;
     let bin = crate::reliability::binary()?;
@@ -129,40 +221,15 @@ pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
     let rows = data(n, steps, out)?;
     let cfg = out.join("net.toml");
     std::fs::write(&cfg, config(n))?;
-    let path = |p: PathBuf| p.display().to_string();
     eprintln!("soak: the one-process reference…");
-    let start = Instant::now();
-    let reference = Command::new(&bin)
-        .args(["network", "--config", &path(cfg.clone()), "--input"])
-        .arg(out.join("merged.csv"))
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .output()?;
-    let reference_s = start.elapsed().as_secs_f64();
-    let want = String::from_utf8_lossy(&reference.stdout).into_owned();
-    let want_err = String::from_utf8_lossy(&reference.stderr).into_owned();
+    let (want, want_err, reference_s) = reference(&bin, &cfg, out)?;
     let ports: Vec<u16> = (0..3)
         .map(|_| Ok(std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port()))
         .collect::<Result<_>>()?;
     let hosts = out.join("hosts.txt");
     std::fs::write(&hosts, ports.iter().map(|p| format!("127.0.0.1:{p}\n")).collect::<String>())?;
     let output = out.join("epochs.csv");
-    let spawn = |i: usize, resume: bool| -> Result<Child> {
-        let ck = out.join(format!("site-{i}.ckpt"));
-        let mut c = Command::new(&bin);
-        c.args(["network", "--config", &path(cfg.clone()), "--processes", "3"])
-            .args(["--process", &i.to_string(), "--hostfile", &path(hosts.clone())])
-            .args(["--input", &path(out.join(format!("site-{i}.csv")))])
-            .args(["--checkpoint", &path(ck.clone()), "--checkpoint-epochs", "10"]);
-        if resume {
-            c.args(["--resume", &path(ck)]);
-        }
-        if i == 0 {
-            c.args(["--output", &path(output.clone())]);
-        }
-        let log = std::fs::File::create(out.join(format!("site-{i}-{}.log", u8::from(resume))))?;
-        Ok(c.stdout(Stdio::null()).stderr(log).spawn()?)
-    };
+    let sites = Sites { bin, cfg, hosts, output: output.clone(), out: out.to_path_buf() };
     for i in 0..3 {
         let _ = std::fs::remove_file(out.join(format!("site-{i}.ckpt")));
     }
@@ -170,49 +237,10 @@ pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
     eprintln!("soak: three processes, two kills…");
     let start = Instant::now();
     let mut procs: Vec<Proc> = (0..3)
-        .map(|i| Ok(Proc { child: spawn(i, false)?, peak: 0.0, runs: 1 }))
+        .map(|i| Ok(Proc { child: sites.spawn(i, false)?, peak: 0.0, runs: 1 }))
         .collect::<Result<_>>()?;
     let total = want.lines().count().max(1);
-    let written = || std::fs::read_to_string(&output).map_or(0, |t| t.lines().count());
-    let mut kills: Vec<(usize, usize, f64)> = Vec::new();
-    let plan = [(1usize, total / 3), (2usize, 2 * total / 3)];
-    let mut next_kill = 0;
-    loop {
-        for p in &mut procs {
-            if let Some(m) = peak_mib(p.child.id()) {
-                p.peak = p.peak.max(m);
-            }
-        }
-        if let Some(&(victim, at)) = plan.get(next_kill) {
-            let done = written();
-            let ck = out.join(format!("site-{victim}.ckpt"));
-            if done >= at && ck.exists() {
-                procs[victim].child.kill()?;
-                procs[victim].child.wait()?;
-                kills.push((victim, done, start.elapsed().as_secs_f64()));
-                std::thread::sleep(Duration::from_secs(2));
-                procs[victim].child = spawn(victim, true)?;
-                procs[victim].runs += 1;
-                next_kill += 1;
-            }
-        }
-        let mut finished = true;
-        for p in &mut procs {
-            if p.child.try_wait()?.is_none() {
-                finished = false;
-            }
-        }
-        if finished {
-            break;
-        }
-        if start.elapsed() > Duration::from_secs(3600) {
-            for p in &mut procs {
-                let _ = p.child.kill();
-            }
-            bail!("the soak run did not finish in an hour");
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
+    let kills = sites.supervise(&mut procs, total)?;
     let soak_s = start.elapsed().as_secs_f64();
     let codes: Vec<Option<i32>> =
         procs.iter_mut().map(|p| p.child.wait().ok().and_then(|s| s.code())).collect();
@@ -232,30 +260,7 @@ pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
          time order ({reference_s:.0} s). The soak took {soak_s:.0} s.\n",
         JUMP_STEPS as f64 * DT
     )?;
-    let kill_rows: Vec<Vec<String>> = kills
-        .iter()
-        .map(|(victim, at, s)| {
-            vec![format!("process {victim}"), format!("{at} of {total}"), format!("{s:.1}")]
-        })
-        .collect();
-    md.push_str(&markdown(
-        &["killed (SIGKILL), restarted with --resume", "epoch rows written", "at [s]"],
-        &kill_rows,
-    ));
-    md.push('\n');
-    let proc_rows: Vec<Vec<String>> = procs
-        .iter()
-        .enumerate()
-        .map(|(i, p)| {
-            vec![
-                format!("{i}"),
-                format!("{}", p.runs),
-                codes[i].map_or("killed".into(), |c| c.to_string()),
-                format!("{:.0}", p.peak),
-            ]
-        })
-        .collect();
-    md.push_str(&markdown(&["process", "starts", "exit code", "peak memory [MiB]"], &proc_rows));
+    md.push_str(&tables(&kills, total, &procs, &codes));
     writeln!(
         md,
         "\nOutput lines (the header and the epoch rows): reference {}, soak {}; lines that \
@@ -272,4 +277,38 @@ pub(crate) fn run(n: usize, steps: usize, out: &Path) -> Result<()> {
         bail!("{differ} epoch rows differ from the uninterrupted run");
     }
     Ok(())
+}
+
+/// SOAK.md's two tables: the kills, and how each process ended.
+fn tables(
+    kills: &[(usize, usize, f64)],
+    total: usize,
+    procs: &[Proc],
+    codes: &[Option<i32>],
+) -> String {
+    let kill_rows: Vec<Vec<String>> = kills
+        .iter()
+        .map(|(victim, at, s)| {
+            vec![format!("process {victim}"), format!("{at} of {total}"), format!("{s:.1}")]
+        })
+        .collect();
+    let mut md = markdown(
+        &["killed (SIGKILL), restarted with --resume", "epoch rows written", "at [s]"],
+        &kill_rows,
+    );
+    md.push('\n');
+    let proc_rows: Vec<Vec<String>> = procs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            vec![
+                format!("{i}"),
+                format!("{}", p.runs),
+                codes[i].map_or("killed".into(), |c| c.to_string()),
+                format!("{:.0}", p.peak),
+            ]
+        })
+        .collect();
+    md.push_str(&markdown(&["process", "starts", "exit code", "peak memory [MiB]"], &proc_rows));
+    md
 }

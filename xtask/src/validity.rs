@@ -325,6 +325,41 @@ pub(crate) fn power_only(runs: usize, out: &Path) -> Result<()> {
     )
 }
 
+/// A near-margin cell's row over its runs.
+fn near_row(cell: &Cell, results: &[RunResult]) -> Vec<String> {
+    let runs = results.len();
+    let opened = results.iter().filter(|r| r.calibrated_open.is_some()).count();
+    let (_, hi) = clopper_pearson(opened, runs);
+    let mut ratios: Vec<f64> =
+        results.iter().map(|r| r.max_ratio).filter(|r| r.is_finite()).collect();
+    let q99 = if ratios.is_empty() { f64::NAN } else { quantile(&mut ratios, 0.99) };
+    let paper: Vec<String> = (0..3)
+        .map(|k| {
+            format!(
+                "{:.1} %",
+                100.0 * results.iter().filter(|r| r.paper_open[k]).count() as f64 / runs as f64
+            )
+        })
+        .collect();
+    let mut row = vec![
+        cell.family.clone(),
+        format!("{:.3}", cell.truth()),
+        cell.window.to_string(),
+        format!("{} / {runs}", opened),
+        format!("{hi:.4}"),
+        if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
+        format!("{q99:.2}"),
+        {
+            let over = results.iter().filter(|r| r.anchored_max > 1.0).count();
+            format!("{over} / {runs}")
+        },
+        guard_share(results),
+    ];
+    row.extend(Efficiency::cells(results));
+    row.push(paper.join(" / "));
+    row
+}
+
 /// Run the study (`runs` per near-margin cell, `runs / 5` per power cell, at least 50);
 /// write `VALIDITY.md` under `out`.
 pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
@@ -354,35 +389,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
             continue;
         }
         let results = run_many(cell, runs, 1_000_000 * (ci as u64 + 1), &bar)?;
-        let opened = results.iter().filter(|r| r.calibrated_open.is_some()).count();
-        let (_, hi) = clopper_pearson(opened, runs);
-        let mut ratios: Vec<f64> =
-            results.iter().map(|r| r.max_ratio).filter(|r| r.is_finite()).collect();
-        let q99 = if ratios.is_empty() { f64::NAN } else { quantile(&mut ratios, 0.99) };
-        let paper: Vec<String> = (0..3)
-            .map(|k| {
-                format!(
-                    "{:.1} %",
-                    100.0 * results.iter().filter(|r| r.paper_open[k]).count() as f64 / runs as f64
-                )
-            })
-            .collect();
-        rows.push(vec![
-            cell.family.clone(),
-            format!("{:.3}", cell.truth()),
-            cell.window.to_string(),
-            format!("{} / {runs}", opened),
-            format!("{hi:.4}"),
-            if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
-            format!("{q99:.2}"),
-            {
-                let over = results.iter().filter(|r| r.anchored_max > 1.0).count();
-                format!("{over} / {runs}")
-            },
-            guard_share(&results),
-        ]);
-        rows.last_mut().expect("pushed").extend(Efficiency::cells(&results));
-        rows.last_mut().expect("pushed").push(paper.join(" / "));
+        rows.push(near_row(cell, &results));
     }
     let _ = writeln!(s, "## Candidates just below the margin (n_s = 1): every opening is false\n");
     let _ = writeln!(

@@ -67,37 +67,7 @@ fn the_anchored_estimate_is_the_delete_a_record_jackknife_of_every_block_since_t
         if recs <= d {
             continue;
         }
-        // The sums of record r (columns of its c blocks).
-        let sums = |r: usize| {
-            let (mut nm, mut cw, mut hm) =
-                (DMatrix::zeros(d, d), DMatrix::zeros(1, d), DMatrix::zeros(d, d));
-            for j in r * c * h..(r + 1) * c * h {
-                let (zq, dyq) = &cols[first + j];
-                let wv = &cols[first + j - h - lag].0;
-                nm += zq * wv.transpose();
-                cw += DMatrix::from_element(1, 1, *dyq) * wv.transpose();
-                hm += wv * wv.transpose();
-            }
-            (nm, cw, hm)
-        };
-        let parts: Vec<_> = (0..recs).map(sums).collect();
-        let (mut nm, mut cw, mut hm) =
-            (DMatrix::zeros(d, d), DMatrix::zeros(1, d), DMatrix::zeros(d, d));
-        for (a, b, e) in &parts {
-            nm += a;
-            cw += b;
-            hm += e;
-        }
-        let q = hm.try_inverse().expect("invertible") * nm.transpose();
-        let a = &nm * &q;
-        let theta = &cw * &q * a.clone().try_inverse().expect("invertible");
-        let mut omega = 0.0;
-        for (nr, cr, _) in &parts {
-            let deleted = (&cw - cr) * &q * (&a - nr * &q).try_inverse().expect("invertible");
-            let s = ((&theta - deleted) * &t_vec)[(0, 0)];
-            omega += s * s;
-        }
-        omega *= overlap(c, h);
+        let (theta, omega) = delete_a_record(&cols, (c, h, lag), recs, &t_vec);
         anchored.estimate(Solve { ridge: 0.0, t: &t, min_pivot_ratio: 0.0 }, &mut est);
         assert!(est.ready, "step {step}");
         assert_eq!((est.batches, est.columns), (recs, recs * c * h));
@@ -137,4 +107,48 @@ fn anchored_windows_refuse_bad_record_counts_and_round_trip() {
     back.check_state(&win, 8).expect("consistent");
     assert_eq!(back, anchored);
     assert!(back.check_state(&win, 12).is_err(), "a different record count is refused");
+}
+
+/// The delete-a-record jackknife by nalgebra over `recs` records of `c` blocks of `h` columns
+/// of `cols` (from the first instrumented column, `h + lag`, each instrumented by the column
+/// `h + lag` before it): `(Θ̂, Ω̂)`.
+fn delete_a_record(
+    cols: &[(DVector<f64>, f64)],
+    (c, h, lag): (usize, usize, usize),
+    recs: usize,
+    t_vec: &DVector<f64>,
+) -> (DMatrix<f64>, f64) {
+    let (d, first) = (t_vec.len(), h + lag);
+    // The sums of record r (columns of its c blocks).
+    let sums = |r: usize| {
+        let (mut nm, mut cw, mut hm) =
+            (DMatrix::zeros(d, d), DMatrix::zeros(1, d), DMatrix::zeros(d, d));
+        for j in r * c * h..(r + 1) * c * h {
+            let (zq, dyq) = &cols[first + j];
+            let wv = &cols[first + j - h - lag].0;
+            nm += zq * wv.transpose();
+            cw += DMatrix::from_element(1, 1, *dyq) * wv.transpose();
+            hm += wv * wv.transpose();
+        }
+        (nm, cw, hm)
+    };
+    let parts: Vec<_> = (0..recs).map(sums).collect();
+    let (mut nm, mut cw, mut hm) =
+        (DMatrix::zeros(d, d), DMatrix::zeros(1, d), DMatrix::zeros(d, d));
+    for (a, b, e) in &parts {
+        nm += a;
+        cw += b;
+        hm += e;
+    }
+    let q = hm.try_inverse().expect("invertible") * nm.transpose();
+    let a = &nm * &q;
+    let theta = &cw * &q * a.clone().try_inverse().expect("invertible");
+    let mut omega = 0.0;
+    for (nr, cr, _) in &parts {
+        let deleted = (&cw - cr) * &q * (&a - nr * &q).try_inverse().expect("invertible");
+        let s = ((&theta - deleted) * t_vec)[(0, 0)];
+        omega += s * s;
+    }
+    omega *= overlap(c, h);
+    (theta, omega)
 }

@@ -121,7 +121,15 @@ fn g5_cell(name: &'static str, which: usize, k: f64) -> Cell {
     Cell { g5: Some(which), ..Cell::power(name, base(), k) }
 }
 
+/// The study's cells, in the order their seeds are drawn from.
 pub(super) fn cells() -> Vec<Cell> {
+    let mut cells = forty_seconds();
+    cells.extend(longer());
+    cells
+}
+
+/// The 40 s cells, and the near-margin cell at the smallest window.
+fn forty_seconds() -> Vec<Cell> {
     let poly = |c: Vec<f64>| ScalarDrift::Polynomial(c);
     let setting = Experiment::Two.setting();
     vec![
@@ -159,11 +167,7 @@ pub(super) fn cells() -> Vec<Cell> {
         Cell::power("same, rate 0.5 + 1.8 x² (10× the margin)", cubic(0.1), -1.0),
         Cell::power(
             "−x tanh x, K = −2, process noise σ = 0.02",
-            ScalarScenario {
-                k_explore: -2.0,
-                noise: Process::Gaussian { sigma: 0.02 },
-                ..base()
-            },
+            ScalarScenario { k_explore: -2.0, noise: Process::Gaussian { sigma: 0.02 }, ..base() },
             -2.0,
         ),
         Cell::power(
@@ -187,8 +191,14 @@ pub(super) fn cells() -> Vec<Cell> {
                 -0.53,
             )
         },
-        // Power with more data: the same loops run longer, with windows that double up to
-        // about the run's length (last, so the seeds above stay as they were).
+    ]
+}
+
+/// Power with more data: the same loops run longer, with windows that double up to about the
+/// run's length (after the cells above, so that their seeds stay as they were).
+fn longer() -> Vec<Cell> {
+    let setting = Experiment::Two.setting();
+    vec![
         Cell::power(
             "cubic, rate 0.15 + 1.8 x² (3× the margin), σ = 0.1, 2000 s, windows up to 102 400 columns",
             cubic(0.1),

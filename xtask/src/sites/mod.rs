@@ -278,7 +278,6 @@ pub(crate) fn run(o: &Options) -> Result<()> {
     let crossing = (0..subsystems).filter(|i| i % processes != 0).count() as u64 * steps as u64;
     let one = OldSample { row: 1, line: 1, index: 1, t: 0.0, values: vec![0.0, 0.0] };
     let old_bytes = crossing * bincode::serialized_size(&one)?;
-    let epochs = m.epochs.max(1);
     let mut md = String::new();
     writeln!(
         md,
@@ -296,24 +295,7 @@ pub(crate) fn run(o: &Options) -> Result<()> {
          {:.1} s wall.\n",
         m.samples, m.epochs, m.seconds
     )?;
-    let per = |b: u64| format!("{:.0}", b as f64 / epochs as f64);
-    md.push_str(&markdown(
-        &["path", "messages per epoch", "bytes per epoch", "ratio to raw samples"],
-        &[
-            vec![
-                "raw samples (process 0 reads and ships every sample)".into(),
-                per(crossing),
-                per(old_bytes),
-                "1".into(),
-            ],
-            vec![
-                "sites (only snapshots and marks cross)".into(),
-                per(m.messages),
-                per(m.bytes),
-                format!("1/{:.0}", old_bytes as f64 / m.bytes.max(1) as f64),
-            ],
-        ],
-    ));
+    md.push_str(&bytes_table(&m, crossing, old_bytes));
     eprintln!("throughput: {throughput_subsystems} subsystems, 2 processes vs push_batch…");
     let tsteps = (throughput_seconds * rate).round() as usize;
     let two = over_processes(throughput_subsystems, 2, tsteps, dt, out).context("throughput")?;
@@ -334,42 +316,78 @@ pub(crate) fn run(o: &Options) -> Result<()> {
         ],
     ));
     if let Some(old) = old_binary {
-        eprintln!("throughput through the binaries (the old one: {})…", old.display());
-        let ([old_s, new_s, one_s, workers_s], same) =
-            cli::throughput(old, throughput_subsystems, tsteps, dt, out)?;
-        writeln!(
-            md,
-            "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
-             processes on localhost, or one; this build's runs wrote the same epoch rows, \
-             {}):\n",
-            if same {
-                "and so did the raw-sample binary's"
-            } else {
-                "the raw-sample binary's differ: its calibrated local certificates predate \
-                 later changes of the default (see VALIDITY.md)"
-            }
-        )?;
-        md.push_str(&markdown(
-            &["path", "seconds", "samples per second", "ratio to the raw-sample binary"],
-            &[
-                timing(
-                    "the raw-sample binary: process 0 reads the wide file and ships the samples",
-                    old_s,
-                    samples,
-                    None,
-                ),
-                timing("sites: each process reads its own columns", new_s, samples, Some(old_s)),
-                timing("sites, one process (no timely)", one_s, samples, Some(old_s)),
-                timing(
-                    "sites, one process on 2 timely workers (`--workers 2`)",
-                    workers_s,
-                    samples,
-                    Some(old_s),
-                ),
-            ],
-        ));
+        md.push_str(&binaries(old, (throughput_subsystems, tsteps, dt), samples, out)?);
     }
     write(&out.join("SITES.md"), &md)?;
     println!("{md}");
     Ok(())
+}
+
+/// The throughput study through the binaries (`old`: the raw-sample one) on `n` subsystems,
+/// `steps` steps of `dt`: SITES.md's paragraph and table.
+fn binaries(
+    old: &Path,
+    (n, steps, dt): (usize, usize, f64),
+    samples: f64,
+    out: &Path,
+) -> Result<String> {
+    let mut md = String::new();
+    eprintln!("throughput through the binaries (the old one: {})…", old.display());
+    let ([old_s, new_s, one_s, workers_s], same) = cli::throughput(old, n, steps, dt, out)?;
+    writeln!(
+        md,
+        "\nThrough the `streamcert` binaries on the same samples written as CSV (2 \
+         processes on localhost, or one; this build's runs wrote the same epoch rows, \
+         {}):\n",
+        if same {
+            "and so did the raw-sample binary's"
+        } else {
+            "the raw-sample binary's differ: its calibrated local certificates predate \
+             later changes of the default (see VALIDITY.md)"
+        }
+    )?;
+    md.push_str(&markdown(
+        &["path", "seconds", "samples per second", "ratio to the raw-sample binary"],
+        &[
+            timing(
+                "the raw-sample binary: process 0 reads the wide file and ships the samples",
+                old_s,
+                samples,
+                None,
+            ),
+            timing("sites: each process reads its own columns", new_s, samples, Some(old_s)),
+            timing("sites, one process (no timely)", one_s, samples, Some(old_s)),
+            timing(
+                "sites, one process on 2 timely workers (`--workers 2`)",
+                workers_s,
+                samples,
+                Some(old_s),
+            ),
+        ],
+    ));
+    Ok(md)
+}
+
+/// The bytes study's table: messages and bytes per epoch of the raw-sample path (`crossing`
+/// samples, `old_bytes` bytes) and of the sites' path (`m`).
+fn bytes_table(m: &Measured, crossing: u64, old_bytes: u64) -> String {
+    let epochs = m.epochs.max(1);
+    let per = |b: u64| format!("{:.0}", b as f64 / epochs as f64);
+    markdown(
+        &["path", "messages per epoch", "bytes per epoch", "ratio to raw samples"],
+        &[
+            vec![
+                "raw samples (process 0 reads and ships every sample)".into(),
+                per(crossing),
+                per(old_bytes),
+                "1".into(),
+            ],
+            vec![
+                "sites (only snapshots and marks cross)".into(),
+                per(m.messages),
+                per(m.bytes),
+                format!("1/{:.0}", old_bytes as f64 / m.bytes.max(1) as f64),
+            ],
+        ],
+    )
 }

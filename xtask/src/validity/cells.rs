@@ -222,6 +222,18 @@ pub(super) fn near_margin_cells() -> Vec<Cell> {
             ..cell(format!("operating point y₀ = {y0:e}, u₀ = 10"), s, vec![0.0], 150)
         });
     }
+    cells.extend(hidden_and_batched_cells());
+    cells
+}
+
+/// The near-margin cells of hidden dynamics and of batches of blocks (after the others, in
+/// the order their seeds are drawn).
+fn hidden_and_batched_cells() -> Vec<Cell> {
+    let mut cells = Vec::new();
+    let scalar = |noise| scenario(1, vec![0.5], -1.0, noise);
+    let cell = |family: String, scenario: LinearScenario, gain: Vec<f64>, window| {
+        plain(family, scenario, gain, window, 1)
+    };
     // Hidden dynamics: a two-state plant measured by its first state, `u = PRBS(±1, held
     // 0.5 s)`, noise into the second state, K = 0: a damped mass (`ẍ = −2 ẋ + u + w`, the
     // position does not contract: β* = 0) and a lightly damped oscillator

@@ -64,6 +64,61 @@ fn one(s: &LinearScenario, seed: u64, reference: f64) -> Result<Run> {
     Ok(run)
 }
 
+/// `runs` runs of scenario `s` (seeds from `base`) on two threads, events measured from
+/// `reference`.
+fn runs_of(
+    s: &LinearScenario,
+    (base, runs): (u64, usize),
+    reference: f64,
+    bar: &indicatif::ProgressBar,
+) -> Result<Vec<Run>> {
+    let half = runs / 2;
+    std::thread::scope(|scope| -> Result<Vec<Run>> {
+        let a = scope.spawn(|| {
+            (0..half).map(|r| one(s, base + r as u64, reference)).collect::<Result<Vec<_>>>()
+        });
+        let b = (half..runs)
+            .map(|r| {
+                bar.inc(2);
+                one(s, base + r as u64, reference)
+            })
+            .collect::<Result<Vec<_>>>();
+        let mut a = a.join().expect("worker thread")?;
+        a.extend(b?);
+        Ok(a)
+    })
+}
+
+/// A cell's row: its sampling step, the change (`what`), the shortest window's span, whether
+/// the new plant is below the margin, and the runs.
+fn row(dt: f64, what: &str, span: f64, unsafe_change: bool, results: &[Run]) -> Vec<String> {
+    let runs = results.len();
+    let open: Vec<&Run> = results.iter().filter(|r| r.open_at_switch).collect();
+    let late = results.iter().filter(|r| r.last_open.is_some_and(|l| l > 1.5 * span));
+    let late = late.count();
+    let mut delays: Vec<f64> = open.iter().map(|r| r.delay).collect();
+    let (after_samples, changed): (usize, usize) =
+        results.iter().fold((0, 0), |(a, c), r| (a + r.after, c + r.changed));
+    vec![
+        format!("{dt}"),
+        what.to_string(),
+        format!("{:.2}", span),
+        format!("{} / {runs}", open.len()),
+        if unsafe_change {
+            format!("{late} ({:.1} %)", 100.0 * late as f64 / runs as f64)
+        } else {
+            "–".into()
+        },
+        if delays.is_empty() { "–".into() } else { format!("{:.2}", median(&delays)) },
+        if delays.is_empty() { "–".into() } else { format!("{:.2}", quantile(&mut delays, 0.9)) },
+        format!("{:.1} %", 100.0 * changed as f64 / after_samples.max(1) as f64),
+        format!(
+            "{:.1} %",
+            100.0 * results.iter().filter(|r| r.last_open.is_some()).count() as f64 / runs as f64
+        ),
+    ]
+}
+
 /// The table: `runs` runs per cell at `dt = 0.01` and `0.02`, changes from `β* = 3` to
 /// `−0.2`, `0`, `0.04` (below the margin) and `1` (still contracting).
 pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
@@ -89,59 +144,15 @@ pub(super) fn table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String>
                 ..scenario(1, vec![-(3.0 + K)], -2.0, Process::Gaussian { sigma: 0.1 })
             };
             let base = 95_000_000 + 1_000_000 * cell as u64;
-            let half = runs / 2;
-            let results = std::thread::scope(|scope| -> Result<Vec<Run>> {
-                let a = scope.spawn(|| {
-                    (0..half)
-                        .map(|r| one(&s, base + r as u64, reference))
-                        .collect::<Result<Vec<_>>>()
-                });
-                let b = (half..runs)
-                    .map(|r| {
-                        bar.inc(2);
-                        one(&s, base + r as u64, reference)
-                    })
-                    .collect::<Result<Vec<_>>>();
-                let mut a = a.join().expect("worker thread")?;
-                a.extend(b?);
-                Ok(a)
-            })?;
-            let open: Vec<&Run> = results.iter().filter(|r| r.open_at_switch).collect();
-            let late = results.iter().filter(|r| r.last_open.is_some_and(|l| l > 1.5 * span));
-            let late = late.count();
-            let mut delays: Vec<f64> = open.iter().map(|r| r.delay).collect();
-            let (after_samples, changed): (usize, usize) =
-                results.iter().fold((0, 0), |(a, c), r| (a + r.after, c + r.changed));
-            let unsafe_change = after < 0.05;
-            rows.push(vec![
-                format!("{dt}"),
-                if ramp > 0.0 {
-                    format!(
-                        "3 → {after}, drift over {ramp} s from {at} s (crosses at {reference:.1} s)"
-                    )
-                } else {
-                    format!("3 → {after}")
-                },
-                format!("{:.2}", span),
-                format!("{} / {runs}", open.len()),
-                if unsafe_change {
-                    format!("{late} ({:.1} %)", 100.0 * late as f64 / runs as f64)
-                } else {
-                    "–".into()
-                },
-                if delays.is_empty() { "–".into() } else { format!("{:.2}", median(&delays)) },
-                if delays.is_empty() {
-                    "–".into()
-                } else {
-                    format!("{:.2}", quantile(&mut delays, 0.9))
-                },
-                format!("{:.1} %", 100.0 * changed as f64 / after_samples.max(1) as f64),
+            let results = runs_of(&s, (base, runs), reference, bar)?;
+            let what = if ramp > 0.0 {
                 format!(
-                    "{:.1} %",
-                    100.0 * results.iter().filter(|r| r.last_open.is_some()).count() as f64
-                        / runs as f64
-                ),
-            ]);
+                    "3 → {after}, drift over {ramp} s from {at} s (crosses at {reference:.1} s)"
+                )
+            } else {
+                format!("3 → {after}")
+            };
+            rows.push(row(dt, &what, span, after < 0.05, &results));
         }
     }
     let mut s = String::new();

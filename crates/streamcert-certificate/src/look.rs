@@ -9,6 +9,7 @@
 //! and the guards depend on it.
 
 pub(crate) mod hotelling;
+pub(crate) mod larger;
 pub(crate) mod quantile;
 mod standing;
 

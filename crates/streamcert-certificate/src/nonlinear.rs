@@ -105,7 +105,7 @@ mod features;
 
 pub use bounds::polynomial_bounds;
 use cells::Bounds;
-use check::{LackOfFit, WaldAt, refused, wald};
+use check::{LackOfFit, refused};
 pub use config::NonlinearConfig;
 pub use features::{Feature, FeatureSet};
 
@@ -114,6 +114,7 @@ use streamcert_regression::{
     InstrumentedWindows, Interval, RegressionConfig, Solve, WindowEstimate,
 };
 
+use crate::look::hotelling::wald_entries;
 pub use crate::look::hotelling::{NonlinearityTest, f_quantile, simultaneous_multiplier};
 use crate::look::quantile::t_quantile;
 use crate::look::{Look, standing};
@@ -381,9 +382,9 @@ impl NonlinearState {
         };
         let Bounds { cert, worst, beta_min, upper } = bounds;
         let alpha = self.cfg.test_risk.unwrap_or(delta);
-        let at =
-            WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: 1, q: dg - 1, nu, alpha };
-        let test = wald(&at, &mut self.sub, &mut self.rhs, &mut self.work);
+        let scratch = (&mut self.sub[..], &mut self.rhs[..], &mut self.work[..]);
+        let (theta, cov) = (&self.est.theta[..d], &self.cov[..d * d]);
+        let test = wald_entries((theta, cov), (dg - 1, |a| 1 + a), (nu, alpha), scratch);
         let misfit =
             self.check.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha));
         let order = self.order.as_mut().and_then(|c| c.test(w, &self.dir, ridge, min_pivot, alpha));

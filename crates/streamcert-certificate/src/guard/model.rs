@@ -75,10 +75,9 @@
 //! [`Calibration::nonlinearity`]: crate::Calibration::nonlinearity
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
 
-use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
-use crate::look::same_windows;
+use crate::look::hotelling::NonlinearityTest;
+use crate::look::larger::LargerFit;
 use crate::{CertifyError, GuardVariance, NotCertified};
 
 /// Which groups of extra regressors the guard fits and tests.
@@ -110,23 +109,13 @@ pub(crate) struct ModelGuard {
     groups: Groups,
     /// The risk `α` of each test.
     alpha: f64,
-    windows: InstrumentedWindows,
-    est: WindowEstimate,
-    /// The increments `ΔY` of the last `h` columns (ring, `h p` values), `pushed` columns so
-    /// far since the last reset.
-    lags: Vec<f64>,
-    pushed: u64,
+    /// The larger fit (its fields inline in a checkpoint).
+    #[serde(flatten)]
+    fit: LargerFit,
     /// The latest order test of each window (`None`: not run, or its fit not ready).
     latest: Vec<Option<NonlinearityTest>>,
     /// The latest nonlinearity test of each window.
     curvature: Vec<Option<NonlinearityTest>>,
-    // Scratch (meaningless between calls).
-    z: Vec<f64>,
-    dir: Vec<f64>,
-    cov: Vec<f64>,
-    sub: Vec<f64>,
-    rhs: Vec<f64>,
-    work: Vec<f64>,
     /// The covariance of the tests ([`Calibration::guard_variance`](crate::Calibration::guard_variance)).
     #[serde(default)]
     variance: GuardVariance,
@@ -144,30 +133,21 @@ impl ModelGuard {
         alpha: f64,
     ) -> Result<Self, CertifyError> {
         let dd = d + groups.extra(p);
-        let windows =
-            InstrumentedWindows::with_regressors(p, dd, horizon, lag, intervals, lengths)?
-                .with_batch(batch)?;
-        let q = 2 * p * p;
+        // The tested coefficients' direction (ones) in standardised coefficients: the weights
+        // behind `ν` are then the same in any units of the outputs. A test takes at most the
+        // `2p` curvature terms of every output.
+        let shape = (lag, intervals, batch);
+        let fit = LargerFit::new((p, dd, horizon), shape, lengths, groups.order, 2 * p * p)?
+            .standardised();
         Ok(Self {
             p,
             d,
             horizon,
             groups,
             alpha,
-            windows,
-            // The tested coefficients' direction (ones) in standardised coefficients: the
-            // weights behind `ν` are then the same in any units of the outputs.
-            est: WindowEstimate::with_regressors(p, dd, intervals).standardised(),
-            lags: vec![0.0; if groups.order { horizon * p } else { 0 }],
-            pushed: 0,
+            fit,
             latest: vec![None; lengths.len()],
             curvature: vec![None; lengths.len()],
-            z: vec![0.0; dd],
-            dir: vec![0.0; dd * p],
-            cov: vec![0.0; (p * dd) * (p * dd)],
-            sub: vec![0.0; q * q],
-            rhs: vec![0.0; q],
-            work: vec![0.0; q],
             variance: GuardVariance::FirstOrder,
         })
     }
@@ -185,9 +165,7 @@ impl ModelGuard {
 
     /// Forget every column and test.
     pub(crate) fn reset(&mut self) {
-        self.windows.reset();
-        self.lags.fill(0.0);
-        self.pushed = 0;
+        self.fit.reset();
         self.latest.fill(None);
         self.curvature.fill(None);
     }
@@ -209,13 +187,11 @@ impl ModelGuard {
     /// columns earlier (zero for the first `h` columns after a reset, so the guard's blocks
     /// stay aligned with the linear ones).
     pub(crate) fn push(&mut self, z: &[f64], dy: &[f64], samples: (&[f64], &[f64], &[f64])) {
-        let (p, d, h) = (self.p, self.d, self.horizon);
-        self.z[..d].copy_from_slice(&z[..d]);
+        let (p, d) = (self.p, self.d);
+        self.fit.z[..d].copy_from_slice(&z[..d]);
         let mut at = d;
         if self.groups.order {
-            let slot = (self.pushed % h as u64) as usize;
-            self.z[at..at + p].copy_from_slice(&self.lags[slot * p..(slot + 1) * p]);
-            self.lags[slot * p..(slot + 1) * p].copy_from_slice(&dy[..p]);
+            self.fit.past_increment(at, &dy[..p]);
             at += p;
         }
         if self.groups.curvature {
@@ -232,21 +208,19 @@ impl ModelGuard {
                     cu += half * (a3 + b3);
                     (a2, a3) = (b2, b3);
                 }
-                self.z[at + 2 * i] = sq;
-                self.z[at + 2 * i + 1] = cu;
+                self.fit.z[at + 2 * i] = sq;
+                self.fit.z[at + 2 * i + 1] = cu;
             }
         }
-        self.pushed += 1;
-        self.windows.push_column(&self.z, dy);
+        self.fit.push(dy);
     }
 
     /// Window `w`'s tests at a look: replace the window's latest tests.
     pub(crate) fn look(&mut self, w: usize, ridge: f64, min_pivot: f64) {
         let (p, d) = (self.p, self.d);
-        let dd = self.z.len();
         self.latest[w] = None;
         self.curvature[w] = None;
-        if !self.windows.is_full(w) {
+        if !self.fit.windows.is_full(w) {
             return;
         }
         // The direction weighs the blocks for the effective number `ν` by the tested
@@ -254,44 +228,17 @@ impl ModelGuard {
         // the certificate's direction the curvature test's rejection rate on a linear loop
         // measured the same, 2–4 % of looks against a nominal 0.25 %: the direction is not
         // what makes that test anti-conservative.)
-        self.dir.fill(0.0);
-        self.dir[d * p..].fill(1.0);
-        let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        let solve = Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot };
-        let ok = match self.variance {
-            GuardVariance::FirstOrder => {
-                windows.estimate_coefficients_first_order(w, solve, est, cov)
-            }
-            GuardVariance::Jackknife => windows.estimate_coefficients(w, solve, est, cov),
-        };
-        if !ok {
-            return;
-        }
-        let nu = self.est.effective_blocks.min(self.est.batches as f64) - dd as f64;
+        self.fit.dir.fill(0.0);
+        self.fit.dir[d * p..].fill(1.0);
+        let Some(nu) = self.fit.fit(w, (ridge, min_pivot), self.variance) else { return };
         let mut first = d;
         if self.groups.order {
-            self.latest[w] = self.wald(first, p, nu);
+            self.latest[w] = self.fit.wald(first, p, nu, self.alpha);
             first += p;
         }
         if self.groups.curvature {
-            self.curvature[w] = self.wald(first, 2 * p, nu);
+            self.curvature[w] = self.fit.wald(first, 2 * p, nu, self.alpha);
         }
-    }
-
-    /// The Wald test of the coefficients of regressors `first .. first + e` in every output's
-    /// equation (`q = p e` entries of `vec(Θ̂)`).
-    fn wald(&mut self, first: usize, e: usize, nu: f64) -> Option<NonlinearityTest> {
-        let (p, dd) = (self.p, self.z.len());
-        let q = p * e;
-        // Entry a: output a / e, regressor first + a % e, at index (a / e)·d' + first + a % e.
-        let index = |a: usize| (a / e) * dd + first + a % e;
-        for a in 0..q {
-            for b in 0..q {
-                self.sub[a * q + b] = self.cov[index(a) * (p * dd) + index(b)];
-            }
-            self.rhs[a] = self.est.theta[index(a)];
-        }
-        hotelling_wald(q, nu, self.alpha, (&mut self.sub, &mut self.rhs, &mut self.work))
     }
 
     /// Whether window `w`'s look may stand: `Ok` when its latest tests ran and found nothing
@@ -307,14 +254,14 @@ impl ModelGuard {
         };
         if let Some((v, t)) = rejected(self.tests()) {
             return Err(NotCertified::HiddenDynamics {
-                window: self.windows.window(v),
+                window: self.fit.windows.window(v),
                 statistic: t.statistic,
                 threshold: t.threshold,
             });
         }
         if let Some((v, t)) = rejected(self.curvature_tests()) {
             return Err(NotCertified::VaryingDynamics {
-                window: self.windows.window(v),
+                window: self.fit.windows.window(v),
                 statistic: t.statistic,
                 threshold: t.threshold,
             });
@@ -330,27 +277,13 @@ impl ModelGuard {
 
     /// Whether a deserialised guard matches a fresh one of the same configuration.
     pub(crate) fn matches(&self, fresh: &Self) -> bool {
-        self.windows.check_state().is_ok()
-            && (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)
+        (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)
             && self.groups == fresh.groups
             && self.alpha == fresh.alpha
             && self.variance == fresh.variance
-            && same_windows(&self.windows, &fresh.windows)
-            && self.est.matches(&fresh.est)
+            && self.fit.matches(&fresh.fit)
             && self.latest.len() == fresh.latest.len()
             && self.curvature.len() == fresh.curvature.len()
-            && [
-                (self.lags.len(), fresh.lags.len()),
-                (self.z.len(), fresh.z.len()),
-                (self.dir.len(), fresh.dir.len()),
-                (self.cov.len(), fresh.cov.len()),
-                (self.sub.len(), fresh.sub.len()),
-                (self.rhs.len(), fresh.rhs.len()),
-                (self.work.len(), fresh.work.len()),
-            ]
-            .iter()
-            .all(|(a, b)| a == b)
-            && self.lags.iter().all(|v| v.is_finite())
     }
 }
 
@@ -369,7 +302,7 @@ mod tests {
             NonlinearityTest { statistic: 1.0, threshold: 10.0 },
             NonlinearityTest { statistic: 11.0, threshold: 10.0 },
         );
-        let closed_by = |g: &ModelGuard, w: usize| match g.admits(w, g.windows.window(w)) {
+        let closed_by = |g: &ModelGuard, w: usize| match g.admits(w, g.fit.windows.window(w)) {
             Ok(()) => None,
             Err(NotCertified::HiddenDynamics { window, .. }) => Some(window),
             Err(other) => panic!("{other:?}"),

@@ -130,6 +130,29 @@ pub(crate) fn hotelling_wald(
     threshold.is_finite().then_some(NonlinearityTest { statistic: quad, threshold })
 }
 
+/// The Wald test of the `q` entries `S = {index(0), …, index(q − 1)}` of `vec(Θ̂)` (`theta`,
+/// its covariance `cov`, `n × n` row-major with `n = theta.len()`): [`hotelling_wald`] on
+/// `Ω̂_SS` and `θ̂_S` gathered into the scratch (`sub`: `q²`, `rhs` and `work`: `q` each).
+/// `None` when `q = 0`, or as [`hotelling_wald`].
+pub(crate) fn wald_entries(
+    (theta, cov): (&[f64], &[f64]),
+    (q, index): (usize, impl Fn(usize) -> usize),
+    (nu, alpha): (f64, f64),
+    (sub, rhs, work): (&mut [f64], &mut [f64], &mut [f64]),
+) -> Option<NonlinearityTest> {
+    if q == 0 {
+        return None;
+    }
+    let n = theta.len();
+    for a in 0..q {
+        for b in 0..q {
+            sub[a * q + b] = cov[index(a) * n + index(b)];
+        }
+        rhs[a] = theta[index(a)];
+    }
+    hotelling_wald(q, nu, alpha, (sub, rhs, work))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -26,12 +26,12 @@
 //! [`NonlinearConfig::check_terms`]: super::NonlinearConfig::check_terms
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
 
-use crate::look::hotelling::{NonlinearityTest, hotelling_wald};
-use crate::{CertifyError, NotCertified};
+use crate::look::hotelling::NonlinearityTest;
+use crate::look::larger::LargerFit;
+use crate::{CertifyError, GuardVariance, NotCertified};
 
-/// The larger fit and its scratch.
+/// The larger fit and what its terms are.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(super) struct LackOfFit {
     /// The exponents `k` of the extra terms `y^k`.
@@ -43,59 +43,9 @@ pub(super) struct LackOfFit {
     /// Whether the fit holds the past increment `ΔY_{q−h}` (the order test).
     #[serde(default)]
     order: bool,
-    /// The increments of the last `h` columns (ring, `h` values when `order`), and the
-    /// columns pushed since the last reset.
-    #[serde(default)]
-    lags: Vec<f64>,
-    #[serde(default)]
-    pushed: u64,
-    windows: InstrumentedWindows,
-    est: WindowEstimate,
-    // Scratch (meaningless between calls).
-    z: Vec<f64>,
-    dir: Vec<f64>,
-    cov: Vec<f64>,
-    sub: Vec<f64>,
-    rhs: Vec<f64>,
-    work: Vec<f64>,
-}
-
-/// What one Wald test needs besides its scratch.
-pub(super) struct WaldAt<'a> {
-    /// The coefficients (one output row).
-    pub theta: &'a [f64],
-    /// Their covariance, `d × d` row-major.
-    pub cov: &'a [f64],
-    /// The tested coefficients `first .. first + q`.
-    pub first: usize,
-    pub q: usize,
-    /// Degrees of freedom `ν` and the test's risk `α`.
-    pub nu: f64,
-    pub alpha: f64,
-}
-
-/// The Wald test `θ̂_Sᵀ Ω̂_SS⁻¹ θ̂_S` of the coefficients `S = first .. first + q` against
-/// Hotelling's quantile with `q` and `ν` degrees of freedom at risk `α`. `None` when `q = 0`,
-/// `Ω̂_SS` is not positive definite, or `ν − q + 1 <= 0`. Scratch: `sub` (`q²`), `rhs`, `work`
-/// (`q` each).
-pub(super) fn wald(
-    at: &WaldAt<'_>,
-    sub: &mut [f64],
-    rhs: &mut [f64],
-    work: &mut [f64],
-) -> Option<NonlinearityTest> {
-    let WaldAt { theta, cov, first, q, nu, alpha } = *at;
-    if q == 0 {
-        return None;
-    }
-    let d = theta.len();
-    for i in 0..q {
-        for j in 0..q {
-            sub[i * q + j] = cov[(first + i) * d + (first + j)];
-        }
-        rhs[i] = theta[first + i];
-    }
-    hotelling_wald(q, nu, alpha, (sub, rhs, work))
+    /// The larger fit (its fields inline in a checkpoint).
+    #[serde(flatten)]
+    fit: LargerFit,
 }
 
 impl LackOfFit {
@@ -111,28 +61,13 @@ impl LackOfFit {
     ) -> Result<Self, CertifyError> {
         let e = powers.len();
         let d = features + e + usize::from(order) + inputs;
-        Ok(Self {
-            windows: InstrumentedWindows::with_regressors(1, d, horizon, lag, intervals, lengths)?,
-            est: WindowEstimate::with_regressors(1, d, intervals),
-            powers,
-            features,
-            horizon,
-            order,
-            lags: vec![0.0; if order { horizon } else { 0 }],
-            pushed: 0,
-            z: vec![0.0; d],
-            dir: vec![0.0; d],
-            cov: vec![0.0; d * d],
-            sub: vec![0.0; (e + usize::from(order)).pow(2)],
-            rhs: vec![0.0; e + usize::from(order)],
-            work: vec![0.0; e + usize::from(order)],
-        })
+        let q = e + usize::from(order);
+        let fit = LargerFit::new((1, d, horizon), (lag, intervals, 1), lengths, order, q)?;
+        Ok(Self { powers, features, horizon, order, fit })
     }
 
     pub(super) fn reset(&mut self) {
-        self.windows.reset();
-        self.lags.fill(0.0);
-        self.pushed = 0;
+        self.fit.reset();
     }
 
     /// Absorb a column: `z_main` holds the library's integrals then the inputs' (`D + m`),
@@ -142,15 +77,13 @@ impl LackOfFit {
     pub(super) fn push(&mut self, z_main: &[f64], dy: &[f64], ts: &[f64], ys: &[f64]) {
         let (dg, e) = (self.features, self.powers.len());
         let o = usize::from(self.order);
-        self.z[..dg].copy_from_slice(&z_main[..dg]);
-        self.z[dg + e + o..].copy_from_slice(&z_main[dg..]);
+        let z = &mut self.fit.z;
+        z[..dg].copy_from_slice(&z_main[..dg]);
+        z[dg + e + o..].copy_from_slice(&z_main[dg..]);
         if self.order {
-            let slot = (self.pushed % self.horizon as u64) as usize;
-            self.z[dg + e] = self.lags[slot];
-            self.lags[slot] = dy[0];
+            self.fit.past_increment(dg + e, &dy[..1]);
         }
-        self.pushed += 1;
-        let extra = &mut self.z[dg..dg + e];
+        let extra = &mut self.fit.z[dg..dg + e];
         extra.fill(0.0);
         // Each sample's powers once (`y^k` by repeated multiplication), then the trapezoids.
         let top = usize::from(self.powers.iter().copied().max().unwrap_or(1));
@@ -170,7 +103,7 @@ impl LackOfFit {
             }
             pa = pb;
         }
-        self.windows.push_column(&self.z, dy);
+        self.fit.push(dy);
     }
 
     /// Window `w`'s test at a look: the Wald test of every extra term of this fit (the powers,
@@ -186,47 +119,22 @@ impl LackOfFit {
         alpha: f64,
     ) -> Option<NonlinearityTest> {
         let (dg, e, o) = (self.features, self.powers.len(), usize::from(self.order));
-        let d = self.z.len();
-        self.dir[..dg].copy_from_slice(&dir_main[..dg]);
-        self.dir[dg..dg + e + o].fill(0.0);
-        self.dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
-        let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        if !windows.estimate_coefficients(
-            w,
-            Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot },
-            est,
-            cov,
-        ) {
-            return None;
-        }
-        let blocks = (self.est.columns / self.horizon) as f64;
-        let nu = self.est.effective_blocks.min(blocks) - d as f64;
-        let at =
-            WaldAt { theta: &self.est.theta[..d], cov: &self.cov, first: dg, q: e + o, nu, alpha };
-        wald(&at, &mut self.sub, &mut self.rhs, &mut self.work)
+        let d = self.fit.z.len();
+        let dir = &mut self.fit.dir;
+        dir[..dg].copy_from_slice(&dir_main[..dg]);
+        dir[dg..dg + e + o].fill(0.0);
+        dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
+        let nu = self.fit.fit(w, (ridge, min_pivot), GuardVariance::Jackknife)?;
+        self.fit.wald(dg, e + o, nu, alpha)
     }
 
     /// Whether a deserialised check matches a fresh one.
     pub(super) fn matches(&self, fresh: &Self) -> bool {
-        self.windows.check_state().is_ok()
-            && self.powers == fresh.powers
+        self.powers == fresh.powers
             && self.features == fresh.features
             && self.horizon == fresh.horizon
             && self.order == fresh.order
-            && self.lags.len() == fresh.lags.len()
-            && self.lags.iter().all(|v| v.is_finite())
-            && crate::look::same_windows(&self.windows, &fresh.windows)
-            && self.est.matches(&fresh.est)
-            && [
-                (self.z.len(), fresh.z.len()),
-                (self.dir.len(), fresh.dir.len()),
-                (self.cov.len(), fresh.cov.len()),
-                (self.sub.len(), fresh.sub.len()),
-                (self.rhs.len(), fresh.rhs.len()),
-                (self.work.len(), fresh.work.len()),
-            ]
-            .iter()
-            .all(|(a, b)| a == b)
+            && self.fit.matches(&fresh.fit)
     }
 }
 

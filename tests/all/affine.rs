@@ -9,7 +9,7 @@ use streamcert::certificate::{
 use streamcert::dynamics::{LinearScenario, Process, Trajectory};
 use streamcert::regression::{InputIntegral, Model, RegressionConfig};
 
-use crate::support::{run as run_scenario, scalar};
+use crate::support::{coupled_pair, run as run_scenario, scalar};
 
 const H: usize = 5;
 
@@ -155,15 +155,7 @@ fn an_operating_point_below_the_margin_is_not_certified() {
 /// identity metric of the new units is another metric of the plant.
 #[test]
 fn a_stated_metric_undoes_a_change_of_units() {
-    let scenario = LinearScenario {
-        n: 2,
-        m: 2,
-        a: vec![0.5, 0.3, -0.2, 0.2],
-        b: vec![1.0, 0.0, 0.0, 1.0],
-        k_explore: vec![-1.0, 0.0, 0.0, -1.0],
-        steps: 3000,
-        ..loop_about_zero()
-    };
+    let scenario = coupled_pair(loop_about_zero(), 3000);
     let traj = run_scenario(&scenario, 12);
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
     let reg = RegressionConfig {

@@ -10,7 +10,7 @@ use streamcert::regression::{
     InputIntegral, InstrumentedWindows, Model, RegressionConfig, SlidingRegression,
 };
 
-use crate::support::{run as run_scenario, scalar};
+use crate::support::{coupled_pair, run as run_scenario, scalar};
 
 const H: usize = 5;
 
@@ -149,15 +149,7 @@ fn every_look_matches_its_formula(batch: usize, model: Model, auto_share: f64) {
     let affine = model == Model::Affine;
     let dd = 4 + usize::from(affine);
     let gain = vec![-2.0, 0.0, 0.0, -2.0];
-    let scenario = LinearScenario {
-        n: 2,
-        m: 2,
-        a: vec![0.5, 0.3, -0.2, 0.2],
-        b: vec![1.0, 0.0, 0.0, 1.0],
-        k_explore: vec![-1.0, 0.0, 0.0, -1.0],
-        steps: 1500,
-        ..short_window_plant()
-    };
+    let scenario = coupled_pair(short_window_plant(), 1500);
     let mut cfg = calibrated(2, gain.clone(), 150, 1);
     cfg.regression.model = model;
     cfg.calibration = Some(Calibration {

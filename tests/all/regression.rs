@@ -253,12 +253,18 @@ fn wide_regressions_equal_batch_at_every_step() {
             ..RegressionConfig::new(p, m, window, 3, 1e-6)
         };
         let samples = random_stream(p, m, 4 * window, 0.0, seed);
-        let mut reg = SlidingRegression::new(cfg).expect("valid");
-        for k in 0..samples.len() {
-            let (t, y, u) = &samples[k];
-            reg.push(*t, y, u).expect("valid sample");
-            assert_matches_batch(&mut reg, &samples[..=k], 1e-9);
-        }
+        matches_batch_at_every_step(cfg, &samples);
+    }
+}
+
+/// Push every sample of `samples` into a regression of `cfg`, each step checked against the
+/// batch recompute of the samples so far (`10⁻⁹`).
+fn matches_batch_at_every_step(cfg: RegressionConfig, samples: &[Sample]) {
+    let mut reg = SlidingRegression::new(cfg).expect("valid");
+    for k in 0..samples.len() {
+        let (t, y, u) = &samples[k];
+        reg.push(*t, y, u).expect("valid sample");
+        assert_matches_batch(&mut reg, &samples[..=k], 1e-9);
     }
 }
 
@@ -283,12 +289,7 @@ fn incremental_equals_batch_at_every_step() {
             ..RegressionConfig::new(2, 1, 40, 3, 1e-4)
         };
         let samples = random_stream(2, 1, 1500, offset, 17);
-        let mut reg = SlidingRegression::new(cfg).expect("valid");
-        for k in 0..samples.len() {
-            let (t, y, u) = &samples[k];
-            reg.push(*t, y, u).expect("valid sample");
-            assert_matches_batch(&mut reg, &samples[..=k], 1e-9);
-        }
+        matches_batch_at_every_step(cfg, &samples);
     }
 }
 

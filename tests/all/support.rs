@@ -59,3 +59,17 @@ pub(crate) fn scalar(a: f64, k_explore: f64, noise: Process, dither: f64) -> Lin
         switch: None,
     }
 }
+
+/// `base` as the coupled two-output plant of the multi-output tests: `A = [0.5 0.3; −0.2 0.2]`,
+/// `B = I`, explored by `u = −y + PRBS`, for `steps` steps.
+pub(crate) fn coupled_pair(base: LinearScenario, steps: usize) -> LinearScenario {
+    LinearScenario {
+        n: 2,
+        m: 2,
+        a: vec![0.5, 0.3, -0.2, 0.2],
+        b: vec![1.0, 0.0, 0.0, 1.0],
+        k_explore: vec![-1.0, 0.0, 0.0, -1.0],
+        steps,
+        ..base
+    }
+}

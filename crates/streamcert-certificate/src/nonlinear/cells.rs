@@ -42,6 +42,12 @@ fn cell_edges(region: Interval, cells: usize) -> impl Iterator<Item = (f64, f64)
 }
 
 impl NonlinearState {
+    /// `B K`: the fitted inputs' coefficients times the candidate gain.
+    fn input_term(&self) -> f64 {
+        let (dg, d) = (self.library.len(), self.dir.len());
+        self.est.theta[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum()
+    }
+
     /// The polynomial library: `β̂(y)` and `s(y)²` are polynomials, bounded on each cell by
     /// their Taylor expansions at its midpoint ([`polynomial_bounds`]).
     pub(super) fn cells_polynomial(
@@ -51,10 +57,9 @@ impl NonlinearState {
         c: f64,
         c_upper: f64,
     ) -> Bounds {
-        let (dg, d) = (self.library.len(), self.dir.len());
+        let (dg, d, bk) = (self.library.len(), self.dir.len(), self.input_term());
         let th = &self.est.theta;
         // β̂(y) = Σ_i f_i y^i, f_0 = −(θ_1 + B K), f_i = −(i + 1) θ_{i+1}.
-        let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
         self.poly_f[0] = -(th[0] + bk);
         for i in 1..dg {
             self.poly_f[i] = -((i + 1) as f64) * th[i];
@@ -104,9 +109,8 @@ impl NonlinearState {
         c: f64,
         c_upper: f64,
     ) -> Bounds {
-        let (dg, d) = (self.library.len(), self.dir.len());
+        let (dg, d, bk) = (self.library.len(), self.dir.len(), self.input_term());
         let th = &self.est.theta;
-        let bk: f64 = th[dg..d].iter().zip(&self.gain).map(|(b, g)| b * g).sum();
         let mut out = Bounds::start(region);
         let mut slopes = [(0.0, 0.0); FeatureSet::CAPACITY];
         for (a, b) in cell_edges(region, cells) {

@@ -205,9 +205,10 @@ fn residual_moments(
     (residual, raw, mag)
 }
 
-/// `out = a b` for `a` (`k × d`) and `b` (`d × p`), row-major.
-#[inline]
-fn product(a: &[f64], b: &[f64], out: &mut [f64], (k, d, p): (usize, usize, usize)) {
+/// `out = a b` for `a` (`k × d`) and `b` (`d × p`), row-major (each entry summed over `d` in
+/// order).
+#[inline(always)]
+pub(super) fn product(a: &[f64], b: &[f64], out: &mut [f64], (k, d, p): (usize, usize, usize)) {
     for r in 0..k {
         for j in 0..p {
             let mut v = 0.0;

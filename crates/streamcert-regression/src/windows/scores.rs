@@ -4,6 +4,7 @@
 
 use super::batch::Batches;
 use super::estimate::block_weight;
+use super::fresh::product;
 use super::jackknife::{JackScratch, Jackknife, MIN_RESIDUAL_SHARE};
 use super::outcome::WindowEstimate;
 use super::{InstrumentedWindows, Layout};
@@ -41,15 +42,7 @@ fn batch_step(
 /// `block = sym(G T)` (`p × p`) for the influence rows `G` (`p × d`) and `T` (`d × p`).
 #[inline(always)]
 fn sym_product(g: &[f64], t: &[f64], block: &mut [f64], p: usize, d: usize) {
-    for i in 0..p {
-        for jj in 0..p {
-            let mut v = 0.0;
-            for a in 0..d {
-                v += g[i * d + a] * t[a * p + jj];
-            }
-            block[i * p + jj] = v;
-        }
-    }
+    product(g, t, block, (p, d, p));
     for i in 0..p {
         for jj in i + 1..p {
             let s = 0.5 * (block[i * p + jj] + block[jj * p + i]);

@@ -5,6 +5,7 @@
 
 mod affine;
 mod checkpoint;
+mod scalar;
 mod solve;
 mod update;
 

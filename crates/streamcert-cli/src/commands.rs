@@ -1,0 +1,149 @@
+//! The `certify` and `network` commands: the configuration read, the pipeline run, the summary
+//! written, and the verdict the exit code reports.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use streamcert_pipeline::{CliError, certify, config, network};
+
+use super::{
+    ClusterArgs, Outcome, Persist, Require, Stream, check_plot, open_input, open_output, verdict,
+};
+
+/// `streamcert certify`.
+pub(super) fn run_certify(
+    io: Stream,
+    on_bad_row: certify::BadRows,
+    persist: Persist,
+    summary: Option<PathBuf>,
+    require: Require,
+    plot: Option<PathBuf>,
+) -> Result<Outcome, CliError> {
+    let Persist { checkpoint, checkpoint_every, resume } = persist;
+    if io.print_config {
+        print!("{}", config::DEFAULT_CONFIG);
+        return Ok(Outcome::Done);
+    }
+    let (path, text) = io.config_text()?;
+    let cfg = config::parse(&text, &path)?;
+    check_plot(plot.as_ref())?;
+    let opts = certify::Options {
+        format: io.format,
+        bad_rows: on_bad_row,
+        checkpoint,
+        checkpoint_every,
+        resume,
+        flush: io.flush(),
+        plot,
+    };
+    let mut out = open_output(&io.output)?;
+    let s = certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
+    out.flush().map_err(|e| CliError::io("writing output", e))?;
+    match summary {
+        Some(file) => {
+            let v = s.json(&cfg.certifier, &cfg.columns.outputs);
+            std::fs::write(&file, format!("{v}\n"))
+                .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
+        }
+        None => {
+            eprintln!("{}", s.text(&cfg.certifier, &cfg.columns.outputs));
+            if let Some(w) = s.units_warning(&cfg.certifier) {
+                eprintln!("warning: {w}");
+            }
+        }
+    }
+    Ok(verdict(require.require_certified, s.certified_at_end(&cfg.certifier)))
+}
+
+/// `streamcert network`.
+pub(super) fn run_network(
+    io: Stream,
+    persist: Persist,
+    summary: Option<PathBuf>,
+    cluster: ClusterArgs,
+    require: Require,
+    plot: Option<PathBuf>,
+) -> Result<Outcome, CliError> {
+    let Persist { checkpoint, checkpoint_every, resume } = persist;
+    if io.print_config {
+        print!("{}", network::template());
+        return Ok(Outcome::Done);
+    }
+    let (path, text) = io.config_text()?;
+    let cfg = network::parse(&text, &path)?;
+    check_plot(plot.as_ref())?;
+    let mut out = open_output(&io.output)?;
+    let opts = network::NetOptions {
+        format: io.format,
+        flush: io.flush(),
+        checkpoint,
+        checkpoint_every,
+        resume,
+        plot,
+    };
+    let ClusterArgs { workers, processes, process, hostfile, silence, checkpoint_epochs } = cluster;
+    let cluster =
+        network::Cluster { workers, processes, process, hostfile, silence, checkpoint_epochs };
+    if cluster.is_set() && opts.plot.is_some() {
+        return Err(CliError::Config {
+            path: path.clone(),
+            message: "--plot draws a one-process run (drop --plot, or run without \
+                      --processes/--workers)"
+                .into(),
+        });
+    }
+    let s = if cluster.is_set() {
+        let Some(s) = run_cluster(&cfg, &io.input, &mut out, &opts, &cluster)? else {
+            return Ok(Outcome::Done);
+        };
+        s
+    } else {
+        network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?
+    };
+    out.flush().map_err(|e| CliError::io("writing output", e))?;
+    match summary {
+        Some(file) => {
+            let v = network::summary_json(&cfg.network, &s);
+            std::fs::write(&file, format!("{v}\n"))
+                .map_err(|e| CliError::io(format!("writing {}", file.display()), e))?;
+        }
+        None => eprintln!("{}", network::summary_text(&cfg.network, &s)),
+    }
+    Ok(verdict(require.require_certified, s.open_at_end))
+}
+
+/// `streamcert network` over timely: every process reads its own input (its subsystems'
+/// rows) and process 0 writes; the summary on process 0, `None` on the others (which say
+/// on standard error what they did).
+fn run_cluster(
+    cfg: &network::NetConfig,
+    input: &str,
+    out: &mut dyn Write,
+    opts: &network::NetOptions,
+    cluster: &network::Cluster,
+) -> Result<Option<network::NetSummary>, CliError> {
+    let name = input.to_string();
+    let opened = std::cell::Cell::new(false);
+    let open = move || -> Result<Box<dyn std::io::Read + Send>, CliError> {
+        if name == "-" && opened.replace(true) {
+            return Err(CliError::Input {
+                file: "-".into(),
+                message: "standard input cannot be read again after a restart".into(),
+            });
+        }
+        Ok(Box::new(open_input(&name)?))
+    };
+    if cluster.index() == 0 {
+        return Ok(Some(network::run_timely(cfg, &open, input, out, opts, cluster)?.0));
+    }
+    let (_, site) = network::run_timely(cfg, &open, input, std::io::sink(), opts, cluster)?;
+    let rejoins =
+        if site.rejoins > 0 { format!(", {} rejoins", site.rejoins) } else { String::new() };
+    eprintln!(
+        "process {}: done, {} rows certified, {} bytes of snapshots sent to process 0{rejoins}",
+        cluster.index(),
+        site.rows,
+        site.bytes_sent,
+    );
+    Ok(None)
+}

@@ -146,9 +146,7 @@ impl CertifierConfig {
     pub fn validate(&self) -> Result<(), CertifyError> {
         self.regression.validate()?;
         let (p, m) = (self.regression.outputs, self.regression.inputs);
-        let bad = |field: &'static str, reason: String| {
-            Err(CertifyError::InvalidConfig { field, reason })
-        };
+        let bad = CertifyError::refuse::<()>;
         if let Some(w) = &self.metric {
             if p < 2 {
                 return bad(

@@ -47,9 +47,9 @@ pub(super) fn q_ainv(
 }
 
 impl InstrumentedWindows {
-    /// Solve window `w` with the ridge `λ` *relative to each diagonal entry* for the
-    /// candidate directions `t` (`d × p` row-major, `T = [I_p; K]`) into `out` (built with
-    /// this structure's `p`, `m`, `J`):
+    /// Solve window `w` with the ridge `λ = solve.ridge` *relative to each diagonal entry*
+    /// for the candidate directions `solve.t` (`d × p` row-major, `T = [I_p; K]`) into `out`
+    /// (built with this structure's `p`, `m`, `J`):
     ///
     /// ```text
     /// Q = (H + λ diag H)⁻¹ Nᵀ,   A = N Q + λ diag(N Q),   Θ̂ = Cw Q A⁻¹     (two-stage LS)
@@ -97,8 +97,8 @@ impl InstrumentedWindows {
     ///
     /// `out.ready` is `false` when the window holds fewer than `h (p + m + 1)` columns,
     /// `H + λ diag H` is not positive definite, `A` is singular to working precision (the pivot
-    /// ratio of `A` equilibrated to a unit diagonal at most `min_pivot_ratio`, the same in any
-    /// units of the regressors), a block alone identifies a direction (the equilibrated
+    /// ratio of `A` equilibrated to a unit diagonal at most `solve.min_pivot_ratio`, the same in
+    /// any units of the regressors), a block alone identifies a direction (the equilibrated
     /// pivot ratio of `I − L_j` at most [`MIN_LEVERAGE_PIVOT`]), or a value is not finite.
     pub fn estimate(&self, w: usize, solve: Solve<'_>, out: &mut WindowEstimate) {
         self.estimate_span(self.span(w, 0), solve, out);

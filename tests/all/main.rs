@@ -15,6 +15,7 @@ mod identification;
 mod network;
 mod network_coupling;
 mod nonlinear;
+mod nonlinear_region;
 mod order;
 mod regression;
 mod reliability;

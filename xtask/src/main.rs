@@ -105,6 +105,10 @@ enum Command {
         /// Runs per validity cell (a fifth of them, at least min(runs, 20), per power cell).
         #[arg(long, default_value_t = 500)]
         runs: usize,
+        /// Only the cells whose name contains this text (for example `G5`); each cell keeps
+        /// its seeds, so its rows equal the full study's.
+        #[arg(long)]
+        only: Option<String>,
         /// Output folder.
         #[arg(long, default_value = "target/nonlinear")]
         out: PathBuf,
@@ -277,7 +281,7 @@ fn main() -> Result<()> {
         Command::Validity { runs, out, only_change: None, .. } => validity::run(runs, &out),
         Command::Validity { out, only_change: Some(runs), .. } => validity::change_only(runs, &out),
         Command::Real { from, out } => real::run(from.as_deref(), &out),
-        Command::Nonlinear { runs, out } => nonlinear::run(runs, &out),
+        Command::Nonlinear { runs, only, out } => nonlinear::run(runs, only.as_deref(), &out),
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)
         }

@@ -25,28 +25,43 @@ const MARGIN: f64 = 0.05;
 const H: usize = 5;
 const WINDOW: usize = 50;
 const PAPER_C: f64 = 0.1;
-/// The certificates of the table: the kind, and the degree of the certifier that gives it (the
-/// nonlinear certificate twice: the default cubic library and a quadratic one).
-const ROWS: [(CertificateKind, usize, &str); 6] = [
-    (CertificateKind::Gaussian, 3, "paper (Gaussian, c = 0.1)"),
-    (CertificateKind::Calibrated, DEFAULT, "linear calibrated, default configuration"),
+/// The study's certifiers: the default configuration (no `[nonlinear]` section, so its linear
+/// calibrated gate is closed by its guards alone), and nonlinear ones by library and region.
+#[derive(Clone, Copy, PartialEq)]
+enum Lib {
+    /// No `[nonlinear]` section.
+    Default,
+    /// The polynomial library of this degree, its region trimmed by this share
+    /// (`region_trim`; 0: the bounding box).
+    Poly(usize, f64),
+    /// The named library `y, y·tanh y`, the default region.
+    Tanh,
+}
+
+/// The certifiers of one run, each fed every sample once (the rows below read them).
+const CERTIFIERS: [Lib; 5] =
+    [Lib::Poly(2, TRIM), Lib::Poly(2, 0.0), Lib::Poly(3, TRIM), Lib::Tanh, Lib::Default];
+
+/// The default region's trim ([`NonlinearConfig::region_trim`]'s default).
+const TRIM: f64 = 0.025;
+
+/// The certificates of the table: the kind, and the certifier that gives it.
+const ROWS: [(CertificateKind, Lib, &str); 7] = [
+    (CertificateKind::Gaussian, Lib::Default, "paper (Gaussian, c = 0.1)"),
+    (CertificateKind::Calibrated, Lib::Default, "linear calibrated, default configuration"),
     (
         CertificateKind::Calibrated,
-        3,
+        Lib::Poly(2, TRIM),
         "linear calibrated (with [nonlinear], hidden-dynamics guard only)",
     ),
-    (CertificateKind::Nonlinear, 3, "nonlinear, degree 3"),
-    (CertificateKind::Nonlinear, 2, "nonlinear, degree 2"),
-    (CertificateKind::Nonlinear, 0, "nonlinear, features y, y·tanh y"),
+    (CertificateKind::Nonlinear, Lib::Poly(2, TRIM), "nonlinear, degree 2 (the default)"),
+    (CertificateKind::Nonlinear, Lib::Poly(2, 0.0), "nonlinear, degree 2, bounding box"),
+    (CertificateKind::Nonlinear, Lib::Poly(3, TRIM), "nonlinear, degree 3"),
+    (CertificateKind::Nonlinear, Lib::Tanh, "nonlinear, features y, y·tanh y"),
 ];
 
-/// The "degree" of the row whose certifier has the default configuration: no `[nonlinear]`
-/// section, so its linear calibrated gate is closed by the nonlinearity guard alone.
-const DEFAULT: usize = 9;
-
-/// The study's certifier: `degree` 2 or 3 for the polynomial library, 0 for the named
-/// library `y, y·tanh y`, [`DEFAULT`] for none.
-fn config(k: f64, degree: usize, window: usize, windows: Option<usize>) -> CertifierConfig {
+/// The study's certifier for `lib`.
+fn config(k: f64, lib: Lib, window: usize, windows: Option<usize>) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
         ..RegressionConfig::new(1, 1, window, H, 1e-4)
@@ -56,20 +71,20 @@ fn config(k: f64, degree: usize, window: usize, windows: Option<usize>) -> Certi
         // (on by default, it gives the nonlinear certificate its order test; the nonlinearity
         // and change guards do not gate the nonlinear certificate, and their cost would
         // dominate the study); the default certifier has them all.
-        calibration: Some(if degree == DEFAULT {
+        calibration: Some(if lib == Lib::Default {
             Calibration { windows, ..Calibration::new(DELTA) }
         } else {
             Calibration { windows, hidden_dynamics: true, ..Calibration::new(DELTA).unguarded() }
         }),
-        nonlinear: (degree != DEFAULT).then(|| {
-            if degree == 0 {
-                NonlinearConfig::with_features(
-                    FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
-                )
-            } else {
-                NonlinearConfig::with_degree(degree)
+        nonlinear: match lib {
+            Lib::Default => None,
+            Lib::Tanh => Some(NonlinearConfig::with_features(
+                FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
+            )),
+            Lib::Poly(degree, region_trim) => {
+                Some(NonlinearConfig { region_trim, ..NonlinearConfig::with_degree(degree) })
             }
-        }),
+        },
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
 }
@@ -144,31 +159,27 @@ struct Outcome {
     /// The nonlinear certificate's latest look of its longest window at the end of the run:
     /// `(β̂_min, β_nl)` (the estimate's minimum over the region, and the certificate).
     last: Option<(f64, f64)>,
+    /// That look's edge-slope factor (`NonlinearLook::edge_factor`).
+    edge: Option<f64>,
 }
 
-fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 6]> {
+fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; ROWS.len()]> {
     let (ts, ys, us) = cell.data(seed)?;
     let rate = |x: f64| cell.rate(x);
-    let mut certs = [
-        Certifier::new(config(cell.k, 3, cell.window, cell.windows))?,
-        Certifier::new(config(cell.k, 2, cell.window, cell.windows))?,
-        Certifier::new(config(cell.k, 0, cell.window, cell.windows))?,
-        Certifier::new(config(cell.k, DEFAULT, cell.window, cell.windows))?,
-    ];
-    let slot = |degree: usize| match degree {
-        3 => 0,
-        2 => 1,
-        DEFAULT => 3,
-        _ => 2,
-    };
-    let mut out = [Outcome::default(); 6];
+    let mut certs = Vec::with_capacity(CERTIFIERS.len());
+    for lib in CERTIFIERS {
+        certs.push(Certifier::new(config(cell.k, lib, cell.window, cell.windows))?);
+    }
+    let slot = |lib: Lib| CERTIFIERS.iter().position(|&l| l == lib).expect("a certifier per row");
+    let mut out = [Outcome::default(); ROWS.len()];
+    let mut evs = Vec::with_capacity(CERTIFIERS.len());
     for i in 0..ts.len() {
-        let mut evs = Vec::with_capacity(4);
+        evs.clear();
         for c in &mut certs {
             evs.push(c.push(ts[i], &ys[i..=i], &us[i..=i])?);
         }
-        for (o, (kind, degree, _)) in out.iter_mut().zip(ROWS) {
-            let (ev, cert) = (&evs[slot(degree)], &certs[slot(degree)]);
+        for (o, (kind, lib, _)) in out.iter_mut().zip(ROWS) {
+            let (ev, cert) = (&evs[slot(lib)], &certs[slot(lib)]);
             let v = ev.verdict(kind);
             let Some(value) = v.value else { continue };
             let region = match kind {
@@ -186,10 +197,12 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; 6]> {
             }
         }
     }
-    for (o, (kind, degree, _)) in out.iter_mut().zip(ROWS) {
+    for (o, (kind, lib, _)) in out.iter_mut().zip(ROWS) {
         if matches!(kind, CertificateKind::Nonlinear) {
-            let looks = certs[slot(degree)].nonlinear_looks();
-            o.last = looks.iter().rev().flatten().next().map(|l| (l.beta_hat_min, l.certificate));
+            let looks = certs[slot(lib)].nonlinear_looks();
+            let last = looks.iter().rev().flatten().next();
+            o.last = last.map(|l| (l.beta_hat_min, l.certificate));
+            o.edge = last.and_then(|l| l.edge_factor);
         }
     }
     Ok(out)
@@ -255,26 +268,40 @@ fn row(cell: &Cell, kind: CertificateKind, label: &str, outs: &[Outcome]) -> Vec
             Some((share, ratio)) => format!("{:.0} % / {ratio:.2}", 100.0 * share),
             None => "–".into(),
         },
+        {
+            let edges: Vec<f64> = outs.iter().filter_map(|o| o.edge).collect();
+            if cell.validity || edges.is_empty() {
+                "–".into()
+            } else {
+                format!("{:.2}", median(&edges))
+            }
+        },
     ]
 }
 
-pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
-    let cells = cells();
+pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
+    // Each cell keeps its index (its seeds) when others are left out.
+    let cells: Vec<(usize, Cell)> = cells()
+        .into_iter()
+        .enumerate()
+        .filter(|(_, c)| only.is_none_or(|o| c.name.contains(o)))
+        .collect();
     let power_runs = (runs / 5).max(runs.min(20));
-    let total: usize = cells.iter().map(|c| if c.validity { runs } else { power_runs }).sum();
+    let total: usize = cells.iter().map(|(_, c)| if c.validity { runs } else { power_runs }).sum();
     let bar = progress(total, "nonlinear");
+    let only_arg = only.map_or(String::new(), |o| format!(" --only \"{o}\""));
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Six certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the degree-3 certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 3, the default, of degree 2, and the named library `y, y·tanh y`, each from its own certifier, with the hidden-dynamics guard only; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, and its order test: the past increment in the same larger fit). Each certificate's region is the range of `y` over the samples of its window: the paper's window, the standing calibrated window, the standing nonlinear window. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio).\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}{only_arg}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Seven certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the default nonlinear certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 2, the default, over the default region, the 2.5–97.5 % quantiles of the window's outputs with the gate closed while the output is outside them; degree 2 over the bounding box of the window's samples, the rule before; degree 3 and the named library `y, y·tanh y` over the default region; each from its own certifier, with the hidden-dynamics guard only; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, `y³, y⁴` for degree 2, and its order test: the past increment in a larger fit of its own). The paper's and the calibrated certificates' region is the range of `y` over the samples of their window (the paper's window, the standing calibrated window); the nonlinear certificate's is the region its standing look reports. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio, the spread factor).\n- **edge-slope factor** (nonlinear rows of power cells): the median over runs of the last look's radius over the radius the same multiplier gives the rate at the region's midpoint, `(β̂_min − β_nl) / (c·s(y_mid))`: how much less the data say of the slope where the certificate is decided, at the region's edge, than at its centre.\n"
     );
     let mut rows = Vec::new();
-    for (ci, cell) in cells.iter().enumerate() {
+    for (ci, cell) in &cells {
         let n = if cell.validity { runs } else { power_runs };
         let table = RateTable::new(|x| cell.rate(x));
         let mut results = Vec::with_capacity(n);
         for r in 0..n {
-            results.push(one_run(cell, 7_000_000 * (ci as u64 + 1) + r as u64, &table)?);
+            results.push(one_run(cell, 7_000_000 * (*ci as u64 + 1) + r as u64, &table)?);
             bar.inc(1);
         }
         for (ki, (kind, _, label)) in ROWS.iter().enumerate() {
@@ -298,6 +325,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
                 "median first opening",
                 "90 % opened by",
                 "one-look oracle at the end: opened / ρ ÷ (z·sd)",
+                "edge-slope factor",
             ],
             &rows
         )

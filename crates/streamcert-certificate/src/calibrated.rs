@@ -460,5 +460,8 @@ impl CalibratedState {
         // step allocates.
         let pp = self.sym.len();
         self.est.batched.score_cov.resize(pp * pp, 0.0);
+        if let Some(n) = &mut self.nonlinear {
+            n.restore_scratch();
+        }
     }
 }

@@ -193,7 +193,7 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let (calibrated_gate, mut calibrated_reason, best, nl) = self.calibrated_step(t);
+        let (calibrated_gate, mut calibrated_reason, best, nl) = self.calibrated_step(t, y);
         let (nonlinear_gate, mut nonlinear_reason, nl_best) = nl;
         let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let mut wass_reason = if amb.is_none() {

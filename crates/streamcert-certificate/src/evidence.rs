@@ -148,6 +148,19 @@ pub enum NotCertified {
         /// transient spans.
         moves: f64,
     },
+    /// Nonlinear certificate: the output lies outside the standing look's region, the only
+    /// states that certificate speaks for (its region is trimmed to quantiles of the visited
+    /// outputs, [`NonlinearConfig::region_trim`]), so the gate stays closed until it returns.
+    ///
+    /// [`NonlinearConfig::region_trim`]: crate::NonlinearConfig::region_trim
+    OutsideRegion {
+        /// The output, in the certificate's units.
+        y: f64,
+        /// The region's lower end.
+        lo: f64,
+        /// The region's upper end.
+        hi: f64,
+    },
 }
 
 impl NotCertified {
@@ -163,6 +176,7 @@ impl NotCertified {
                 [beta_hat.to_bits(), newest_upper.to_bits(), 0]
             }
             N::WeaklyIdentified { moves, .. } => [moves.to_bits(), 0, 0],
+            N::OutsideRegion { y, lo, hi } => [y.to_bits(), lo.to_bits(), hi.to_bits()],
             N::VaryingDynamics { statistic, threshold, .. }
             | N::HiddenDynamics { statistic, threshold, .. }
             | N::LibraryMisfit { statistic, threshold, .. } => {
@@ -192,7 +206,7 @@ impl NotCertified {
 
     /// Every reason's name (the `reason` tag of its serde form) in the order of
     /// [`code`](Self::code), from code 1.
-    pub const KINDS: [&'static str; 19] = [
+    pub const KINDS: [&'static str; 20] = [
         "warming_up",
         "insufficient_excitation",
         "weak_instruments",
@@ -212,6 +226,7 @@ impl NotCertified {
         "library_misfit",
         "library_untested",
         "weakly_identified",
+        "outside_region",
     ];
 
     /// A small stable integer per kind of reason, from 1 (0 is left for "certified" in
@@ -238,6 +253,7 @@ impl NotCertified {
             Self::LibraryMisfit { .. } => 17,
             Self::LibraryUntested { .. } => 18,
             Self::WeaklyIdentified { .. } => 19,
+            Self::OutsideRegion { .. } => 20,
         }
     }
 
@@ -305,6 +321,29 @@ impl std::fmt::Display for NotCertified {
                 Sig(*beta_hat),
                 Sig(*newest_upper)
             ),
+            Self::NoNonlinearModel
+            | Self::LibraryMisfit { .. }
+            | Self::LibraryUntested { .. }
+            | Self::OutsideRegion { .. } => self.fmt_nonlinear(f),
+            Self::WeaklyIdentified { window, moves } if *moves <= 0.0 => write!(
+                f,
+                "the data do not identify the rate: an input or output has not moved beyond \
+                 its level in window {window} (hold it less long, or move it more often)"
+            ),
+            Self::WeaklyIdentified { window, moves } => write!(
+                f,
+                "the input has barely moved in window {window}: {} effective moves carry the \
+                 rate, too few for a bound (move it more often)",
+                Fixed::<1>(*moves)
+            ),
+        }
+    }
+}
+
+impl NotCertified {
+    /// The nonlinear certificate's reasons in words ([`Display`](std::fmt::Display)'s).
+    fn fmt_nonlinear(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
             Self::NoNonlinearModel => f.write_str("no nonlinear model configured"),
             Self::LibraryMisfit { window, statistic, threshold } => write!(
                 f,
@@ -318,17 +357,14 @@ impl std::fmt::Display for NotCertified {
                     "window {window}: feature library not yet checked (no lack-of-fit estimate)"
                 )
             }
-            Self::WeaklyIdentified { window, moves } if *moves <= 0.0 => write!(
+            Self::OutsideRegion { y, lo, hi } => write!(
                 f,
-                "the data do not identify the rate: an input or output has not moved beyond \
-                 its level in window {window} (hold it less long, or move it more often)"
+                "the output {} lies outside the certified region [{}, {}]",
+                Sig(*y),
+                Sig(*lo),
+                Sig(*hi)
             ),
-            Self::WeaklyIdentified { window, moves } => write!(
-                f,
-                "the input has barely moved in window {window}: {} effective moves carry the \
-                 rate, too few for a bound (move it more often)",
-                Fixed::<1>(*moves)
-            ),
+            _ => unreachable!("only the nonlinear reasons reach here"),
         }
     }
 }

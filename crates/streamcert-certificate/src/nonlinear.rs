@@ -32,8 +32,11 @@
 //!
 //! ## Region, certificate and radius
 //!
-//! The region is the bounding box of the outputs the window's columns integrate (for one
-//! output, their convex hull): `[y_lo, y_hi]`, reported with the certificate. With `Ω̂_θ` the
+//! The region `[y_lo, y_hi]`, reported with the certificate, is the `q` and `1 − q` quantiles
+//! of the outputs at the window's column starts ([`NonlinearConfig::region_trim`], default
+//! `q = 0.025`; `q = 0`: the bounding box of every sample the columns integrate). The gate
+//! stays closed while the output lies outside the standing look's region
+//! ([`NotCertified::OutsideRegion`]): the certificate speaks for that region only. With `Ω̂_θ` the
 //! batch-means covariance of the coefficients
 //! ([`InstrumentedWindows::coefficient_covariance`]) and `s(y)² = a(y)ᵀ Ω̂_θ a(y)`,
 //!
@@ -159,6 +162,13 @@ pub struct NonlinearLook {
     /// [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
     #[serde(default)]
     pub order: Option<NonlinearityTest>,
+    /// The edge-slope factor: the certificate's radius `β̂_min − β_nl` over `c · s(y_mid)`,
+    /// the radius the same multiplier gives the rate at the region's midpoint (for an
+    /// exploring input that visits the region symmetrically, about the average slope's). How
+    /// much wider the bound is where the certificate is decided, at the region's edge, than
+    /// at its centre (`None` when `s(y_mid) = 0`).
+    #[serde(default)]
+    pub edge_factor: Option<f64>,
 }
 
 /// One look's circumstances, from the calibrated schedule that drives it.
@@ -229,6 +239,10 @@ pub(crate) struct NonlinearState {
     work: Vec<f64>,
     sub: Vec<f64>,
     rhs: Vec<f64>,
+    /// The trimmed region's selection scratch (the longest window's column values; not
+    /// serialised, sized on restore by [`restore_scratch`](Self::restore_scratch)).
+    #[serde(skip)]
+    values: Vec<f64>,
 }
 
 impl NonlinearState {
@@ -249,6 +263,8 @@ impl NonlinearState {
         let windows =
             InstrumentedWindows::with_regressors(1, d, reg.horizon, lag, intervals, lengths)?
                 .with_ranges(1);
+        let windows = if cfg.region_trim > 0.0 { windows.with_values() } else { windows };
+        let longest = windows.window(lengths.len() - 1);
         let powers: Vec<u8> = cfg
             .check_features()
             .into_iter()
@@ -278,7 +294,14 @@ impl NonlinearState {
             work: vec![0.0; (2 * dg - 1).max(d)],
             sub: vec![0.0; (dg - 1) * (dg - 1)],
             rhs: vec![0.0; dg - 1],
+            values: vec![0.0; longest],
         })
+    }
+
+    /// Size the scratch a checkpoint does not carry, so that no look allocates.
+    pub(crate) fn restore_scratch(&mut self) {
+        let longest = self.windows.window(self.latest.len() - 1);
+        self.values.resize(longest, 0.0);
     }
 
     /// Whether the library is polynomial (its class is the same about any origin).
@@ -336,7 +359,8 @@ impl NonlinearState {
         for c in self.check.iter_mut().chain(self.order.iter_mut()) {
             c.push(&self.z, dy, ts, ys);
         }
-        self.windows.push_column_ranged(&self.z, dy, &[Interval { lo, hi }])
+        // The column's value for the trimmed region: the output at its start.
+        self.windows.push_column_valued(&self.z, dy, &[Interval { lo, hi }], ys[0])
     }
 
     /// Window `w`'s look (see [`LookAt`]); its outcome replaces the window's latest look.
@@ -348,9 +372,7 @@ impl NonlinearState {
         let LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin } = at;
         let (dg, m) = (self.library.len(), self.gain.len());
         let d = dg + m;
-        let mut region = [Interval::EMPTY];
-        self.windows.window_range(w, &mut region);
-        let region = region[0];
+        let region = self.region(w);
         if !region.is_proper() {
             return None;
         }
@@ -381,6 +403,13 @@ impl NonlinearState {
             self.cells_named(region, cells, c, c_upper)
         };
         let Bounds { cert, worst, beta_min, upper } = bounds;
+        // s(y_mid)² = a(y_mid)ᵀ Ω̂_θ a(y_mid).
+        let s_mid = (0..d)
+            .map(|i| self.dir[i] * (0..d).map(|j| self.cov[i * d + j] * self.dir[j]).sum::<f64>())
+            .sum::<f64>()
+            .max(0.0)
+            .sqrt();
+        let edge_factor = (s_mid > 0.0).then(|| (beta_min - cert) / (c * s_mid));
         let alpha = self.cfg.test_risk.unwrap_or(delta);
         let scratch = (&mut self.sub[..], &mut self.rhs[..], &mut self.work[..]);
         let (theta, cov) = (&self.est.theta[..d], &self.cov[..d * d]);
@@ -402,7 +431,19 @@ impl NonlinearState {
             test,
             misfit,
             order,
+            edge_factor,
         })
+    }
+
+    /// Window `w`'s region: its trimmed region ([`NonlinearConfig::region_trim`]) where values
+    /// are tracked, else the hull of its columns' samples.
+    fn region(&mut self, w: usize) -> Interval {
+        if self.windows.tracks_values() {
+            return self.windows.window_quantiles(w, self.cfg.region_trim, &mut self.values);
+        }
+        let mut region = [Interval::EMPTY];
+        self.windows.window_range(w, &mut region);
+        region[0]
     }
 
     /// The largest standing nonlinear certificate, and why the gate stays closed if none.

@@ -51,11 +51,13 @@ impl Default for Features {
     }
 }
 
-/// The region rules of `[nonlinear]` (one so far).
+/// The region rules of `[nonlinear]`: the quantiles of the visited outputs (trimmed by
+/// `region_trim`, [`NonlinearConfig::region_trim`]) or their whole range.
 #[derive(Debug, Default, Clone, Copy, Deserialize, PartialEq)]
 #[serde(rename_all = "snake_case")]
 enum RegionRule {
     #[default]
+    Quantiles,
     BoundingBox,
 }
 
@@ -69,8 +71,9 @@ struct NonlinearSection {
     #[serde(default)]
     degree: Option<usize>,
     #[serde(default)]
-    #[allow(dead_code)]
     region: RegionRule,
+    #[serde(default)]
+    region_trim: Option<f64>,
     #[serde(default)]
     cells: Option<usize>,
     #[serde(default)]
@@ -458,6 +461,21 @@ impl Ambiguity {
 }
 
 impl NonlinearSection {
+    /// The region's trim: `region_trim` (default 0.025) for the quantile region, 0 for the
+    /// bounding box (where a trim is a contradiction, refused).
+    fn region_trim(&self) -> Result<f64, String> {
+        match (self.region, self.region_trim) {
+            (RegionRule::Quantiles, trim) => {
+                Ok(trim.unwrap_or(NonlinearConfig::default().region_trim))
+            }
+            (RegionRule::BoundingBox, None) => Ok(0.0),
+            (RegionRule::BoundingBox, Some(trim)) => Err(format!(
+                "[nonlinear] region_trim = {trim} needs region = \"quantiles\" (the bounding box \
+                 keeps every visited output)"
+            )),
+        }
+    }
+
     /// The nonlinear certificate this section configures, if enabled, or what is wrong.
     fn config(&self) -> Result<Option<NonlinearConfig>, String> {
         if !self.enabled {
@@ -482,6 +500,7 @@ impl NonlinearSection {
             cells: self.cells.unwrap_or(d.cells),
             test_risk: self.test_risk,
             check_terms: self.check_terms.unwrap_or(d.check_terms),
+            region_trim: self.region_trim()?,
         }))
     }
 }

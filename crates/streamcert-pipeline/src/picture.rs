@@ -258,6 +258,7 @@ fn reason_color(kind: &str) -> RGBColor {
         "order_untested" | "linearity_untested" => RGBColor(210, 210, 150),
         "plant_changed" => RGBColor(90, 60, 160),
         "weakly_identified" => RGBColor(188, 189, 34),
+        "outside_region" => RGBColor(31, 119, 180),
         "insufficient_excitation" | "weak_instruments" => RGBColor(255, 200, 60),
         "gap" | "skipped_sample" => RGBColor(40, 40, 40),
         _ => RGBColor(100, 100, 100),

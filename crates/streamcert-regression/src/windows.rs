@@ -47,6 +47,7 @@ mod fresh;
 mod jackknife;
 mod moments;
 mod outcome;
+mod quantile;
 mod region;
 mod scores;
 
@@ -113,6 +114,13 @@ pub struct InstrumentedWindows {
     open_range: Vec<Interval>,
     #[serde(default)]
     block_ranges: Vec<Interval>,
+    // Value tracking (`with_values`): one value per column, the open block's (`h`) and `h`
+    // per complete block, aligned with `blocks`; empty when off (and in states written
+    // before it).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    open_values: Vec<f64>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    block_values: Vec<f64>,
     // Blocks per batch of the batch-means covariance (`with_batch`; 1 by default, and then
     // not written, so a state without it reads as it always did).
     #[serde(default = "batch::one", skip_serializing_if = "batch::is_one")]
@@ -203,6 +211,8 @@ impl InstrumentedWindows {
             range_channels: 0,
             open_range: Vec::new(),
             block_ranges: Vec::new(),
+            open_values: Vec::new(),
+            block_values: Vec::new(),
             batch: 1,
             coarse: 1,
             moments: None,

@@ -21,10 +21,13 @@ pub(super) struct Standing {
 
 impl Certifier {
     /// Feed the newest column to the calibrated (and nonlinear) certificate, update their
-    /// gates, say why closed.
+    /// gates, say why closed. `y`: the sample's outputs in the metric's units (the nonlinear
+    /// gate stays closed while `y` lies outside the standing look's region, which is all that
+    /// look speaks for).
     pub(super) fn calibrated_step(
         &mut self,
         t: f64,
+        y: &[f64],
     ) -> (GateState, Option<NotCertified>, Option<Standing>, NonlinearStep) {
         let Some(state) = &mut self.calibrated else {
             // Without a calibration the calibrated gates never see a certificate.
@@ -50,7 +53,15 @@ impl Certifier {
         let gate = self.calibrated_gate.update(t, cert);
         let reason = closed_reason(blocked, cert, &gate, &self.calibrated_gate);
         let nl = if self.cfg.nonlinear.is_some() {
-            let cert = nonlinear.map(|b| b.value);
+            // The certificate speaks for its region only: outside it the gate sees none.
+            let outside =
+                nonlinear.zip(y.first()).and_then(|(b, &y)| {
+                    (!(b.region.lo <= y && y <= b.region.hi)).then_some(
+                        NotCertified::OutsideRegion { y, lo: b.region.lo, hi: b.region.hi },
+                    )
+                });
+            let nonlinear_blocked = outside.or(nonlinear_blocked);
+            let cert = nonlinear.map(|b| b.value).filter(|_| outside.is_none());
             let gate = self.nonlinear_gate.update(t, cert);
             (gate, closed_reason(nonlinear_blocked, cert, &gate, &self.nonlinear_gate), nonlinear)
         } else {

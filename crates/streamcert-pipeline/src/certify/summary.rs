@@ -217,7 +217,8 @@ impl Summary {
         match (self.nonlinear_since, self.nonlinear_region) {
             (Some(since), region) => format!(
                 "region-valid verdict: CERTIFIED from {} to the end (nonlinear certificate: the \
-                 rate bounded at every state of {output} in {})",
+                 rate bounded at every state of {output} in {}; its gate closes while {output} \
+                 is outside)",
                 when(Some(since)),
                 region.map_or_else(
                     || "(none recorded)".into(),
@@ -349,6 +350,9 @@ pub(crate) fn reason_phrase(kind: &str) -> &str {
         "weakly_identified" => {
             "the data barely identify the rate: the input moved too rarely in the windows"
         }
+        "outside_region" => "the output is outside the region the nonlinear certificate speaks for",
+        "library_misfit" => "the feature library misses the drift (lack-of-fit check)",
+        "library_untested" => "the lack-of-fit check has not tested the window yet",
         other => other,
     }
 }

@@ -86,9 +86,18 @@ fn nonlinear_section_selects_the_nonlinear_certificate() {
     assert!(err.contains("needs a calibration"), "{err}");
     let c = parse(&both, "x").unwrap();
     assert_eq!(c.certifier.nonlinear, Some(NonlinearConfig::default()));
-    let deg = both.replace("degree = 3", "degree = 2").replace("# cells = 32 ", "cells = 8 ");
+    let deg = both.replace("degree = 2", "degree = 3").replace("# cells = 32 ", "cells = 8 ");
     let c = parse(&deg, "x").unwrap().certifier.nonlinear.unwrap();
-    assert_eq!((c.degree, c.cells, c.check_terms), (2, 8, 2));
+    assert_eq!((c.degree, c.cells, c.check_terms, c.region_trim), (3, 8, 2, 0.025));
+    // The region: the quantiles' trim, or the bounding box (trim 0), never both.
+    let trim = both.replace("# region_trim = 0.025 ", "region_trim = 0.05 ");
+    assert_eq!(parse(&trim, "x").unwrap().certifier.nonlinear.unwrap().region_trim, 0.05);
+    let hull = both.replace("region = \"quantiles\"", "region = \"bounding_box\"");
+    assert_eq!(parse(&hull, "x").unwrap().certifier.nonlinear.unwrap().region_trim, 0.0);
+    let both_rules = hull.replace("# region_trim = 0.025 ", "region_trim = 0.05 ");
+    assert!(parse(&both_rules, "x").unwrap_err().to_string().contains("region_trim"));
+    let wide = both.replace("# region_trim = 0.025 ", "region_trim = 0.3 ");
+    assert!(parse(&wide, "x").unwrap_err().to_string().contains("region_trim"));
     let off = both.replace("# check_terms = 2 ", "check_terms = 0 ");
     assert_eq!(parse(&off, "x").unwrap().certifier.nonlinear.unwrap().check_terms, 0);
     let many = both.replace("# check_terms = 2 ", "check_terms = 9 ");

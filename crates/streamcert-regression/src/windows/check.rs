@@ -22,7 +22,11 @@ impl InstrumentedWindows {
             && self.batch >= 1
             && self.windows[0].div_ceil(self.batch) > self.p + self.m
             && self.open_range.len() == self.range_channels
-            && self.block_ranges.len() == self.range_channels * fresh.block_cap();
+            && self.block_ranges.len() == self.range_channels * fresh.block_cap()
+            && (self.block_values.is_empty() && self.open_values.is_empty()
+                || self.open_values.len() == self.horizon
+                    && self.block_values.len() == self.horizon * fresh.block_cap()
+                    && self.coarse == 1);
         if !sizes_ok {
             return Err(RegressionError::CorruptState("window buffers have the wrong size".into()));
         }
@@ -41,7 +45,12 @@ impl InstrumentedWindows {
         let range_ok = |r: &Interval| *r == Interval::EMPTY || r.is_proper();
         let ranges_ok = self.open_range.iter().chain(&self.block_ranges).all(range_ok);
         if !values.all(|v| v.is_finite())
-            || !self.blocks.iter().all(|v| v.is_finite())
+            || !self
+                .blocks
+                .iter()
+                .chain(&self.open_values)
+                .chain(&self.block_values)
+                .all(|v| v.is_finite())
             || !ranges_ok
         {
             return Err(RegressionError::CorruptState("non-finite value in the windows".into()));

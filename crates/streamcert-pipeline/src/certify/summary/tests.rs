@@ -42,7 +42,8 @@ fn with_nonlinear_the_line_carries_both_verdicts() {
     assert!(
         line.contains(
             "; region-valid verdict: CERTIFIED from t = 20 to the end (nonlinear certificate: \
-             the rate bounded at every state of level in [-0.25, 0.5])"
+             the rate bounded at every state of level in [-0.25, 0.5]; its gate closes while \
+             level is outside)"
         ),
         "{line}"
     );

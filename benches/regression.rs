@@ -125,7 +125,7 @@ fn step_config(p: usize, m: usize, variant: u8) -> (CertifierConfig, &'static st
     if wasserstein {
         cfg.ambiguity = Some(AmbiguityConfig::paper(150));
     }
-    if variant == 2 || variant == 4 {
+    if variant == 2 || variant == 4 || variant == 11 {
         cfg.calibration = Some(Calibration::new(0.01));
     }
     if variant == 7 {
@@ -161,6 +161,9 @@ fn step_config(p: usize, m: usize, variant: u8) -> (CertifierConfig, &'static st
     if variant == 4 {
         cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
     }
+    if variant == 11 {
+        cfg.nonlinear = Some(NonlinearConfig::default());
+    }
     if variant == 3 {
         cfg.regression.refresh_period = 1;
     }
@@ -176,6 +179,7 @@ fn step_config(p: usize, m: usize, variant: u8) -> (CertifierConfig, &'static st
         "gaussian_and_calibrated_without_change_guard",
         "gaussian_and_calibrated_without_model_guards",
         "gaussian_and_calibrated_jackknife_guards",
+        "gaussian_calibrated_and_nonlinear",
     ][usize::from(variant)];
     (cfg, name)
 }
@@ -186,7 +190,8 @@ fn certifier_step(c: &mut Criterion) {
     // certifier with `refresh_period = 1`, so the regression statistics are recomputed from the
     // whole window at every sample (`O(M d²)`).
     // Variant 4 adds the nonlinear certificate of degree 3 to the calibrated one (variant 2 is
-    // its baseline in the same run).
+    // its baseline in the same run); variant 11 adds the default nonlinear certificate
+    // (degree 2 over the trimmed region, whose looks select the region's quantiles).
     // Variants 0 to 4 run the defaults (the affine model; with a calibration, its guards:
     // hidden dynamics, nonlinearity, plant change). Variants 5 and 6 are their baselines in
     // the same run: the paper's model through the origin, and the calibrated certificate
@@ -208,6 +213,7 @@ fn certifier_step(c: &mut Criterion) {
         (1, 1, 8),
         (1, 1, 9),
         (1, 1, 10),
+        (1, 1, 11),
         (10, 10, 0),
         (10, 10, 1),
         (10, 10, 5),

@@ -7,6 +7,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Result;
+use streamcert_certificate::nonlinear::simultaneous_multiplier;
 use streamcert_certificate::{
     Calibration, CertificateKind, Certifier, CertifierConfig, FeatureSet, Interval, NonlinearConfig,
 };
@@ -161,6 +162,10 @@ struct Outcome {
     last: Option<(f64, f64)>,
     /// That look's edge-slope factor (`NonlinearLook::edge_factor`).
     edge: Option<f64>,
+    /// That look's certificate had it spent the whole `δ` (one look at the end): `β̂_min −
+    /// c_δ · s`, with `s = (β̂_min − β_nl) / c` the look's own spread at its worst cell and
+    /// `c_δ` the simultaneous multiplier at `δ` with the look's `ν`.
+    one_look: Option<f64>,
 }
 
 fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; ROWS.len()]> {
@@ -203,6 +208,14 @@ fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; ROWS.l
             let last = looks.iter().rev().flatten().next();
             o.last = last.map(|l| (l.beta_hat_min, l.certificate));
             o.edge = last.and_then(|l| l.edge_factor);
+            let rank = match lib {
+                Lib::Poly(degree, _) => degree,
+                _ => 2,
+            };
+            o.one_look = last.map(|l| {
+                let c_delta = simultaneous_multiplier(rank, l.nu, DELTA);
+                l.beta_hat_min - c_delta * (l.beta_hat_min - l.certificate) / l.multiplier
+            });
         }
     }
     Ok(out)
@@ -268,6 +281,12 @@ fn row(cell: &Cell, kind: CertificateKind, label: &str, outs: &[Outcome]) -> Vec
             Some((share, ratio)) => format!("{:.0} % / {ratio:.2}", 100.0 * share),
             None => "–".into(),
         },
+        if cell.validity || !matches!(kind, CertificateKind::Nonlinear) {
+            "–".into()
+        } else {
+            let opened = outs.iter().filter(|o| o.one_look.is_some_and(|v| v >= MARGIN)).count();
+            share(opened, n)
+        },
         {
             let edges: Vec<f64> = outs.iter().filter_map(|o| o.edge).collect();
             if cell.validity || edges.is_empty() {
@@ -293,7 +312,7 @@ pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}{only_arg}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Seven certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the default nonlinear certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 2, the default, over the default region, the 2.5–97.5 % quantiles of the window's outputs with the gate closed while the output is outside them; degree 2 over the bounding box of the window's samples, the rule before; degree 3 and the named library `y, y·tanh y` over the default region; each from its own certifier, with the hidden-dynamics guard only; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, `y³, y⁴` for degree 2, and its order test: the past increment in a larger fit of its own). The paper's and the calibrated certificates' region is the range of `y` over the samples of their window (the paper's window, the standing calibrated window); the nonlinear certificate's is the region its standing look reports. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio, the spread factor).\n- **edge-slope factor** (nonlinear rows of power cells): the median over runs of the last look's radius over the radius the same multiplier gives the rate at the region's midpoint, `(β̂_min − β_nl) / (c·s(y_mid))`: how much less the data say of the slope where the certificate is decided, at the region's edge, than at its centre.\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}{only_arg}` ({power_runs} runs per power cell). Each run: 40 s (the last seven cells: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Seven certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the default nonlinear certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 2, the default, over the default region, the 2.5–97.5 % quantiles of the window's outputs with the gate closed while the output is outside them; degree 2 over the bounding box of the window's samples, the rule before; degree 3 and the named library `y, y·tanh y` over the default region; each from its own certifier, with the hidden-dynamics guard only; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, `y³, y⁴` for degree 2, and its order test: the past increment in a larger fit of its own). The paper's and the calibrated certificates' region is the range of `y` over the samples of their window (the paper's window, the standing calibrated window); the nonlinear certificate's is the region its standing look reports. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio, the spread factor).\n- **one look at the end, whole δ** (nonlinear rows of power cells): the share of runs whose last look of the longest window would have certified had it been the run's only look, spending the whole δ: `β̂_min − c_δ·s ≥ β_margin`, with `s = (β̂_min − β_nl)/c` that look's own spread at its worst cell and `c_δ` the simultaneous multiplier at δ. The most a region-valid bound on the same estimates can open at the end (against the one-look oracle, which knows the spread over runs and bounds one point).\n- **edge-slope factor** (nonlinear rows of power cells): the median over runs of the last look's radius over the radius the same multiplier gives the rate at the region's midpoint, `(β̂_min − β_nl) / (c·s(y_mid))`: how much less the data say of the slope where the certificate is decided, at the region's edge, than at its centre.\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in &cells {
@@ -325,6 +344,7 @@ pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
                 "median first opening",
                 "90 % opened by",
                 "one-look oracle at the end: opened / ρ ÷ (z·sd)",
+                "one look at the end, whole δ",
                 "edge-slope factor",
             ],
             &rows

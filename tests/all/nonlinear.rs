@@ -37,7 +37,7 @@ fn tanh_loop() -> ScalarScenario {
 
 /// `f = −x − 0.3 x³` explored by `u = −x + PRBS(±3, held 1 s)`: under `k = −1` the rate
 /// `2 + 0.9 x²` is at least 2 (40× the margin 0.05) everywhere.
-fn cubic_40x() -> ScalarScenario {
+pub(crate) fn cubic_40x() -> ScalarScenario {
     ScalarScenario {
         drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
         k_explore: -1.0,

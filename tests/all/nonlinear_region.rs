@@ -1,26 +1,15 @@
 //! The nonlinear certificate's trimmed region: the quantiles of the window's outputs, inside
 //! the bounding box of the same window; the gate closed while the output lies outside the
 //! standing look's region; the edge-slope factor (1 where the slope does not vary); a
-//! checkpoint that resumes bit for bit with the region's values.
+//! checkpoint that resumes bit for bit with the region's values. The loop: `nonlinear.rs`'s
+//! cubic at 40× the margin.
 
 use streamcert::certificate::{
     Certifier, CertifierConfig, Interval, NonlinearConfig, NotCertified,
 };
-use streamcert::dynamics::{ScalarDrift, ScalarScenario, Trajectory};
+use streamcert::dynamics::Trajectory;
 
-use crate::nonlinear::config;
-
-/// `f = −x − 0.3 x³` explored by `u = −x + PRBS(±3, held 1 s)`, σ = 0.1, 40 s at dt = 0.01:
-/// under `k = −1` the rate `2 + 0.9 x²` is at least 2, 40× the margin 0.05.
-fn cubic_40x() -> ScalarScenario {
-    ScalarScenario {
-        drift: ScalarDrift::Polynomial(vec![0.0, -1.0, 0.0, -0.3]),
-        k_explore: -1.0,
-        dither: 3.0,
-        dither_hold: 1.0,
-        ..ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
-    }
-}
+use crate::nonlinear::{config, cubic_40x};
 
 /// The degree-2 certifier with the region trimmed by `trim` (0: the bounding box).
 fn trimmed(trim: f64) -> CertifierConfig {

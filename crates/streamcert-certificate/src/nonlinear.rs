@@ -70,9 +70,9 @@
 //! ## Lack-of-fit check
 //!
 //! The certificate's model is its library. A second instrumented fit on the same columns adds
-//! `e` powers of `y` the library lacks ([`NonlinearConfig::check_terms`], default 2: `y⁴, y⁵`
-//! for the cubic library, `y², y³` for `y, y·tanh y`) and tests them with the same Wald
-//! statistic and risk as the nonlinearity test. A window's nonlinear certificate stands only
+//! `e` powers of `y` the library lacks ([`NonlinearConfig::check_terms`], default 2: `y³, y⁴`
+//! for the default quadratic library, `y⁴, y⁵` for the cubic, `y², y³` for `y, y·tanh y`)
+//! and tests them with the same Wald statistic and risk as the nonlinearity test. A window's nonlinear certificate stands only
 //! where that test ran and found nothing ([`NotCertified::LibraryMisfit`],
 //! [`NotCertified::LibraryUntested`]). Closing costs no validity; the check cannot prove a
 //! library right (a drift the extra terms do not see passes), so the assumption below stays.

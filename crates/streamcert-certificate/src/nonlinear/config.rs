@@ -40,7 +40,7 @@ pub struct NonlinearConfig {
     #[serde(default)]
     pub test_risk: Option<f64>,
     /// Lack-of-fit check of the library (default 2; 0 turns it off): the number `e` of extra
-    /// terms, the lowest powers `y^k` (`2 <= k <= 8`) the library lacks (`y⁴, y⁵` for the cubic
+    /// terms, the lowest powers `y^k` (`2 <= k <= 8`) the library lacks (`y³, y⁴` for the default quadratic, `y⁴, y⁵` for the cubic
     /// library, `y², y³` for `y, y·tanh y`). A second instrumented fit on the library plus
     /// these terms tests them with the same Wald statistic and risk as the nonlinearity test;
     /// where they are significant, or cannot be tested yet, the window's nonlinear certificate

@@ -1,6 +1,7 @@
 //! The configuration file: defaults, refusals, and what each section selects.
 
 use super::*;
+use streamcert_certificate::{FeatureSet, NonlinearConfig};
 
 /// The printed configuration with G5 node b's required keys set.
 fn base() -> String {

@@ -180,20 +180,17 @@ fn the_anchored_window_checkpoints_and_is_checked() {
     for split in [1777, 3003] {
         let (text, second) = resume_matches(&cfg, &traj, &all, split);
         assert_eq!(second.anchored_look(), whole.anchored_look());
-        let payload = streamcert::certificate::unseal::<streamcert::certificate::CertifierConfig>(
-            &text, None,
-        )
-        .expect("sealed");
+        let payload = crate::support::json_payload(&text);
         // Records of 2 blocks at 1777 samples (354 blocks), of 4 at 3003 (598).
         let coarse = if split < 2000 { "\"coarse\":2" } else { "\"coarse\":4" };
         assert!(payload.contains(coarse), "merged records at {split}");
-        let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
+        let reseal = |edited: String| crate::support::reseal_json(&edited, &cfg);
         let bad = payload.replace(coarse, "\"coarse\":3");
-        assert!(Certifier::restore(&reseal(bad)).is_err(), "a record of 3 blocks");
+        assert!(Certifier::restore(reseal(bad)).is_err(), "a record of 3 blocks");
         let at = payload.find("\"start\":").expect("epoch start") + "\"start\":".len();
         let digits = payload[at..].chars().take_while(char::is_ascii_digit).count();
         let bad = format!("{}{}{}", &payload[..at], 10_000_000, &payload[at + digits..]);
-        assert!(Certifier::restore(&reseal(bad)).is_err(), "an epoch after the columns seen");
+        assert!(Certifier::restore(reseal(bad)).is_err(), "an epoch after the columns seen");
     }
     assert!(whole.anchored_look().0.is_some(), "the anchored window looked");
 }

@@ -366,16 +366,16 @@ fn batched_windows_checkpoint_and_are_checked_against_their_configuration() {
         .collect();
     let (text, _) = crate::support::resume_matches(&cfg, &traj, &all, 2345);
     assert!(all.iter().any(|e| e.calibrated.value.is_some()), "the calibrated looks ran");
-    let payload = streamcert::certificate::unseal::<CertifierConfig>(&text, None).expect("sealed");
+    let payload = crate::support::json_payload(&text);
     // The calibrated windows' (the model guard's larger fit keeps batches of one block).
     assert_eq!(payload.matches("\"batch\":4").count(), 1, "the windows' batch is written");
     assert!(payload.contains("\"batch_blocks\":4"));
-    let reseal = |edited: String| streamcert::certificate::seal(&edited, &cfg).expect("seals");
-    let err = Certifier::restore(&reseal(payload.replace("\"batch\":4", "\"batch\":2")))
+    let reseal = |edited: String| crate::support::reseal_json(&edited, &cfg);
+    let err = Certifier::restore(reseal(payload.replace("\"batch\":4", "\"batch\":2")))
         .expect_err("refused");
     assert!(err.to_string().contains("calibrated state does not match"), "{err}");
     // The default setting writes neither key.
     let plain = Certifier::new(calibrated(1, vec![-0.54], 150, 1)).expect("valid");
-    let text = plain.checkpoint().expect("serialises");
+    let text = plain.checkpoint_json().expect("serialises");
     assert!(!text.contains("\"batch\"") && !text.contains("batch_blocks"));
 }

@@ -188,8 +188,9 @@ fn checkpoint_and_restore_continue_bit_identically() {
     for k in 0..split {
         first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
     }
-    let json = first.checkpoint().expect("serialises");
-    let mut second = Certifier::restore(&json).expect("restores");
+    let sealed = first.checkpoint().expect("serialises");
+    let json = first.checkpoint_json().expect("serialises");
+    let mut second = Certifier::restore(&sealed).expect("restores");
     for k in split..traj.len() {
         let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
         let want = &all[k];
@@ -199,35 +200,39 @@ fn checkpoint_and_restore_continue_bit_identically() {
     }
     assert_eq!(second, whole);
     // A corrupted checkpoint is refused, not trusted: every flipped bit of the header and
-    // of a sample of the payload is caught (by the checksum, or before it by the header).
-    let bytes = json.as_bytes();
-    let positions = (0..bytes.len()).filter(|&i| i < 400 || i % 61 == 0);
-    for i in positions {
-        let mut damaged = bytes.to_vec();
-        damaged[i] ^= 1 << (i % 8);
-        let Ok(text) = std::str::from_utf8(&damaged) else { continue };
-        assert!(Certifier::restore(text).is_err(), "flipped bit at byte {i} was accepted");
+    // of a sample of the payload is caught (by the checksum, or before it by the header), in
+    // both encodings.
+    for bytes in [&sealed[..], json.as_bytes()] {
+        let positions = (0..bytes.len()).filter(|&i| i < 400 || i % 61 == 0);
+        for i in positions {
+            let mut damaged = bytes.to_vec();
+            damaged[i] ^= 1 << (i % 8);
+            assert!(Certifier::restore(&damaged).is_err(), "flipped bit at byte {i} was accepted");
+        }
+        assert!(Certifier::restore(&bytes[..bytes.len() / 2]).is_err());
     }
     assert!(Certifier::restore("{").is_err());
-    assert!(Certifier::restore(&json[..json.len() / 2]).is_err());
+    assert!(Certifier::restore("").is_err());
+    // The binary encoding is the smaller.
+    assert!(sealed.len() * 2 < json.len(), "{} against {}", sealed.len(), json.len());
     // Past the checksum (re-sealed after an edit), the state is checked against itself.
-    let payload = streamcert::certificate::unseal::<CertifierConfig>(&json, None).expect("sealed");
+    let payload = crate::support::json_payload(&json);
     let config = second.config().clone();
-    let reseal = |edited: String| streamcert::certificate::seal(&edited, &config).expect("seals");
+    let reseal = |edited: String| crate::support::reseal_json(&edited, &config);
     assert!(
-        Certifier::restore(&reseal(payload.replace("\"window\":150", "\"window\":151"))).is_err()
+        Certifier::restore(reseal(payload.replace("\"window\":150", "\"window\":151"))).is_err()
     );
     // A spike count that disagrees with the values in the window.
     let at = payload.find("\"spikes\":").expect("spike count serialised") + "\"spikes\":".len();
     let digits = payload[at..].chars().take_while(char::is_ascii_digit).count();
     let count: usize = payload[at..at + digits].parse().expect("a count");
     let tampered = format!("{}{}{}", &payload[..at], count + 1, &payload[at + digits..]);
-    assert!(Certifier::restore(&reseal(tampered)).is_err());
+    assert!(Certifier::restore(reseal(tampered)).is_err());
     // A Gram entry that no longer matches the window it summarises.
     let at = payload.find("\"g\":[").expect("Gram sums serialised") + "\"g\":[".len();
     let end = at + payload[at..].find(',').expect("an entry");
     let tampered = format!("{}-5.0{}", &payload[..at], &payload[end..]);
-    let err = Certifier::restore(&reseal(tampered)).expect_err("refused");
+    let err = Certifier::restore(reseal(tampered)).expect_err("refused");
     assert!(err.to_string().contains("running sum G[0][0]"), "{err}");
 }
 

@@ -9,7 +9,8 @@ pub(crate) fn run(scenario: &LinearScenario, seed: u64) -> Trajectory {
 }
 
 /// Run `cfg` on `traj` up to row `split`, checkpoint, restore, and check that every later
-/// row's evidence equals `all`'s (the uninterrupted run's), bit for bit; the checkpoint's text
+/// row's evidence equals `all`'s (the uninterrupted run's), bit for bit, and that the JSON
+/// export restores the same state as the binary checkpoint; the export's text (for edits)
 /// and the restored certifier at the end.
 pub(crate) fn resume_matches(
     cfg: &CertifierConfig,
@@ -21,13 +22,28 @@ pub(crate) fn resume_matches(
     for k in 0..split {
         first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
     }
-    let text = first.checkpoint().expect("serialises");
-    let mut second = Certifier::restore(&text).expect("restores");
+    let binary = first.checkpoint().expect("serialises");
+    let text = first.checkpoint_json().expect("serialises");
+    let mut second = Certifier::restore(&binary).expect("restores");
+    // The JSON export restores the same state.
+    assert_eq!(Certifier::restore(&text).expect("restores"), second);
     for k in split..traj.len() {
         let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
         assert_eq!(ev, all[k], "row {k} after a restore at {split}");
     }
     (text, second)
+}
+
+/// The JSON payload of a sealed JSON checkpoint ([`Certifier::checkpoint_json`]).
+pub(crate) fn json_payload(text: &str) -> &str {
+    text.split_once('\n').expect("a header line").1
+}
+
+/// A JSON payload sealed again for `cfg` with a valid checksum: past the checksum, so only
+/// the state's own checks can refuse it.
+pub(crate) fn reseal_json(payload: &str, cfg: &CertifierConfig) -> Vec<u8> {
+    streamcert::certificate::seal(payload.as_bytes(), streamcert::certificate::Encoding::Json, cfg)
+        .expect("seals")
 }
 
 /// True closed-loop rate `−λ_max(sym(A + B K))` with nalgebra's dense eigensolver (the oracle).

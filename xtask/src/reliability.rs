@@ -189,15 +189,11 @@ impl Cases {
             "checkpoint: a JSON file that is not a checkpoint",
             resume(b"{\"certifier\": 1}\n")?,
         );
-        let text = String::from_utf8(good.clone())?;
-        let (_, payload) = text.split_once('\n').context("checkpoint header")?;
-        let certifier: serde_json::Value = serde_json::from_str(payload)?;
-        let cert_config: streamcert_certificate::CertifierConfig =
-            serde_json::from_value(certifier["certifier"]["cfg"].clone())?;
+        let (certifier, cert_config) = payload(&good)?;
         let reseal = |edit: &dyn Fn(&mut serde_json::Value)| -> Result<Vec<u8>> {
             let mut v = certifier.clone();
             edit(&mut v);
-            Ok(streamcert_certificate::seal(&v.to_string(), &cert_config)?.into_bytes())
+            reseal(&v, &cert_config)
         };
         record(
             rows,
@@ -247,15 +243,11 @@ impl Cases {
         let cal = s(&cal_cfg)?;
         let cal_ckpt = self.path("calibrated.ckpt");
         self.run(&["certify", "--config", &cal, "--checkpoint", &s(&cal_ckpt)?], first.as_bytes())?;
-        let cal_text = std::fs::read_to_string(&cal_ckpt)?;
-        let (_, cal_payload) = cal_text.split_once('\n').context("checkpoint header")?;
-        let mut cal_state: serde_json::Value = serde_json::from_str(cal_payload)?;
-        let cal_config: streamcert_certificate::CertifierConfig =
-            serde_json::from_value(cal_state["certifier"]["cfg"].clone())?;
+        let (mut cal_state, cal_config) = payload(&std::fs::read(&cal_ckpt)?)?;
         if let Some(t) = cal_state["certifier"]["calibrated"]["tmat"].as_array_mut() {
             t.iter_mut().for_each(|x| *x = 0.0.into());
         }
-        let zeroed = streamcert_certificate::seal(&cal_state.to_string(), &cal_config)?;
+        let zeroed = reseal(&cal_state, &cal_config)?;
         let damaged = self.path("damaged-calibrated.ckpt");
         std::fs::write(&damaged, zeroed)?;
         record(
@@ -450,4 +442,21 @@ impl Cases {
         );
         Ok(())
     }
+}
+
+/// A sealed `certify` checkpoint's payload as a JSON value (whatever its encoding), and the
+/// certifier's configuration it holds.
+fn payload(sealed: &[u8]) -> Result<(serde_json::Value, streamcert_certificate::CertifierConfig)> {
+    let state: serde_json::Value = streamcert_certificate::unseal::<()>(sealed, None)?.decode()?;
+    let config = serde_json::from_value(state["certifier"]["cfg"].clone())?;
+    Ok((state, config))
+}
+
+/// `state` sealed again for `config` in the binary encoding the command line writes, with a
+/// valid checksum: a damage that only the state's own checks can catch.
+fn reseal(
+    state: &serde_json::Value,
+    config: &streamcert_certificate::CertifierConfig,
+) -> Result<Vec<u8>> {
+    Ok(streamcert_certificate::seal_value(state, streamcert_certificate::Encoding::Binary, config)?)
 }

@@ -222,13 +222,13 @@ fn killed_live_run_resumes_to_the_unsplit_output() {
     let _ = child.wait();
     drop(pipe);
     let partial = text(&collector.join().expect("collector"));
-    // The checkpoint's last time: the header line, then the JSON with the summary.
-    let saved = std::fs::read_to_string(&cp).expect("a checkpoint was written before the kill");
-    let (_, payload) = saved.split_once('\n').expect("header");
-    let last: f64 =
-        serde_json::from_str::<serde_json::Value>(payload).expect("json")["summary"]["last_time"]
-            .as_f64()
-            .expect("last time");
+    // The checkpoint's last time: the header line, then the state with the summary.
+    let saved = std::fs::read(&cp).expect("a checkpoint was written before the kill");
+    let state: serde_json::Value = streamcert_certificate::unseal::<()>(&saved, None)
+        .expect("sealed")
+        .decode()
+        .expect("a state");
+    let last: f64 = state["summary"]["last_time"].as_f64().expect("last time");
     let kept: Vec<&str> = partial
         .lines()
         .take_while(|l| {

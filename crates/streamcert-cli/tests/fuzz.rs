@@ -5,9 +5,11 @@
 //! the test, and proptest shrinks it to a minimal input and records it in
 //! `proptest-regressions/`.
 //!
-//! Targets: the CSV reader, the TOML configuration, checkpoint resume (the damaged file
-//! itself, and its payload re-sealed with a valid checksum so that the JSON parser and the
-//! state checks behind it are reached), the `compose` rate and gain files, and the `network`
+//! Targets: the CSV reader, the TOML configuration, checkpoint resume in both encodings (the
+//! committed seed is a JSON checkpoint, the format before the binary one; the binary seed is
+//! its state sealed again as the command line writes it now: the damaged file itself, and its
+//! payload re-sealed with a valid checksum so that the JSON or CBOR parser and the state
+//! checks behind it are reached), the `compose` rate and gain files, and the `network`
 //! configuration and its long-layout input.
 //!
 //! `cargo test` runs a short pass (`STREAMCERT_FUZZ_CASES`, default 64 per target, a few
@@ -21,7 +23,10 @@ use std::io::Cursor;
 use std::path::{Path, PathBuf};
 
 use proptest::prelude::*;
-use streamcert_pipeline::certify::{BadRows, Flush, Format, Options, run};
+use streamcert_certificate::Encoding;
+use streamcert_pipeline::certify::{
+    BadRows, Flush, Format, Options, open_checkpoint, run, seal_checkpoint,
+};
 use streamcert_pipeline::compose::{self, GainsFormat, Method};
 use streamcert_pipeline::config::{Columns, parse};
 use streamcert_pipeline::input::{Sample, SampleReader};
@@ -108,11 +113,10 @@ fn scratch(name: &str) -> PathBuf {
     dir.join(format!("{name}-{}-{n}", std::process::id()))
 }
 
-/// Resume from the corpus checkpoint damaged by `m` (re-sealed with a valid checksum when
+/// Resume from the corpus checkpoint (the committed JSON seed, or with `binary` its state
+/// sealed in the binary encoding) damaged by `m` (re-sealed with a valid checksum when
 /// `reseal`); returns (whether the file changed, whether the resume was refused).
-fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
-    let seeds = corpus("checkpoint");
-    let text = String::from_utf8_lossy(&seeds[0]).into_owned();
+fn resume_damaged(m: &[Mutation], reseal: bool, binary: bool) -> (bool, bool) {
     let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
     let calibrated = cfg_text
         .replace("enabled = false\ndelta", "enabled = true\ndelta")
@@ -120,13 +124,20 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
         .replace("# max_window = 1200 ", "max_window = 160 ")
         .replace("tail_window = 150", "tail_window = 40");
     let cfg = parse(&calibrated, "c").expect("corpus config");
+    let mut seed = corpus("checkpoint").swap_remove(0);
+    let encoding = if binary { Encoding::Binary } else { Encoding::Json };
+    if binary {
+        let (cert, summary) = open_checkpoint(&seed, &cfg, "seed").expect("the seed opens");
+        seed = seal_checkpoint("seed", &cert, &summary).expect("seals");
+    }
     let damaged = if reseal {
         // Past the checksum: mutate the payload and seal it again.
-        let (_, payload) = text.split_once('\n').expect("header");
-        let mutated = String::from_utf8_lossy(&mutate(payload.as_bytes(), &[], m)).into_owned();
-        streamcert_certificate::seal(&mutated, &cfg.certifier).expect("seal").into_bytes()
+        let sealed = streamcert_certificate::unseal::<()>(&seed, None).expect("header");
+        assert_eq!(sealed.encoding, encoding);
+        let mutated = mutate(sealed.payload, &[], m);
+        streamcert_certificate::seal(&mutated, encoding, &cfg.certifier).expect("seal")
     } else {
-        mutate(text.as_bytes(), &[], m)
+        mutate(&seed, &[], m)
     };
     let path = scratch("checkpoint");
     std::fs::write(&path, &damaged).expect("write");
@@ -134,15 +145,17 @@ fn resume_damaged(m: &[Mutation], reseal: bool) -> (bool, bool) {
     let mut out = Vec::new();
     let result = run(&cfg, Cursor::new(data), "fuzz", &mut out, &options(Some(path.clone())));
     let _ = std::fs::remove_file(&path);
-    (damaged != text.as_bytes(), result.is_err())
+    (damaged != seed, result.is_err())
 }
 
 /// The seed checkpoint itself resumes (so the mutations start from a file the checks
 /// accept, and a format change that leaves the corpus stale fails here).
 #[test]
 fn the_corpus_checkpoint_resumes() {
-    assert_eq!(resume_damaged(&[], false), (false, false));
-    assert_eq!(resume_damaged(&[], true), (false, false));
+    for binary in [false, true] {
+        assert_eq!(resume_damaged(&[], false, binary), (false, false));
+        assert_eq!(resume_damaged(&[], true, binary), (false, false));
+    }
 }
 
 /// Inputs the long fuzz runs found, kept as fixed cases.
@@ -161,7 +174,8 @@ fn fuzz_findings_stay_fixed() {
     assert_ne!(edited, payload);
     let cfg_text = String::from_utf8_lossy(&corpus("toml")[0]).into_owned();
     let cfg = parse(&cfg_text, "c").expect("corpus config");
-    let sealed = streamcert_certificate::seal(&edited, &cfg.certifier).expect("seal");
+    let sealed = streamcert_certificate::seal(edited.as_bytes(), Encoding::Json, &cfg.certifier)
+        .expect("seal");
     let path = scratch("finding");
     std::fs::write(&path, sealed).expect("write");
     let data = "t,y_b,u_b\n100,0.1,0.2\n";
@@ -202,8 +216,8 @@ proptest! {
     }
 
     #[test]
-    fn checkpoint_resume_never_panics(m in mutations(), reseal in any::<bool>()) {
-        let (changed, refused) = resume_damaged(&m, reseal);
+    fn checkpoint_resume_never_panics(m in mutations(), reseal in any::<bool>(), binary in any::<bool>()) {
+        let (changed, refused) = resume_damaged(&m, reseal, binary);
         if changed && !reseal {
             // Any change of the sealed file is refused.
             prop_assert!(refused);

@@ -4,7 +4,7 @@ use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Evidence, Interval, NotCertified};
+use streamcert_certificate::{Certifier, Encoding, Evidence, Interval, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
@@ -56,16 +56,24 @@ struct Checkpoint {
     summary: Summary,
 }
 
-/// The sealed text of the checkpoint of `cert` and `summary` (to be written to `path`).
-fn checkpoint_text(path: &Path, cert: &Certifier, summary: &Summary) -> Result<String, CliError> {
+/// [`Checkpoint`] borrowed, for writing: the same fields and encoding, without a copy of the
+/// state.
+#[derive(Serialize)]
+struct CheckpointRef<'a> {
+    certifier: &'a Certifier,
+    summary: &'a Summary,
+}
+
+/// The sealed checkpoint of `cert` and `summary` (to be written to `path`).
+fn checkpoint_bytes(path: &Path, cert: &Certifier, summary: &Summary) -> Result<Vec<u8>, CliError> {
     seal_checkpoint(&path.display().to_string(), cert, summary)
 }
 
-/// The sealed text of a `certify` checkpoint: the certifier's state and the run's summary,
-/// sealed with the configuration's fingerprint and a checksum
-/// ([`seal`](streamcert_certificate::seal)); `label` names it in errors. The CLI writes this
-/// text to its `--checkpoint` file and the Python package's `Certifier.checkpoint()` returns
-/// it as bytes, so either restores the other's.
+/// The sealed `certify` checkpoint: the certifier's state and the run's summary, in the
+/// compact binary encoding, sealed with the configuration's fingerprint and a checksum
+/// ([`seal`](streamcert_certificate::seal)); `label` names it in errors. The CLI writes these
+/// bytes to its `--checkpoint` file and the Python package's `Certifier.checkpoint()` returns
+/// them, so either restores the other's.
 ///
 /// # Errors
 /// [`CliError::Checkpoint`] when the state cannot be encoded.
@@ -73,16 +81,32 @@ pub fn seal_checkpoint(
     label: &str,
     cert: &Certifier,
     summary: &Summary,
-) -> Result<String, CliError> {
-    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
-    let cp = Checkpoint { certifier: cert.clone(), summary: summary.clone() };
-    let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
-    streamcert_certificate::seal(&json, cert.config()).map_err(|e| bad(crate::resume::inner(e)))
+) -> Result<Vec<u8>, CliError> {
+    seal_checkpoint_as(label, cert, summary, Encoding::Binary)
 }
 
-/// Open a sealed `certify` checkpoint ([`seal_checkpoint`]) for the configuration `cfg`:
-/// refused, with what is wrong, when it is not UTF-8 text, damaged (checksum), written with
-/// another configuration (fingerprint), or holds an inconsistent state.
+/// [`seal_checkpoint`] in the chosen encoding: [`Encoding::Json`] is the readable export
+/// (version 4, what checkpoints were before the binary encoding), which
+/// [`open_checkpoint`] reads as well.
+///
+/// # Errors
+/// [`CliError::Checkpoint`] when the state cannot be encoded.
+pub fn seal_checkpoint_as(
+    label: &str,
+    cert: &Certifier,
+    summary: &Summary,
+    encoding: Encoding,
+) -> Result<Vec<u8>, CliError> {
+    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
+    let cp = CheckpointRef { certifier: cert, summary };
+    streamcert_certificate::seal_value(&cp, encoding, cert.config())
+        .map_err(|e| bad(crate::resume::inner(e)))
+}
+
+/// Open a sealed `certify` checkpoint ([`seal_checkpoint`], in either encoding) for the
+/// configuration `cfg`: refused, with what is wrong, when it is not a checkpoint, damaged
+/// (checksum), written with another configuration (fingerprint), or holds an inconsistent
+/// state.
 ///
 /// # Errors
 /// [`CliError::Checkpoint`] naming `label`.
@@ -92,10 +116,8 @@ pub fn open_checkpoint(
     label: &str,
 ) -> Result<(Certifier, Summary), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
-    let text = std::str::from_utf8(bytes)
-        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
     let cp: Checkpoint =
-        crate::resume::open(text, &cfg.certifier, |cp: &Checkpoint| cp.certifier.config())
+        crate::resume::open(bytes, &cfg.certifier, |cp: &Checkpoint| cp.certifier.config())
             .map_err(bad)?;
     let cert = cp.certifier.verify().map_err(|e| bad(crate::resume::inner(e)))?;
     if cert.config() != &cfg.certifier {
@@ -105,16 +127,16 @@ pub fn open_checkpoint(
 }
 
 fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
-    write_atomic(path, &checkpoint_text(path, cert, summary)?)
+    write_atomic(path, &checkpoint_bytes(path, cert, summary)?)
 }
 
-/// Write `text` to `path` atomically: a unique temporary file beside the target, flushed to
+/// Write `bytes` to `path` atomically: a unique temporary file beside the target, flushed to
 /// disk, then renamed over it, so a crash leaves either the old file or the new one, never a
 /// torn one.
 ///
 /// # Errors
 /// [`CliError::Io`] naming the checkpoint.
-pub(crate) fn write_atomic(path: &Path, text: &str) -> Result<(), CliError> {
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
     let nanos = std::time::SystemTime::now()
         .duration_since(std::time::UNIX_EPOCH)
         .map_or(0, |d| d.as_nanos());
@@ -122,7 +144,7 @@ pub(crate) fn write_atomic(path: &Path, text: &str) -> Result<(), CliError> {
     let tmp = path.with_file_name(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
     let write = || -> std::io::Result<()> {
         let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(text.as_bytes())?;
+        f.write_all(bytes)?;
         f.sync_all()?;
         std::fs::rename(&tmp, path)?;
         // Make the rename itself durable where the platform allows opening a directory.
@@ -156,8 +178,8 @@ struct Batch {
     /// The rows' region values, concatenated; row `i` ends at `region_ends[i]`.
     regions: Vec<Interval>,
     region_ends: Vec<usize>,
-    /// Checkpoints due: the sealed text, written once the first `n` rows are out.
-    checkpoints: Vec<(usize, String)>,
+    /// Checkpoints due: the sealed bytes, written once the first `n` rows are out.
+    checkpoints: Vec<(usize, Vec<u8>)>,
     /// The error that stopped the run, after the rows before it.
     error: Option<CliError>,
 }
@@ -258,10 +280,10 @@ fn start(cfg: &Config, opts: &Options) -> Result<(Certifier, Summary), CliError>
     }
 }
 
-/// Write a due checkpoint's text (made on the certifying side) where `opts` says, if it does.
-fn write_checkpoint(opts: &Options, text: &str) -> Result<(), CliError> {
+/// Write a due checkpoint (sealed on the certifying side) where `opts` says, if it does.
+fn write_checkpoint(opts: &Options, bytes: &[u8]) -> Result<(), CliError> {
     match &opts.checkpoint {
-        Some(path) => write_atomic(path, text),
+        Some(path) => write_atomic(path, bytes),
         None => Ok(()),
     }
 }
@@ -433,10 +455,10 @@ impl Step<'_> {
 
     /// The sealed checkpoint due after the row just certified (every `checkpoint_every`
     /// accepted rows), if any.
-    fn due_checkpoint(&self) -> Result<Option<String>, CliError> {
+    fn due_checkpoint(&self) -> Result<Option<Vec<u8>>, CliError> {
         match (&self.opts.checkpoint, self.opts.checkpoint_every) {
             (Some(path), Some(every)) if every > 0 && self.summary.rows % every == 0 => {
-                checkpoint_text(path, self.cert, self.summary).map(Some)
+                checkpoint_bytes(path, self.cert, self.summary).map(Some)
             }
             _ => Ok(None),
         }

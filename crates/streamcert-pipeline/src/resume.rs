@@ -10,7 +10,8 @@ use streamcert_certificate::CertifyError;
 /// Settings named in a refusal at most.
 const SHOWN: usize = 3;
 
-/// The payload `P` of the sealed checkpoint `text` for the configuration `now`, or why not.
+/// The payload `P` of the sealed checkpoint `bytes` (either encoding) for the configuration
+/// `now`, or why not.
 /// Where the envelope and checksum are intact but the configuration fingerprint is not
 /// `now`'s, the message names up to three settings whose values differ (dotted paths of the
 /// serialised configuration, as `config_of` finds it in the payload).
@@ -18,25 +19,25 @@ const SHOWN: usize = 3;
 /// # Errors
 /// The refusal's message: not a checkpoint, another format version, damaged, corrupted,
 /// another configuration (with its differences), or a payload that does not parse.
-pub(crate) fn open<P, C>(text: &str, now: &C, config_of: impl Fn(&P) -> &C) -> Result<P, String>
+pub(crate) fn open<P, C>(bytes: &[u8], now: &C, config_of: impl Fn(&P) -> &C) -> Result<P, String>
 where
     P: DeserializeOwned,
     C: Serialize,
 {
-    let payload = match streamcert_certificate::unseal(text, Some(now)) {
-        Ok(payload) => payload,
+    let sealed = match streamcert_certificate::unseal(bytes, Some(now)) {
+        Ok(sealed) => sealed,
         Err(e) => {
             let message = inner(e);
             // Intact but for another configuration: say what differs.
-            let Ok(payload) = streamcert_certificate::unseal::<C>(text, None) else {
+            let Ok(sealed) = streamcert_certificate::unseal::<C>(bytes, None) else {
                 return Err(message);
             };
-            let then = serde_json::from_str::<P>(payload).ok();
+            let then = sealed.decode::<P>().ok();
             let diff = then.map(|p| differences(config_of(&p), now)).unwrap_or_default();
             return Err(if diff.is_empty() { message } else { format!("{message}: {diff}") });
         }
     };
-    serde_json::from_str(payload).map_err(|e| e.to_string())
+    sealed.decode().map_err(inner)
 }
 
 /// The message of a checkpoint error without the library's `checkpoint:` prefix (the command
@@ -90,6 +91,7 @@ fn walk(path: &str, a: &Value, b: &Value, found: &mut Vec<(String, Value, Value)
 #[cfg(test)]
 mod tests {
     use super::*;
+    use streamcert_certificate::Encoding;
 
     #[derive(Serialize, serde::Deserialize, PartialEq, Debug)]
     struct Inner {
@@ -110,19 +112,22 @@ mod tests {
     fn a_checkpoint_of_another_configuration_names_what_differs() {
         let then = Inner { margin: 0.05, window: 150 };
         let p = Payload { config: Inner { margin: 0.05, window: 150 }, rows: 7 };
-        let text = streamcert_certificate::seal(&serde_json::to_string(&p).unwrap(), &then)
-            .expect("sealed");
-        let opened: Payload = open(&text, &then, |p: &Payload| &p.config).expect("opens");
+        let text = streamcert_certificate::seal_value(&p, Encoding::Json, &then).expect("sealed");
+        let text = String::from_utf8(text).expect("JSON is text");
+        let opened: Payload = open(text.as_bytes(), &then, |p: &Payload| &p.config).expect("opens");
+        let binary = streamcert_certificate::seal_value(&p, Encoding::Binary, &then).unwrap();
+        let opened_binary: Payload = open(&binary, &then, |p: &Payload| &p.config).unwrap();
+        assert_eq!(opened_binary, p);
         assert_eq!(opened, p);
         let now = Inner { margin: 0.1, window: 150 };
-        let err = open(&text, &now, |p: &Payload| &p.config).unwrap_err();
+        let err = open(text.as_bytes(), &now, |p: &Payload| &p.config).unwrap_err();
         assert_eq!(
             err,
             "the checkpoint was written with a different configuration: \
              margin: 0.05 in the checkpoint, 0.1 now"
         );
         let both = Inner { margin: 0.1, window: 300 };
-        let err = open(&text, &both, |p: &Payload| &p.config).unwrap_err();
+        let err = open(text.as_bytes(), &both, |p: &Payload| &p.config).unwrap_err();
         assert!(
             err.ends_with(
                 "margin: 0.05 in the checkpoint, 0.1 now; window: 150 in the checkpoint, 300 now"
@@ -130,7 +135,7 @@ mod tests {
             "{err}"
         );
         let damaged = text.replace("\"rows\":7", "\"rows\":8");
-        let err = open(&damaged, &now, |p: &Payload| &p.config).unwrap_err();
+        let err = open(damaged.as_bytes(), &now, |p: &Payload| &p.config).unwrap_err();
         assert!(err.starts_with("the checkpoint is corrupted"), "{err}");
         assert!(!err.contains("margin"), "{err}");
     }

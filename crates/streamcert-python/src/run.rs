@@ -270,12 +270,12 @@ impl Run {
         EvidenceColumns::with_capacity(n, self.region_names.clone())
     }
 
-    /// The sealed checkpoint text: the command line's `--checkpoint` format, so either
-    /// restores the other's.
+    /// The sealed checkpoint's bytes: the command line's `--checkpoint` format (binary), so
+    /// either restores the other's.
     ///
     /// # Errors
     /// [`Error::Checkpoint`] when the state cannot be encoded.
-    pub fn checkpoint(&self) -> Result<String, Error> {
+    pub fn checkpoint(&self) -> Result<Vec<u8>, Error> {
         Ok(certify::seal_checkpoint("checkpoint", &self.cert, &self.summary)?)
     }
 

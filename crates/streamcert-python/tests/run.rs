@@ -115,7 +115,7 @@ fn a_checkpoint_after_any_sample_resumes_to_the_uninterrupted_run() {
         let mut got = a.columns(t.len());
         a.push_block(&t[..cut], &y[..cut], &u[..cut], &mut got).unwrap();
         let text = a.checkpoint().unwrap();
-        let mut b = Run::restore(text.as_bytes(), cfg.clone()).unwrap();
+        let mut b = Run::restore(&text, cfg.clone()).unwrap();
         b.push_block(&t[cut..], &y[cut..], &u[cut..], &mut got).unwrap();
         let (g, e) = (format!("{got:?}"), format!("{expected:?}"));
         if g != e {
@@ -173,8 +173,8 @@ fn a_checkpoint_of_another_configuration_or_damaged_is_refused() {
     let mut cols = run.columns(0);
     run.push_block(&t, &y, &u, &mut cols).unwrap();
     let text = run.checkpoint().unwrap();
-    assert!(matches!(Run::restore(text.as_bytes(), other), Err(Error::Checkpoint(_))));
-    let mut damaged = text.into_bytes();
+    assert!(matches!(Run::restore(&text, other), Err(Error::Checkpoint(_))));
+    let mut damaged = text;
     let at = damaged.len() / 2;
     damaged[at] = if damaged[at] == b'1' { b'2' } else { b'1' };
     assert!(matches!(Run::restore(&damaged, cfg.clone()), Err(Error::Checkpoint(_))));

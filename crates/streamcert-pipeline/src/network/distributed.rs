@@ -115,25 +115,26 @@ fn sealed_config<'a>(
 }
 
 fn save(path: &Path, cfg: &NetConfig, place: &Placement, file: &SiteFile) -> Result<(), String> {
-    let json = serde_json::to_string(file).map_err(|e| e.to_string())?;
-    let text = streamcert_certificate::seal(&json, &sealed_config(cfg, place))
-        .map_err(|e| e.to_string())?;
-    crate::certify::write_atomic(path, &text).map_err(|e| e.to_string())
+    let bytes = streamcert_certificate::seal_value(
+        file,
+        streamcert_certificate::Encoding::Binary,
+        &sealed_config(cfg, place),
+    )
+    .map_err(|e| e.to_string())?;
+    crate::certify::write_atomic(path, &bytes).map_err(|e| e.to_string())
 }
 
 fn load(path: &Path, cfg: &NetConfig, place: &Placement) -> Result<SiteFile, CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
-    let text = std::str::from_utf8(&bytes)
-        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
-    let json =
-        streamcert_certificate::unseal(text, Some(&sealed_config(cfg, place))).map_err(|e| {
+    let sealed =
+        streamcert_certificate::unseal(&bytes, Some(&sealed_config(cfg, place))).map_err(|e| {
             bad(format!(
                 "{e} (or another placement of the subsystems on the processes, or another \
                  number of processes)"
             ))
         })?;
-    let file: SiteFile = serde_json::from_str(json).map_err(|e| bad(e.to_string()))?;
+    let file: SiteFile = sealed.decode().map_err(|e| bad(crate::resume::inner(e)))?;
     if file.process != place.process || file.processes != place.processes {
         return Err(bad(format!(
             "the checkpoint is process {}'s of {}, not process {}'s of {}: give every process \

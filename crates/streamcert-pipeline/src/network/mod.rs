@@ -91,22 +91,31 @@ struct Checkpoint {
     summary: NetSummary,
 }
 
+/// [`Checkpoint`] borrowed, for writing: the same fields and encoding, without a copy of the
+/// network's state.
+#[derive(Serialize)]
+struct CheckpointRef<'a> {
+    network: &'a NetworkCertifier,
+    summary: &'a NetSummary,
+}
+
 fn save(path: &Path, net: &NetworkCertifier, summary: &NetSummary) -> Result<(), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
-    let cp = Checkpoint { network: net.clone(), summary: summary.clone() };
-    let json = serde_json::to_string(&cp).map_err(|e| bad(e.to_string()))?;
-    let text = streamcert_certificate::seal(&json, net.config())
-        .map_err(|e| bad(crate::resume::inner(e)))?;
-    crate::certify::write_atomic(path, &text)
+    let cp = CheckpointRef { network: net, summary };
+    let bytes = streamcert_certificate::seal_value(
+        &cp,
+        streamcert_certificate::Encoding::Binary,
+        net.config(),
+    )
+    .map_err(|e| bad(crate::resume::inner(e)))?;
+    crate::certify::write_atomic(path, &bytes)
 }
 
 fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), CliError> {
     let bad = |message: String| CliError::Checkpoint { path: path.display().to_string(), message };
     let bytes = std::fs::read(path).map_err(|e| bad(e.to_string()))?;
-    let text = std::str::from_utf8(&bytes)
-        .map_err(|_| bad("not a streamcert checkpoint (not UTF-8 text)".into()))?;
     let cp: Checkpoint =
-        crate::resume::open(text, &cfg.network, |cp: &Checkpoint| cp.network.config())
+        crate::resume::open(&bytes, &cfg.network, |cp: &Checkpoint| cp.network.config())
             .map_err(bad)?;
     let net = cp.network.verify().map_err(|e| bad(e.to_string()))?;
     if net.config() != &cfg.network {

@@ -161,8 +161,8 @@ impl PyCertifier {
 
     /// The sealed checkpoint (the command line's `--checkpoint` format), as bytes.
     fn checkpoint<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyBytes>> {
-        let text = self.run.checkpoint().map_err(|e| to_py(py, e))?;
-        Ok(PyBytes::new(py, text.as_bytes()))
+        let bytes = self.run.checkpoint().map_err(|e| to_py(py, e))?;
+        Ok(PyBytes::new(py, &bytes))
     }
 
     /// Replace this certifier's state by the checkpoint `data` (for its own configuration),

@@ -1,0 +1,62 @@
+//! One calibrated certifier's sealed checkpoint: writing it (encode and seal) and restoring it
+//! (check, decode, verify) in the binary encoding the command line writes (CBOR, version 5)
+//! against the JSON export (version 4, the format before it) of the same state in the same
+//! run, and the two sizes (printed once, before the timings).
+//!
+//! The state: `examples/data/certify_b.toml` (G5's subsystem B, the default calibrated
+//! certificate with every guard) after 20 000 steps of Experiment 1's data, seed 1 (the
+//! data of `streamcert simulate g5 --experiment 1 --seed 1 --steps 20000`), so that every
+//! window and the anchored window hold data.
+//!
+//! Run: `cargo bench --bench checkpoint`.
+
+use std::hint::black_box;
+
+use criterion::{Criterion, criterion_group, criterion_main};
+use streamcert::certificate::{Certifier, Encoding, seal_value};
+use streamcert::experiments::{Experiment, G5Dataset};
+
+const ROWS: usize = 20_000;
+
+fn certifier() -> Certifier {
+    let toml = include_str!("../examples/data/certify_b.toml");
+    let cfg = streamcert_pipeline::config::parse(toml, "certify_b.toml").expect("valid");
+    let data = G5Dataset { steps: Some(ROWS), ..G5Dataset::defaults(Experiment::One) };
+    let traj = data.run_seeded(1).expect("simulates");
+    let mut cert = Certifier::new(cfg.certifier).expect("valid");
+    // Subsystem B: the second output and input (`y_b`, `u_b` of `streamcert simulate g5`).
+    for k in 0..traj.len() {
+        let (y, u) = (traj.output(k)[1], traj.input(k)[1]);
+        cert.push(traj.t[k], &[y], &[u]).expect("finite");
+    }
+    cert
+}
+
+fn checkpoint(c: &mut Criterion) {
+    let cert = certifier();
+    let binary = cert.checkpoint().expect("encodes");
+    let json = cert.checkpoint_json().expect("encodes");
+    eprintln!(
+        "checkpoint of one certifier after {ROWS} rows: binary {} bytes, JSON {} bytes ({:.3}×)",
+        binary.len(),
+        json.len(),
+        binary.len() as f64 / json.len() as f64
+    );
+    let mut group = c.benchmark_group("checkpoint");
+    group.sample_size(20);
+    for (name, encoding) in [("binary", Encoding::Binary), ("json", Encoding::Json)] {
+        group.bench_function(format!("write_{name}"), |b| {
+            b.iter(|| seal_value(black_box(&cert), encoding, cert.config()).expect("encodes"));
+        });
+    }
+    group.bench_function("restore_binary", |b| {
+        b.iter(|| Certifier::restore(black_box(&binary)).expect("restores"));
+    });
+    group.bench_function("restore_json", |b| {
+        b.iter(|| Certifier::restore(black_box(&json)).expect("restores"));
+    });
+    group.finish();
+}
+
+criterion_group!(benches, checkpoint);
+criterion_main!(benches);

@@ -1,10 +1,9 @@
 //! `streamcert certify`: one output row per sample ([`EvidenceWriter`]) and a summary.
 
 use std::io::{Read, Write};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use serde::{Deserialize, Serialize};
-use streamcert_certificate::{Certifier, Encoding, Evidence, Interval, NotCertified};
+use streamcert_certificate::{Certifier, Evidence, Interval, NotCertified};
 
 use crate::CliError;
 use crate::config::Config;
@@ -13,8 +12,12 @@ pub use crate::output::{Flush, Format, Header};
 pub use summary::Summary;
 pub(crate) use summary::{reason_phrase, reason_words};
 
+mod checkpoint;
 mod summary;
 use crate::output::{EvidenceWriter, region_columns};
+pub(crate) use checkpoint::write_atomic;
+use checkpoint::{checkpoint_bytes, load, save};
+pub use checkpoint::{open_checkpoint, seal_checkpoint, seal_checkpoint_as};
 
 /// What to do with a malformed row.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
@@ -48,124 +51,6 @@ pub struct Options {
     pub flush: Flush,
     /// Draw a picture of the run into this `.png` or `.svg` file at the end.
     pub plot: Option<PathBuf>,
-}
-
-#[derive(Serialize, Deserialize)]
-struct Checkpoint {
-    certifier: Certifier,
-    summary: Summary,
-}
-
-/// [`Checkpoint`] borrowed, for writing: the same fields and encoding, without a copy of the
-/// state.
-#[derive(Serialize)]
-struct CheckpointRef<'a> {
-    certifier: &'a Certifier,
-    summary: &'a Summary,
-}
-
-/// The sealed checkpoint of `cert` and `summary` (to be written to `path`).
-fn checkpoint_bytes(path: &Path, cert: &Certifier, summary: &Summary) -> Result<Vec<u8>, CliError> {
-    seal_checkpoint(&path.display().to_string(), cert, summary)
-}
-
-/// The sealed `certify` checkpoint: the certifier's state and the run's summary, in the
-/// compact binary encoding, sealed with the configuration's fingerprint and a checksum
-/// ([`seal`](streamcert_certificate::seal)); `label` names it in errors. The CLI writes these
-/// bytes to its `--checkpoint` file and the Python package's `Certifier.checkpoint()` returns
-/// them, so either restores the other's.
-///
-/// # Errors
-/// [`CliError::Checkpoint`] when the state cannot be encoded.
-pub fn seal_checkpoint(
-    label: &str,
-    cert: &Certifier,
-    summary: &Summary,
-) -> Result<Vec<u8>, CliError> {
-    seal_checkpoint_as(label, cert, summary, Encoding::Binary)
-}
-
-/// [`seal_checkpoint`] in the chosen encoding: [`Encoding::Json`] is the readable export
-/// (version 4, what checkpoints were before the binary encoding), which
-/// [`open_checkpoint`] reads as well.
-///
-/// # Errors
-/// [`CliError::Checkpoint`] when the state cannot be encoded.
-pub fn seal_checkpoint_as(
-    label: &str,
-    cert: &Certifier,
-    summary: &Summary,
-    encoding: Encoding,
-) -> Result<Vec<u8>, CliError> {
-    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
-    let cp = CheckpointRef { certifier: cert, summary };
-    streamcert_certificate::seal_value(&cp, encoding, cert.config())
-        .map_err(|e| bad(crate::resume::inner(e)))
-}
-
-/// Open a sealed `certify` checkpoint ([`seal_checkpoint`], in either encoding) for the
-/// configuration `cfg`: refused, with what is wrong, when it is not a checkpoint, damaged
-/// (checksum), written with another configuration (fingerprint), or holds an inconsistent
-/// state.
-///
-/// # Errors
-/// [`CliError::Checkpoint`] naming `label`.
-pub fn open_checkpoint(
-    bytes: &[u8],
-    cfg: &Config,
-    label: &str,
-) -> Result<(Certifier, Summary), CliError> {
-    let bad = |message: String| CliError::Checkpoint { path: label.to_string(), message };
-    let cp: Checkpoint =
-        crate::resume::open(bytes, &cfg.certifier, |cp: &Checkpoint| cp.certifier.config())
-            .map_err(bad)?;
-    let cert = cp.certifier.verify().map_err(|e| bad(crate::resume::inner(e)))?;
-    if cert.config() != &cfg.certifier {
-        return Err(bad("the checkpoint was written with a different configuration".into()));
-    }
-    Ok((cert, cp.summary))
-}
-
-fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
-    write_atomic(path, &checkpoint_bytes(path, cert, summary)?)
-}
-
-/// Write `bytes` to `path` atomically: a unique temporary file beside the target, flushed to
-/// disk, then renamed over it, so a crash leaves either the old file or the new one, never a
-/// torn one.
-///
-/// # Errors
-/// [`CliError::Io`] naming the checkpoint.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos());
-    let name = path.file_name().map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy());
-    let tmp = path.with_file_name(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        // Make the rename itself durable where the platform allows opening a directory.
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if let Ok(d) = std::fs::File::open(dir) {
-                let _ = d.sync_all();
-            }
-        }
-        Ok(())
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        CliError::io(format!("writing the checkpoint {}", path.display()), e)
-    })
-}
-
-fn load(path: &Path, cfg: &Config) -> Result<(Certifier, Summary), CliError> {
-    let label = path.display().to_string();
-    let bytes = std::fs::read(path)
-        .map_err(|e| CliError::Checkpoint { path: label.clone(), message: e.to_string() })?;
-    open_checkpoint(&bytes, cfg, &label)
 }
 
 /// Rows a reader thread hands over at a time (when the input is not live).
@@ -302,10 +187,10 @@ fn run_live<R: Read, W: Write>(
         region.clear();
         if let Some(ev) = step.row(next, &s, &mut region)? {
             writer.write_with_region(&ev, &region).map_err(io)?;
-            if let Some(text) = step.due_checkpoint()? {
+            if let Some(sealed) = step.due_checkpoint()? {
                 // The rows a checkpoint holds are on the output before it is written.
                 writer.flush().map_err(io)?;
-                write_checkpoint(step.opts, &text)?;
+                write_checkpoint(step.opts, &sealed)?;
             }
         }
     }
@@ -343,9 +228,9 @@ fn run_batched<R: Read + Send, W: Write>(
                 let to = batch.region_ends[i];
                 writer.write_with_region(ev, &batch.regions[from..to]).map_err(io)?;
                 from = to;
-                while let Some((_, text)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
+                while let Some((_, sealed)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
                     writer.flush().map_err(io)?;
-                    write_checkpoint(opts, &text)?;
+                    write_checkpoint(opts, &sealed)?;
                 }
             }
             drop(checkpoints);
@@ -392,7 +277,7 @@ impl Step<'_> {
             batch.region_ends.push(batch.regions.len());
             match self.due_checkpoint() {
                 Ok(None) => {}
-                Ok(Some(text)) => batch.checkpoints.push((batch.evidence.len(), text)),
+                Ok(Some(sealed)) => batch.checkpoints.push((batch.evidence.len(), sealed)),
                 Err(e) => {
                     batch.error = Some(e);
                     return true;

@@ -9,8 +9,8 @@
 //! ```
 //!
 //! Version 5 ([`Encoding::Binary`], what [`Certifier::checkpoint`] writes) encodes the payload
-//! in CBOR (RFC 8949; each float in the shortest of 2, 4 or 8 bytes that holds it exactly), a
-//! third of the JSON's size; version 4 ([`Encoding::Json`], [`Certifier::checkpoint_json`])
+//! in CBOR (RFC 8949; each float in the shortest of 2, 4 or 8 bytes that holds it exactly),
+//! 0.43 of the JSON's size for a default calibrated certifier (BENCHMARKS.md); version 4 ([`Encoding::Json`], [`Certifier::checkpoint_json`])
 //! is JSON text, kept as a readable export and for the checkpoints written before version 5.
 //! [`Certifier::restore`] reads both.
 //!
@@ -45,7 +45,7 @@ pub const CHECKPOINT_JSON_VERSION: u32 = 4;
 pub enum Encoding {
     /// CBOR (RFC 8949), version [`CHECKPOINT_VERSION`]: the compact default.
     Binary,
-    /// JSON text, version [`CHECKPOINT_JSON_VERSION`]: readable, about three times larger.
+    /// JSON text, version [`CHECKPOINT_JSON_VERSION`]: readable, about twice as large.
     Json,
 }
 

@@ -13,7 +13,10 @@
 //! (`AmbiguityRadius::push` + `snapshot`), `step` (`Certifier::push`, Gaussian + Wasserstein),
 //! `gaussian` (`Certifier::push`, the paper's Gaussian certificate only), `calibrated`
 //! (`Certifier::push`, Gaussian + calibrated with its default windows), `nonlinear` (the same
-//! plus the nonlinear certificate of degree 3), all for `p = m = 1`; `wide` (`Certifier::push`,
+//! plus the nonlinear certificate of degree 3), `baseline` (`Certifier::push`, the bench's
+//! `through_origin_gaussian_and_calibrated_unguarded`: the calibrated step before the
+//! intercept, the guards, the fifth window and the anchored window, the baseline of the
+//! default step's target), all for `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
 
@@ -22,8 +25,29 @@ use std::hint::black_box;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
-use streamcert::certificate::{Calibration, Certifier, CertifierConfig, NonlinearConfig};
-use streamcert::regression::{RegressionConfig, SlidingRegression};
+use streamcert::certificate::{
+    Calibration, Certifier, CertifierConfig, NonlinearConfig, RiskSplit,
+};
+use streamcert::regression::{Model, RegressionConfig, SlidingRegression};
+
+/// The calibrated certifiers: Gaussian + calibrated (δ = 0.01, the default windows, as the
+/// bench's `gaussian_and_calibrated`), the baseline (through the origin, no guard, four windows,
+/// the risk split by length) and the default with the nonlinear certificate of degree 3.
+fn calibrated(reg_cfg: RegressionConfig) -> Result<[Certifier; 3], Box<dyn std::error::Error>> {
+    let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
+    cal_cfg.calibration = Some(Calibration::new(0.01));
+    let mut was_cfg = cal_cfg.clone();
+    was_cfg.regression.model = Model::ThroughOrigin;
+    was_cfg.calibration = Some(Calibration {
+        windows: Some(4),
+        risk_split: RiskSplit::ByLength,
+        anchored_share: 0.0,
+        ..Calibration::new(0.01).unguarded()
+    });
+    let mut nonlinear_cfg = cal_cfg.clone();
+    nonlinear_cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
+    Ok([Certifier::new(cal_cfg)?, Certifier::new(was_cfg)?, Certifier::new(nonlinear_cfg)?])
+}
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut args = std::env::args().skip(1);
@@ -43,12 +67,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cfg.ambiguity = Some(AmbiguityConfig::paper(150));
     let mut cert = Certifier::new(cfg)?;
-    // Gaussian + calibrated (δ = 0.01, the default windows), as the bench's `gaussian_and_calibrated`.
-    let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
-    cal_cfg.calibration = Some(Calibration::new(0.01));
-    let mut cal = Certifier::new(cal_cfg.clone())?;
-    cal_cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
-    let mut nonlinear = Certifier::new(cal_cfg)?;
+    let [mut cal, mut baseline, mut nonlinear] = calibrated(reg_cfg)?;
     let mut gauss = Certifier::new(CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10))?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
@@ -93,6 +112,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             }
             "calibrated" => {
                 let ev = cal.push(black_box(t), y, u)?;
+                black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
+            }
+            "baseline" => {
+                let ev = baseline.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
             }
             "nonlinear" => {

@@ -4,7 +4,7 @@
 //! sums ([`InstrumentedWindows::fresh_estimate`]).
 
 use super::moments::{Moments, upper};
-use super::{InstrumentedWindows, Solve, WindowEstimate};
+use super::{InstrumentedWindows, Layout, Solve, WindowEstimate};
 
 /// A span's first-order statistics fell below this share of their magnitude (the sum of the
 /// absolute terms of the quadratic form): the difference of the segment sums may have lost
@@ -92,8 +92,28 @@ impl InstrumentedWindows {
         out: &mut WindowEstimate,
     ) -> bool {
         let lay = self.layout();
-        let (p, d, k) = (lay.p, lay.d, lay.k);
-        let (nv, nh, pp) = (mo.nv, mo.nh, p * p);
+        match (lay.p, lay.d, lay.k) {
+            (1, 2, 2) => self.first_order_dims(mo, blocks, t, out, (1, 2, 2)),
+            (1, 3, 3) => self.first_order_dims(mo, blocks, t, out, (1, 3, 3)),
+            dims => self.first_order_dims(mo, blocks, t, out, dims),
+        }
+    }
+
+    /// [`first_order`](Self::first_order) with the dimensions passed in: literal for the
+    /// single-output shapes through the origin and with the intercept, so that the compiler
+    /// unrolls the quadratic forms (the same operations in the same order, so the same bits).
+    #[inline(always)]
+    fn first_order_dims(
+        &self,
+        mo: &mut Moments,
+        blocks: usize,
+        t: &[f64],
+        out: &mut WindowEstimate,
+        (p, d, k): (usize, usize, usize),
+    ) -> bool {
+        let lay = Layout { p, d, k };
+        let (nv, nh, pp) = ((d + p) * k, k * (k + 1) / 2, p * p);
+        debug_assert_eq!((nv, nh), (mo.nv, mo.nh));
         let stride = lay.stride();
         // Σ v vᵀ, its upper triangle row by row.
         let m2 = &mo.span[stride..stride + nv * (nv + 1) / 2];
@@ -177,7 +197,7 @@ impl InstrumentedWindows {
 /// The exact-identity refusal's moments from the span's `Σ v vᵀ` (`m2`, upper triangle of
 /// `nv`): `(Σ_j ‖r_j‖², Σ_j ‖Cw_j‖², the residual's magnitude)`, each `r_{j,ib}` the
 /// combination of `Cw_{j,ib}` (coefficient 1) and `N_{j,cb}` (coefficient −θ̂_ic).
-#[inline]
+#[inline(always)]
 fn residual_moments(
     m2: &[f64],
     nv: usize,

@@ -43,8 +43,6 @@ pub(super) struct Moments {
     pub(super) nh: usize,
     /// Slots per segment `E = ⌈cap / SEGMENTS⌉` (module docs).
     pub(super) segment: usize,
-    /// Position in `H_j` (`k × k`) of each distinct entry, the upper triangle row by row.
-    pub(super) hidx: Vec<usize>,
     /// `cap` slots of `len` values: prefixes before the head, suffixes from it.
     pub(super) acc: Vec<f64>,
     /// One record (scratch) and a span's record (scratch).
@@ -88,7 +86,6 @@ impl Moments {
             nv,
             nh,
             segment: cap.div_ceil(SEGMENTS).max(1),
-            hidx: (0..lay.k).flat_map(|a| (a..lay.k).map(move |b| a * lay.k + b)).collect(),
             acc: vec![0.0; cap * len],
             rec: vec![0.0; len],
             span: vec![0.0; len],
@@ -103,12 +100,15 @@ impl Moments {
         self.acc.fill(0.0);
     }
 
-    /// Block `blk`'s record into `out`.
+    /// Block `blk`'s record into `out`, for the layout `(p, d, k)` (literal at the callers
+    /// that dispatch on the common shapes, so that the compiler unrolls the products).
     #[inline(always)]
-    fn record(&self, lay: Layout, blk: &[f64], out: &mut [f64]) {
+    fn record(&self, (p, d, k): (usize, usize, usize), blk: &[f64], out: &mut [f64]) {
+        let lay = Layout { p, d, k };
         let stride = lay.stride();
-        let (nv, nh) = (self.nv, self.nh);
-        out[..stride].copy_from_slice(blk);
+        let (nv, nh) = ((d + p) * k, k * (k + 1) / 2);
+        debug_assert_eq!((nv, nh), (self.nv, self.nh));
+        out[..stride].copy_from_slice(&blk[..stride]);
         let v = &blk[..nv];
         let mut at = stride;
         for a in 0..nv {
@@ -117,15 +117,40 @@ impl Moments {
                 at += 1;
             }
         }
+        // The distinct entries of `H_j`, its upper triangle row by row.
         let h = &blk[lay.h()..stride];
+        let mut hd = [0.0f64; MAX_DISTINCT_H];
+        let mut c = 0;
+        for a in 0..k {
+            for b in a..k {
+                hd[c] = h[a * k + b];
+                c += 1;
+            }
+        }
         for a in 0..nh {
-            let ha = h[self.hidx[a]];
-            for b in a..nh {
-                out[at] = ha * h[self.hidx[b]];
+            let ha = hd[a];
+            for &hb in &hd[a..nh] {
+                out[at] = ha * hb;
                 at += 1;
             }
         }
     }
+}
+
+/// The most distinct entries of a block's `H` that [`Moments`] keeps: `k (k + 1)/2` for the
+/// largest `k` that [`MAX_MOMENT_ENTRIES`] admits (`(d + p) k <= 24` with `d + p >= 2`).
+const MAX_DISTINCT_H: usize = 12 * 13 / 2;
+
+/// `f(dims)` with the dimensions `(p, d, k)` literal for the single-output shapes through the
+/// origin and with the intercept (the same operations in the same order: the same bits).
+macro_rules! with_dims {
+    ($lay:expr, $f:expr) => {
+        match ($lay.p, $lay.d, $lay.k) {
+            (1, 2, 2) => $f((1, 2, 2)),
+            (1, 3, 3) => $f((1, 3, 3)),
+            dims => $f(dims),
+        }
+    };
 }
 
 impl InstrumentedWindows {
@@ -184,11 +209,24 @@ impl InstrumentedWindows {
     /// Slots `from..to` of the segment starting at `start` as prefixes from `start` (the
     /// slots `start..from` already hold theirs).
     fn prefix_run(&self, mo: &mut Moments, start: usize, from: usize, to: usize) {
-        let (lay, len) = (self.layout(), mo.len);
-        let stride = lay.stride();
+        with_dims!(self.layout(), |dims| self.prefix_dims(mo, start, from, to, dims));
+    }
+
+    /// [`prefix_run`](Self::prefix_run) with the dimensions passed in.
+    #[inline(always)]
+    fn prefix_dims(
+        &self,
+        mo: &mut Moments,
+        start: usize,
+        from: usize,
+        to: usize,
+        dims: (usize, usize, usize),
+    ) {
+        let len = mo.len;
+        let stride = Layout { p: dims.0, d: dims.1, k: dims.2 }.stride();
         let mut rec = std::mem::take(&mut mo.rec);
         for i in from..to {
-            mo.record(lay, &self.blocks[i * stride..(i + 1) * stride], &mut rec);
+            mo.record(dims, &self.blocks[i * stride..(i + 1) * stride], &mut rec);
             if i == start {
                 mo.acc[i * len..(i + 1) * len].copy_from_slice(&rec);
             } else {
@@ -205,11 +243,17 @@ impl InstrumentedWindows {
     /// Slots `from..to` (a segment's last slots, `to` its end) as suffixes to `to`, from the
     /// last slot down.
     fn suffix_run(&self, mo: &mut Moments, from: usize, to: usize) {
-        let (lay, len) = (self.layout(), mo.len);
-        let stride = lay.stride();
+        with_dims!(self.layout(), |dims| self.suffix_dims(mo, from, to, dims));
+    }
+
+    /// [`suffix_run`](Self::suffix_run) with the dimensions passed in.
+    #[inline(always)]
+    fn suffix_dims(&self, mo: &mut Moments, from: usize, to: usize, dims: (usize, usize, usize)) {
+        let len = mo.len;
+        let stride = Layout { p: dims.0, d: dims.1, k: dims.2 }.stride();
         let mut rec = std::mem::take(&mut mo.rec);
         for i in (from..to).rev() {
-            mo.record(lay, &self.blocks[i * stride..(i + 1) * stride], &mut rec);
+            mo.record(dims, &self.blocks[i * stride..(i + 1) * stride], &mut rec);
             if i + 1 == to {
                 mo.acc[i * len..(i + 1) * len].copy_from_slice(&rec);
             } else {

@@ -7,6 +7,7 @@ mod calibrated;
 mod calibrated_config;
 mod certificate;
 mod change;
+mod checkpoint;
 mod coefficient_covariance;
 mod compose;
 mod crate_graph;

@@ -444,12 +444,23 @@ impl Cases {
     }
 }
 
-/// A sealed `certify` checkpoint's payload as a JSON value (whatever its encoding), and the
-/// certifier's configuration it holds.
+/// A `certify` checkpoint's payload: the certifier (its block rings unpacked when the
+/// binary encoding packed them) and the run's summary.
+#[derive(serde::Deserialize)]
+struct CertifyCheckpoint {
+    certifier: streamcert_certificate::Certifier,
+    summary: serde_json::Value,
+}
+
+/// A sealed `certify` checkpoint's payload as a JSON value (whatever its encoding; every
+/// block ring whole), and the certifier's configuration it holds.
 fn payload(sealed: &[u8]) -> Result<(serde_json::Value, streamcert_certificate::CertifierConfig)> {
-    let state: serde_json::Value = streamcert_certificate::unseal::<()>(sealed, None)?.decode()?;
-    let config = serde_json::from_value(state["certifier"]["cfg"].clone())?;
-    Ok((state, config))
+    let cp: CertifyCheckpoint = streamcert_certificate::unseal::<()>(sealed, None)?.decode()?;
+    let state = serde_json::json!({
+        "certifier": serde_json::to_value(&cp.certifier)?,
+        "summary": cp.summary,
+    });
+    Ok((state, cp.certifier.config().clone()))
 }
 
 /// `state` sealed again for `config` in the binary encoding the command line writes, with a

@@ -6,6 +6,7 @@
 mod access;
 mod calibrated_step;
 pub(crate) mod checkpoint;
+mod pack;
 
 use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;
@@ -30,6 +31,8 @@ pub struct Certifier {
     skipped: u64,
     wass: Gate,
     calibrated_gate: Gate,
+    /// In a binary checkpoint, with its block rings packed (`pack.rs`).
+    #[serde(serialize_with = "pack::serialize", deserialize_with = "pack::deserialize")]
     calibrated: Option<CalibratedState>,
     nonlinear_gate: Gate,
     // The window length of the standing calibrated look (for its region).

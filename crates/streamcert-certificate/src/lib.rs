@@ -85,8 +85,8 @@ pub use calibrated::{
 };
 pub use certifier::Certifier;
 pub use certifier::checkpoint::{
-    CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_VERSION, Encoding, Sealed,
-    config_fingerprint, decode, encode, fnv1a64, seal, seal_value, unseal,
+    CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION,
+    Encoding, Sealed, config_fingerprint, decode, encode, fnv1a64, seal, seal_value, unseal,
 };
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;

@@ -8,11 +8,15 @@
 //! <payload>
 //! ```
 //!
-//! Version 5 ([`Encoding::Binary`], what [`Certifier::checkpoint`] writes) encodes the payload
+//! Version 6 ([`Encoding::Binary`], what [`Certifier::checkpoint`] writes) encodes the payload
 //! in CBOR (RFC 8949; each float in the shortest of 2, 4 or 8 bytes that holds it exactly),
-//! 0.43 of the JSON's size for a default calibrated certifier (BENCHMARKS.md); version 4 ([`Encoding::Json`], [`Certifier::checkpoint_json`])
-//! is JSON text, kept as a readable export and for the checkpoints written before version 5.
-//! [`Certifier::restore`] reads both.
+//! with the calibrated state's block rings packed: an entry that another entry determines bit
+//! for bit (the model guards' sums shared with the linear windows', the lower triangle of each
+//! `H`) is not written, and the rest are raw `f64` bytes (`pack.rs`). For a default
+//! calibrated certifier that is 0.23 of the JSON's size (BENCHMARKS.md). Version 5 is the
+//! same CBOR with every ring whole; version 4 ([`Encoding::Json`], [`Certifier::checkpoint_json`])
+//! is JSON text with every ring whole, kept as a readable export and for the checkpoints
+//! written before the binary ones. [`Certifier::restore`] reads all three.
 //!
 //! The checksum detects every change of one byte with certainty (each FNV-1a step is a
 //! bijection of the state for a fixed input byte) and any other corruption with probability
@@ -34,8 +38,10 @@ use crate::CertifyError;
 /// The first word of a checkpoint file.
 pub const CHECKPOINT_MAGIC: &str = "streamcert-checkpoint";
 /// The checkpoint format version this build writes ([`Encoding::Binary`]); it also reads
-/// [`CHECKPOINT_JSON_VERSION`].
-pub const CHECKPOINT_VERSION: u32 = 5;
+/// [`CHECKPOINT_UNPACKED_VERSION`] and [`CHECKPOINT_JSON_VERSION`].
+pub const CHECKPOINT_VERSION: u32 = 6;
+/// The binary encoding before the packed block rings (every ring written whole), still read.
+pub const CHECKPOINT_UNPACKED_VERSION: u32 = 5;
 /// The version of the JSON encoding ([`Encoding::Json`]): the export, and every checkpoint
 /// written before the binary one.
 pub const CHECKPOINT_JSON_VERSION: u32 = 4;
@@ -43,7 +49,8 @@ pub const CHECKPOINT_JSON_VERSION: u32 = 4;
 /// How a checkpoint's payload is encoded; its header's version says which.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Encoding {
-    /// CBOR (RFC 8949), version [`CHECKPOINT_VERSION`]: the compact default.
+    /// CBOR (RFC 8949) with the block rings packed, version [`CHECKPOINT_VERSION`] (version
+    /// [`CHECKPOINT_UNPACKED_VERSION`] read as well): the compact default.
     Binary,
     /// JSON text, version [`CHECKPOINT_JSON_VERSION`]: readable, about twice as large.
     Json,
@@ -60,6 +67,9 @@ impl Encoding {
     }
 
     fn of_version(v: &str) -> Option<Self> {
+        if v == CHECKPOINT_UNPACKED_VERSION.to_string() {
+            return Some(Self::Binary);
+        }
         [Self::Binary, Self::Json].into_iter().find(|e| v == e.version().to_string())
     }
 }
@@ -224,8 +234,8 @@ fn open(bytes: &[u8]) -> Result<(Sealed<'_>, u64), CertifyError> {
     }
     let Some(encoding) = Encoding::of_version(version) else {
         return bad(format!(
-            "checkpoint format version `{}`, this build reads versions {CHECKPOINT_VERSION} \
-             and {CHECKPOINT_JSON_VERSION}",
+            "checkpoint format version `{}`, this build reads versions {CHECKPOINT_VERSION}, \
+             {CHECKPOINT_UNPACKED_VERSION} and {CHECKPOINT_JSON_VERSION}",
             version.escape_debug()
         ));
     };
@@ -351,6 +361,6 @@ mod tests {
         // Another version, or none, is refused with what this build reads.
         let text = String::from_utf8(seal_value(&value, Encoding::Json, &"cfg").unwrap()).unwrap();
         let err = unseal(text.replacen(" 4 ", " 3 ", 1).as_bytes(), None::<&()>).unwrap_err();
-        assert!(err.to_string().contains("reads versions 5 and 4"), "{err}");
+        assert!(err.to_string().contains("reads versions 6, 5 and 4"), "{err}");
     }
 }

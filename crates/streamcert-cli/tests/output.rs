@@ -167,8 +167,9 @@ fn json_lines_read_back_to_the_library_evidence() {
 
 #[test]
 fn the_reader_thread_changes_nothing_but_speed() {
-    // A file input is read by a second thread in batches of 1024 rows; a live one on the
-    // certifying thread. Bad rows spread over several batches, under both policies.
+    // A file input is read and parsed by one thread and certified by another, in batches of
+    // 1024 rows; a live one on the writing thread. Bad rows spread over several batches,
+    // under both policies.
     let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("default configuration");
     let mut lines: Vec<String> = plant_csv(5000).lines().map(String::from).collect();
     for (k, bad) in [(700, "x"), (1024, "nan"), (1025, ""), (2049, "1e999"), (4000, "-inf")] {

@@ -12,6 +12,7 @@ pub use crate::output::{Flush, Format, Header};
 pub use summary::Summary;
 pub(crate) use summary::{reason_phrase, reason_words};
 
+mod batched;
 mod checkpoint;
 mod summary;
 use crate::output::{EvidenceWriter, region_columns};
@@ -53,48 +54,12 @@ pub struct Options {
     pub plot: Option<PathBuf>,
 }
 
-/// Rows a reader thread hands over at a time (when the input is not live).
-const BATCH: usize = 1024;
-
-/// Certified rows on their way from the certifying thread to the writing one, in input
-/// order. Batches travel back to be refilled, so their buffers are reused.
-struct Batch {
-    evidence: Vec<Evidence>,
-    /// The rows' region values, concatenated; row `i` ends at `region_ends[i]`.
-    regions: Vec<Interval>,
-    region_ends: Vec<usize>,
-    /// Checkpoints due: the sealed bytes, written once the first `n` rows are out.
-    checkpoints: Vec<(usize, Vec<u8>)>,
-    /// The error that stopped the run, after the rows before it.
-    error: Option<CliError>,
-}
-
-impl Batch {
-    fn new() -> Self {
-        Self {
-            evidence: Vec::with_capacity(BATCH),
-            regions: Vec::with_capacity(BATCH * 6),
-            region_ends: Vec::with_capacity(BATCH),
-            checkpoints: Vec::new(),
-            error: None,
-        }
-    }
-
-    fn clear(&mut self) {
-        self.evidence.clear();
-        self.regions.clear();
-        self.region_ends.clear();
-        self.checkpoints.clear();
-        self.error = None;
-    }
-}
-
 /// Certify a stream: one output row per accepted input row (flushed per row with
 /// [`Options::flush`]).
 ///
 /// A live input ([`Flush::EachRow`]) is read, certified and written row by row on the calling
-/// thread, so every row is answered as soon as its line is complete. Otherwise a second
-/// thread reads, parses and certifies the input while this one formats and writes, in
+/// thread, so every row is answered as soon as its line is complete. Otherwise one thread
+/// reads and parses the input, a second certifies it and this one formats and writes, in
 /// batches of 1024 rows; rows, errors, checkpoints and output are in input order either way,
 /// so the output is the same (tested).
 ///
@@ -137,7 +102,7 @@ pub fn run<R: Read + Send, W: Write>(
     if opts.flush == Flush::EachRow {
         run_live(step, &mut reader, &mut writer, channels.len())?;
     } else {
-        run_batched(step, &mut reader, &mut writer)?;
+        batched::run(step, &mut reader, &mut writer)?;
     }
     writer.flush().map_err(io)?;
     finish(&cert, &mut summary);
@@ -197,53 +162,6 @@ fn run_live<R: Read, W: Write>(
     Ok(())
 }
 
-/// A file: a second thread reads, parses and certifies in batches while this one formats
-/// and writes, in input order.
-fn run_batched<R: Read + Send, W: Write>(
-    mut step: Step<'_>,
-    reader: &mut SampleReader<R>,
-    writer: &mut EvidenceWriter<W>,
-) -> Result<(), CliError> {
-    let io = |e| CliError::io("writing output", e);
-    let opts = step.opts;
-    std::thread::scope(|scope| -> Result<(), CliError> {
-        let (full_tx, full_rx) = std::sync::mpsc::sync_channel::<Batch>(4);
-        let (empty_tx, empty_rx) = std::sync::mpsc::channel::<Batch>();
-        scope.spawn(move || {
-            let mut s = Sample::default();
-            loop {
-                let mut batch = empty_rx.try_recv().unwrap_or_else(|_| Batch::new());
-                batch.clear();
-                let done = step.fill(reader, &mut s, &mut batch);
-                // A closed channel means the writing side stopped (an error): stop too.
-                if full_tx.send(batch).is_err() || done {
-                    return;
-                }
-            }
-        });
-        for mut batch in full_rx {
-            let mut from = 0;
-            let mut checkpoints = batch.checkpoints.drain(..).peekable();
-            for (i, ev) in batch.evidence.iter().enumerate() {
-                let to = batch.region_ends[i];
-                writer.write_with_region(ev, &batch.regions[from..to]).map_err(io)?;
-                from = to;
-                while let Some((_, sealed)) = checkpoints.next_if(|(n, _)| *n == i + 1) {
-                    writer.flush().map_err(io)?;
-                    write_checkpoint(opts, &sealed)?;
-                }
-            }
-            drop(checkpoints);
-            if let Some(e) = batch.error.take() {
-                return Err(e);
-            }
-            // The certifying thread may have finished: a failed return is harmless.
-            let _ = empty_tx.send(batch);
-        }
-        Ok(())
-    })
-}
-
 /// The certifying side of one `certify` run: every accepted row updates it.
 struct Step<'a> {
     cert: &'a mut Certifier,
@@ -255,38 +173,6 @@ struct Step<'a> {
 }
 
 impl Step<'_> {
-    /// Read and certify up to [`BATCH`] rows into `batch`; `true` when the run ends here (the
-    /// end of the input or an error, which is then in `batch.error`).
-    fn fill<R: Read>(
-        &mut self,
-        reader: &mut SampleReader<R>,
-        s: &mut Sample,
-        batch: &mut Batch,
-    ) -> bool {
-        for _ in 0..BATCH {
-            let Some(next) = reader.next_into(s) else { return true };
-            let ev = match self.row(next, s, &mut batch.regions) {
-                Ok(Some(ev)) => ev,
-                Ok(None) => continue,
-                Err(e) => {
-                    batch.error = Some(e);
-                    return true;
-                }
-            };
-            batch.evidence.push(ev);
-            batch.region_ends.push(batch.regions.len());
-            match self.due_checkpoint() {
-                Ok(None) => {}
-                Ok(Some(sealed)) => batch.checkpoints.push((batch.evidence.len(), sealed)),
-                Err(e) => {
-                    batch.error = Some(e);
-                    return true;
-                }
-            }
-        }
-        false
-    }
-
     /// One input row: `next` is the outcome of reading it into `s`. `Some` is a row to write,
     /// its region values appended to `region`; `None` a row passed over (skipped or replayed).
     fn row(

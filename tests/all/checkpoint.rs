@@ -11,9 +11,9 @@ use crate::support::{json_payload, resume_matches, run};
 
 /// The default calibrated certificate (both model guards, the change guard, the anchored
 /// window) past the wrap of its longest window's ring (2400 columns): the packed checkpoint
-/// resumes bit for bit, restores the state the JSON export does, is under 0.6 of the
-/// unpacked binary's size (0.52 measured), and the unpacked binary still restores under its
-/// own version.
+/// resumes bit for bit (every row, and the whole state at the end, scratch included),
+/// restores the state the JSON export does, is under 0.6 of the unpacked binary's size (0.52
+/// measured), and the unpacked binary still restores under its own version.
 #[test]
 fn packed_rings_resume_bit_for_bit_and_the_unpacked_version_still_reads() {
     let traj = run(&LinearScenario { steps: 6000, ..short_window_plant() }, 11);
@@ -24,7 +24,9 @@ fn packed_rings_resume_bit_for_bit_and_the_unpacked_version_still_reads() {
         .collect();
     assert!(all.iter().any(|e| e.calibrated.open), "the calibrated gate opened");
     for split in [2222, 4567] {
-        let (text, _) = resume_matches(&cfg, &traj, &all, split);
+        let (text, second) = resume_matches(&cfg, &traj, &all, split);
+        // The whole state, scratch included, as the uninterrupted run's.
+        assert_eq!(second, whole, "the state at the end after a restore at {split}");
         if split < 2400 {
             continue;
         }
@@ -45,6 +47,8 @@ fn packed_rings_resume_bit_for_bit_and_the_unpacked_version_still_reads() {
         ]
         .concat();
         assert_eq!(unseal::<()>(&v5, None).expect("opens").encoding, Encoding::Binary);
+        // Restored against restored: a live state also holds its latest look's scratch and
+        // verdict, which a restore recomputes at the next step.
         let restored = Certifier::restore(&packed).expect("restores");
         assert_eq!(Certifier::restore(&v5).expect("version 5 restores"), restored);
         let (packed_len, unpacked_len) = (packed.len(), sealed.len());

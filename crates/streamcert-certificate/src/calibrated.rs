@@ -460,6 +460,9 @@ impl CalibratedState {
         // step allocates.
         let pp = self.sym.len();
         self.est.batched.score_cov.resize(pp * pp, 0.0);
+        for guard in &mut self.model {
+            guard.restore_scratch();
+        }
         if let Some(n) = &mut self.nonlinear {
             n.restore_scratch();
         }

@@ -163,6 +163,13 @@ impl ModelGuard {
         self.groups.curvature
     }
 
+    /// Size the scratch a checkpoint does not carry (its fit's batched covariance), as a
+    /// fresh guard's, after a restore.
+    pub(crate) fn restore_scratch(&mut self) {
+        let pp = self.p * self.p;
+        self.fit.est.batched.score_cov.resize(pp * pp, 0.0);
+    }
+
     /// Forget every column and test.
     pub(crate) fn reset(&mut self) {
         self.fit.reset();

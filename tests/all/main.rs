@@ -16,6 +16,7 @@ mod identification;
 mod network;
 mod network_coupling;
 mod nonlinear;
+mod nonlinear_bound;
 mod nonlinear_region;
 mod order;
 mod regression;

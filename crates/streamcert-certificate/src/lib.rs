@@ -93,7 +93,9 @@ pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use fixed::{Sig, SigRange};
 pub use gate::{Gate, GateState};
-pub use nonlinear::{Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest};
+pub use nonlinear::{
+    Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest, RegionBound,
+};
 pub use radius::{certificate_surface, certificate_value};
 pub use row::{
     ColumnKind, EVIDENCE_COLUMN_KINDS, EVIDENCE_COLUMNS, EvidenceRow, NUMBER_COLUMNS, ReasonText,

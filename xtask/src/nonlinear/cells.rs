@@ -138,6 +138,27 @@ pub(super) fn cells() -> Vec<Cell> {
         },
         -0.75,
     ));
+    // A drift the default library holds exactly, `0.5 x + 0.15 x²`, whose local rate
+    // `−(0.5 + 0.3 x + K)` is smallest at the region's upper end: the pointwise bound's case,
+    // where the point of the smallest rate is an end of the region the data chose. Under
+    // `K = −0.85` the rate crosses the margin at x = 1, where the regions' upper quantile
+    // falls in about a third of the runs; under `K = −0.9` at x = 1.17, above most of them.
+    for (name, k) in [
+        (
+            "quadratic drift 0.5 x + 0.15 x², σ = 0.02, K = −0.85: rate 0.35 − 0.3 x, below the margin for x > 1, K_e = −1.5",
+            -0.85,
+        ),
+        (
+            "quadratic drift 0.5 x + 0.15 x², σ = 0.02, K = −0.9: rate 0.4 − 0.3 x, below the margin for x > 1.17, K_e = −1.5",
+            -0.9,
+        ),
+    ] {
+        cells.push(Cell::validity(
+            name,
+            ScalarScenario { drift: ScalarDrift::Polynomial(vec![0.0, 0.5, 0.15]), ..cubic(0.02) },
+            k,
+        ));
+    }
     cells
 }
 

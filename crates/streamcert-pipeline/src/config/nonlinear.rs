@@ -2,7 +2,7 @@
 //! nonlinear certificate.
 
 use serde::Deserialize;
-use streamcert_certificate::{FeatureSet, NonlinearConfig};
+use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound};
 
 /// The feature library of `[nonlinear]`: `"polynomial"` (with `degree`) or a list of named
 /// features starting with `"y"`.
@@ -50,6 +50,8 @@ pub(super) struct NonlinearSection {
     check_terms: Option<usize>,
     #[serde(default)]
     test_risk: Option<f64>,
+    #[serde(default)]
+    bound: RegionBound,
 }
 
 impl NonlinearSection {
@@ -93,6 +95,7 @@ impl NonlinearSection {
             test_risk: self.test_risk,
             check_terms: self.check_terms.unwrap_or(d.check_terms),
             region_trim: self.region_trim()?,
+            bound: self.bound,
         }))
     }
 }

@@ -1,7 +1,7 @@
 //! The configuration file: defaults, refusals, and what each section selects.
 
 use super::*;
-use streamcert_certificate::{FeatureSet, NonlinearConfig};
+use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound};
 
 /// The printed configuration with G5 node b's required keys set.
 fn base() -> String {
@@ -97,6 +97,11 @@ fn nonlinear_section_selects_the_nonlinear_certificate() {
     assert_eq!(parse(&hull, "x").unwrap().certifier.nonlinear.unwrap().region_trim, 0.0);
     let both_rules = hull.replace("# region_trim = 0.025 ", "region_trim = 0.05 ");
     assert!(parse(&both_rules, "x").unwrap_err().to_string().contains("region_trim"));
+    let sim = both.replace("# bound = \"pointwise\" ", "bound = \"simultaneous\" ");
+    let bound = |t: &str| parse(t, "x").unwrap().certifier.nonlinear.unwrap().bound;
+    assert_eq!((bound(&both), bound(&sim)), (RegionBound::Pointwise, RegionBound::Simultaneous));
+    let typo = both.replace("# bound = \"pointwise\" ", "bound = \"both\" ");
+    assert!(parse(&typo, "x").unwrap_err().to_string().contains("bound"));
     let wide = both.replace("# region_trim = 0.025 ", "region_trim = 0.3 ");
     assert!(parse(&wide, "x").unwrap_err().to_string().contains("region_trim"));
     let off = both.replace("# check_terms = 2 ", "check_terms = 0 ");

@@ -41,6 +41,13 @@ fn the_default_bound_is_pointwise() {
     assert_eq!(NonlinearConfig::default().bound, RegionBound::Pointwise);
     assert_eq!(RegionBound::Pointwise.directions(3), 1);
     assert_eq!(RegionBound::Simultaneous.directions(3), 3);
+    // The documented ratio of the radii at D = 2: 0.75 to 0.87 for ν >= 100 and risks 10⁻² to 10⁻⁴.
+    for nu in [100.0, 1e6] {
+        let ratio = |risk| t_quantile(nu, risk) / simultaneous_multiplier(2, nu, risk);
+        let (wide, narrow) = (ratio(1e-2), ratio(1e-4));
+        assert!((0.75..0.77).contains(&wide), "ν = {nu}: {wide}");
+        assert!((0.85..0.87).contains(&narrow), "ν = {nu}: {narrow}");
+    }
 }
 
 #[test]

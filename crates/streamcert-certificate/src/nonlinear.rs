@@ -54,10 +54,10 @@
 //! measures it at a quadratic drift whose smallest rate is at the region's edge). With
 //! [`RegionBound::Simultaneous`], as `a(y)` spans a space of dimension `D` when `y` varies,
 //! by Cauchy–Schwarz the Hotelling bound holds *for every y at once*: so `β_nl <= min_y
-//! β*(y)` over every region, with no appeal to the region settling, at about 1.15 to 1.3
-//! times the pointwise radius for `D = 2` (risks `10⁻⁴` to `10⁻²`). The minimum is bounded,
-//! not sampled: the region is cut into `cells` intervals and on each `β̂(y)` is bounded below
-//! and `s(y)²` above by their Taylor expansions at the cell's midpoint
+//! β*(y)` over every region, with no appeal to the region settling, at about 1.15 to 1.33
+//! times the pointwise radius for `D = 2` (`ν >= 100`, risks `10⁻⁴` to `10⁻²`). The minimum
+//! is bounded, not sampled: the region is cut into `cells` intervals and on each `β̂(y)` is
+//! bounded below and `s(y)²` above by their Taylor expansions at the cell's midpoint
 //! ([`polynomial_bounds`]); for a named library every slope `φ_k'` is bounded on the cell
 //! ([`Feature::slope_bounds`]), `β̂` by interval arithmetic and `s²`, convex in `a`, at the
 //! corners of the box of slopes. The certificate is the smallest cell bound (so it holds

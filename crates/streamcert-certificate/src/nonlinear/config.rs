@@ -85,9 +85,9 @@ pub enum RegionBound {
     /// [`NonlinearConfig::region_trim`]) `y*` is the interior point where `β*` is smallest (a
     /// fixed state) or an end of the region, which converges to a fixed quantile as the
     /// window grows, so the bound holds as the window's other approximations do (the batch
-    /// means, the Student-t quantile). Its radius is 0.77 to 0.87 of the simultaneous one at
-    /// `D = 2` (risks `10⁻²` to `10⁻⁴`). Measured with `cargo xtask nonlinear --runs 500`
-    /// (NONLINEAR.md): no false opening in 500 runs of any near-margin cell, two of them a
+    /// means, the Student-t quantile). Its radius is 0.75 to 0.87 of the simultaneous one at
+    /// `D = 2` (`ν >= 100`, risks `10⁻²` to `10⁻⁴`; a test). Measured with
+    /// `cargo xtask nonlinear --runs 500` (NONLINEAR.md): no false opening in 500 runs of any near-margin cell, two of them a
     /// quadratic drift whose smallest rate is at the region's upper end and crosses the margin
     /// where that end falls (opened in 18 and 48 % of the runs, never above the truth), and
     /// G5's subsystem B certified in 26 % of 40 s runs against 4 %. A library that misses the

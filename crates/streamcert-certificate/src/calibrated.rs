@@ -234,14 +234,16 @@ mod check;
 mod config;
 mod coupling;
 mod look;
+mod options;
 mod update;
 mod validate;
 mod window_look;
 
 pub(crate) use crate::look::standing;
-pub use config::{Calibration, GuardVariance, RiskSplit};
+pub use config::Calibration;
 pub use coupling::{CouplingBlock, CouplingBound, CouplingConfig};
 use coupling::{CouplingLook, CouplingState};
+pub use options::{GuardVariance, RiskSplit};
 pub use window_look::WindowLook;
 
 pub use crate::look::quantile::{

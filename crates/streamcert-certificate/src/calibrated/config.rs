@@ -3,6 +3,8 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::options::{GuardVariance, RiskSplit};
+
 /// Settings of the calibrated certificate. Only `delta` is required; the rest have documented
 /// defaults.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -224,75 +226,6 @@ pub struct Calibration {
     /// decreasing tail ([`anchored_look_risk`](crate::anchored_look_risk)).
     #[serde(default = "default_anchored_looks")]
     pub anchored_looks: usize,
-}
-
-/// The covariance behind the model guards' Wald tests
-/// ([`Calibration::hidden_dynamics`], [`Calibration::nonlinearity`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GuardVariance {
-    /// Each block's first-order influence `r_j Q A⁻¹` with the factor `B/(B − d)` for the
-    /// fitted directions
-    /// ([`estimate_coefficients_first_order`](streamcert_regression::InstrumentedWindows::estimate_coefficients_first_order)):
-    /// one pass over the blocks without a factorisation per block, about a fifth of the
-    /// jackknife's operations for the nonlinearity guard's five regressors (the default
-    /// step's model guards about 0.3 µs against 0.8 µs, BENCHMARKS.md). It differs from the
-    /// jackknife where a few blocks carry a direction (no leverage factor there, so the
-    /// test rejects more often), and by `B/(B − d)` against about `1 + 2d/B` elsewhere.
-    /// Closing never costs validity, so this moves the guards' false-closing rate and their
-    /// protection, not the certificate's risk: VALIDITY.md, rerun with it, has every
-    /// near-margin cell within 2δ, the hidden-state cells closed in 95 % of samples as
-    /// before, and the `guard closed` column on linear loops up by 0.0 to 0.2 points.
-    #[default]
-    FirstOrder,
-    /// Each block's delete-one-block change, as the certificate's own variance
-    /// ([`estimate_coefficients`](streamcert_regression::InstrumentedWindows::estimate_coefficients)).
-    Jackknife,
-}
-
-impl GuardVariance {
-    /// Whether this is the default, [`GuardVariance::FirstOrder`].
-    #[must_use]
-    pub fn is_first_order(&self) -> bool {
-        *self == Self::FirstOrder
-    }
-}
-
-/// How the calibrated certificate splits its risk `δ` across its `W` windows `M_w`; window
-/// `w`'s `k`-th look then spends `δ · share_w / (k (k + 1))`
-/// ([`look_risk`](crate::look_risk)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RiskSplit {
-    /// `share_w = 1 / W` (the default): each doubling of the window is one more time scale
-    /// the loop may need, and none is favoured. The shortest window, which certifies a fast
-    /// loop first, keeps its share when longer windows are added.
-    #[default]
-    Equal,
-    /// `share_w = M_w / Σ_v M_v`: the longer windows, which look less often, get more (the
-    /// split before the default changed to [`Equal`](Self::Equal); with five windows the
-    /// shortest gets `1/31` of `δ`, and a fast loop waits a look longer).
-    ByLength,
-}
-
-impl RiskSplit {
-    /// Whether this is the default split.
-    #[must_use]
-    pub fn is_equal(&self) -> bool {
-        *self == Self::Equal
-    }
-
-    /// The shares `share_w` of the windows `lengths` (columns), summing to 1.
-    #[must_use]
-    pub fn shares(self, lengths: &[usize]) -> Vec<f64> {
-        match self {
-            Self::Equal => vec![1.0 / lengths.len().max(1) as f64; lengths.len()],
-            Self::ByLength => {
-                let total: f64 = lengths.iter().map(|&w| w as f64).sum();
-                lengths.iter().map(|&w| w as f64 / total).collect()
-            }
-        }
-    }
 }
 
 fn default_true() -> bool {

@@ -16,7 +16,8 @@
 //! plus the nonlinear certificate of degree 3), `baseline` (`Certifier::push`, the bench's
 //! `through_origin_gaussian_and_calibrated_unguarded`: the calibrated step before the
 //! intercept, the guards, the fifth window and the anchored window, the baseline of the
-//! default step's target), all for `p = m = 1`; `wide` (`Certifier::push`,
+//! default step's target), `unguarded`, `without_change`, `without_model` (the default with
+//! no guard, without its change guard, without its two model guards), all for `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
 
@@ -30,23 +31,41 @@ use streamcert::certificate::{
 };
 use streamcert::regression::{Model, RegressionConfig, SlidingRegression};
 
-/// The calibrated certifiers: Gaussian + calibrated (δ = 0.01, the default windows, as the
-/// bench's `gaussian_and_calibrated`), the baseline (through the origin, no guard, four windows,
-/// the risk split by length) and the default with the nonlinear certificate of degree 3.
-fn calibrated(reg_cfg: RegressionConfig) -> Result<[Certifier; 3], Box<dyn std::error::Error>> {
-    let mut cal_cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
-    cal_cfg.calibration = Some(Calibration::new(0.01));
-    let mut was_cfg = cal_cfg.clone();
-    was_cfg.regression.model = Model::ThroughOrigin;
-    was_cfg.calibration = Some(Calibration {
-        windows: Some(4),
-        risk_split: RiskSplit::ByLength,
-        anchored_share: 0.0,
-        ..Calibration::new(0.01).unguarded()
-    });
-    let mut nonlinear_cfg = cal_cfg.clone();
-    nonlinear_cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
-    Ok([Certifier::new(cal_cfg)?, Certifier::new(was_cfg)?, Certifier::new(nonlinear_cfg)?])
+/// The calibrated certifier of `mode`, `None` for a mode without one: `calibrated`
+/// (Gaussian + calibrated, δ = 0.01, the default windows, as the bench's
+/// `gaussian_and_calibrated`), `baseline` (through the origin, no guard, four windows, the
+/// risk split by length), `nonlinear` (the default with the nonlinear certificate of degree
+/// 3), and the default with a part of it off, for the share of each part (BENCHMARKS.md):
+/// `unguarded` (no guard), `without_change` (no change guard), `without_model` (no model
+/// guard).
+fn calibrated(
+    reg_cfg: RegressionConfig,
+    mode: &str,
+) -> Result<Option<Certifier>, Box<dyn std::error::Error>> {
+    let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
+    let default = Calibration::new(0.01);
+    let cal = match mode {
+        "calibrated" => default,
+        "baseline" => {
+            cfg.regression.model = Model::ThroughOrigin;
+            Calibration {
+                windows: Some(4),
+                risk_split: RiskSplit::ByLength,
+                anchored_share: 0.0,
+                ..default.unguarded()
+            }
+        }
+        "nonlinear" => {
+            cfg.nonlinear = Some(NonlinearConfig::with_degree(3));
+            default
+        }
+        "unguarded" => default.unguarded(),
+        "without_change" => Calibration { plant_change: false, ..default },
+        "without_model" => Calibration { hidden_dynamics: false, nonlinearity: false, ..default },
+        _ => return Ok(None),
+    };
+    cfg.calibration = Some(cal);
+    Ok(Some(Certifier::new(cfg)?))
 }
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
@@ -67,7 +86,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cfg.ambiguity = Some(AmbiguityConfig::paper(150));
     let mut cert = Certifier::new(cfg)?;
-    let [mut cal, mut baseline, mut nonlinear] = calibrated(reg_cfg)?;
     let mut gauss = Certifier::new(CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10))?;
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
@@ -85,6 +103,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         (0..mw * pw).map(|i| if i % (pw + 1) == 0 { -1.0 } else { 0.0 }).collect();
     let wide_cfg = RegressionConfig::new(pw, mw, 150, 5, 1e-4);
     let mut wide = Certifier::new(CertifierConfig::new(wide_cfg, wide_gain, 0.2, 0.05, 10))?;
+    let mut cal = calibrated(reg_cfg, &mode)?;
     let mut t = 0.0;
     for i in 0..samples {
         let k = i % len;
@@ -110,17 +129,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let ev = gauss.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.gaussian.open));
             }
-            "calibrated" => {
-                let ev = cal.push(black_box(t), y, u)?;
-                black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
-            }
-            "baseline" => {
-                let ev = baseline.push(black_box(t), y, u)?;
-                black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
-            }
             "nonlinear" => {
-                let ev = nonlinear.push(black_box(t), y, u)?;
+                let Some(cert) = cal.as_mut() else { unreachable!("built for this mode") };
+                let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
+            }
+            "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model" => {
+                let Some(cert) = cal.as_mut() else { unreachable!("built for these modes") };
+                let ev = cert.push(black_box(t), y, u)?;
+                black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));
             }
             "wide" => {
                 let s = &wide_data[(pw + mw) * k..(pw + mw) * (k + 1)];

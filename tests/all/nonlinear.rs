@@ -7,7 +7,7 @@
 use proptest::prelude::*;
 use streamcert::certificate::{
     Calibration, CertificateKind, Certifier, CertifierConfig, CertifyError, FeatureSet, Interval,
-    NonlinearConfig, NotCertified,
+    NonlinearConfig, NotCertified, RiskSplit,
 };
 use streamcert::dynamics::{ScalarDrift, ScalarScenario, Trajectory};
 use streamcert::experiments::{Experiment, G5Dataset};
@@ -142,18 +142,23 @@ fn a_named_library_that_holds_the_drift_certifies_the_tanh_loop_and_stays_below_
         ..config(k, 0.05, 50, 3)
     };
     // The loop (a non-contracting band) and a contracting one (K = −2, rate >= 0.8).
-    let mut opened = 0;
+    // The promise is per run: a value above the smallest true rate over its region in at most
+    // δ = 0.01 of runs, so two such runs of these twelve would happen with probability below
+    // 0.7 % if it holds (with the default split one seed of the band loop has one, 0.009
+    // above; with equal shares none of these seeds does).
+    let (mut opened, mut above) = (0, 0);
     for (k, seeds) in [(-1.1, 0..6), (-2.0, 0..6)] {
         let s = ScalarScenario::new(ScalarDrift::NegXTanhX, k);
         for seed in seeds {
             let (_, out, cert) = trace(&s, &named(k), seed);
-            assert!(out.iter().all(|(v, truth)| v <= truth), "K = {k}, seed {seed}");
+            above += usize::from(out.iter().any(|(v, truth)| v > truth));
             if k == -2.0 {
                 opened +=
                     usize::from(cert.gate(CertificateKind::Nonlinear).first_opened_at.is_some());
             }
         }
     }
+    assert!(above <= 1, "{above} of 12 runs had a value above the truth");
     assert!(opened >= 5, "the contracting tanh loop opened in {opened} of 6 runs");
 }
 
@@ -255,10 +260,14 @@ fn the_configuration_says_what_is_valid() {
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(12))]
 
-    /// On linear data the nonlinear certificate of degree 1 is the linear calibrated one.
+    /// On linear data the nonlinear certificate of degree 1 is the linear calibrated one, when
+    /// both split `δ` across the windows by the same rule.
     #[test]
     fn degree_one_equals_the_linear_calibrated_certificate(
         a in -1.0f64..0.8, k in -2.5f64..-0.5, seed in 0u64..1000, window in 25usize..80,
+        split in prop_oneof![
+            Just(RiskSplit::Equal), Just(RiskSplit::ByLength), Just(RiskSplit::ByLengthSquared)
+        ],
     ) {
         let s = ScalarScenario {
             drift: ScalarDrift::Polynomial(vec![0.0, a]),
@@ -271,12 +280,17 @@ proptest! {
         let traj = s.run(seed).expect("valid");
         // The certificate's arithmetic, without the lack-of-fit check (which only closes gates).
         let mut cfg = config(k, 0.05, window, 1);
-        cfg.nonlinear = Some(NonlinearConfig { check_terms: 0, ..NonlinearConfig::with_degree(1) });
+        cfg.nonlinear = Some(NonlinearConfig {
+            check_terms: 0,
+            risk_split: split,
+            ..NonlinearConfig::with_degree(1)
+        });
         // Guards, the batched second covariance (`auto_batches`) and the anchored window (whose
         // share the sliding windows' looks give up) are the linear one's only.
         cfg.calibration = cfg.calibration.map(|c| Calibration {
             auto_batches: 0,
             anchored_share: 0.0,
+            risk_split: split,
             ..Calibration::unguarded(c)
         });
         let mut cert = Certifier::new(cfg).expect("valid");

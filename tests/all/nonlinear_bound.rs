@@ -1,11 +1,12 @@
 //! The nonlinear certificate's multiplier ([`RegionBound`]): the pointwise bound against the
 //! simultaneous one on the same estimates, and the pointwise bound at its boundary, a
 //! quadratic drift whose smallest rate over the region lies at the region's data-chosen end
-//! and crosses the margin about where that end falls.
+//! and crosses the margin about where that end falls; and the certificate's own split of `δ`
+//! across the windows.
 
 use streamcert::certificate::nonlinear::simultaneous_multiplier;
 use streamcert::certificate::{
-    Certifier, CertifierConfig, NonlinearConfig, RegionBound, t_quantile,
+    Certifier, CertifierConfig, NonlinearConfig, RegionBound, RiskSplit, look_risk, t_quantile,
 };
 use streamcert::dynamics::{Process, ScalarDrift, ScalarScenario};
 
@@ -147,4 +148,55 @@ fn the_pointwise_bound_holds_where_the_smallest_rate_is_at_the_regions_data_chos
     let (opened, _, falsely) = quadratic_runs(-0.9);
     assert!(opened >= 6, "opened in {opened} of 24 runs");
     assert_eq!(falsely, 0);
+}
+
+/// The nonlinear certificate's own split of `δ` ([`NonlinearConfig::risk_split`]): by
+/// default `M_w² / Σ M_v²`, the shares summing to 1; every look's multiplier is `t_ν` at
+/// `δ · share_w / (k (k + 1))` of its split, whatever the linear certificate's split is; and
+/// moving risk to the longest window raises its certificate and lowers the shortest's.
+#[test]
+fn the_nonlinear_looks_spend_their_own_split_of_delta() {
+    assert_eq!(NonlinearConfig::default().risk_split, RiskSplit::ByLengthSquared);
+    let lengths = [150, 300, 600, 1200, 2400];
+    let shares = RiskSplit::ByLengthSquared.shares(&lengths);
+    assert!((shares.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+    assert!((shares[4] - 256.0 / 341.0).abs() < 1e-15 && (shares[0] - 1.0 / 341.0).abs() < 1e-15);
+    assert_eq!(RiskSplit::ByLength.shares(&lengths)[4], 2400.0 / 4650.0);
+    assert_eq!(RiskSplit::Equal.shares(&lengths), vec![0.2; 5]);
+
+    let traj = cubic_40x().run(4).expect("valid scenario");
+    let base = config(-1.0, 0.05, 50, 2);
+    let cal = base.calibration.expect("calibrated");
+    let lengths = cal.window_lengths(50, base.regression.horizon);
+    let run = |split: RiskSplit| {
+        let mut cfg = base.clone();
+        // The linear certificate's split stays its default: the nonlinear looks do not read it.
+        cfg.nonlinear = Some(NonlinearConfig { risk_split: split, ..NonlinearConfig::default() });
+        let mut cert = Certifier::new(cfg).expect("valid");
+        let shares = split.shares(&lengths);
+        let mut last = vec![None; lengths.len()];
+        let mut checked = 0;
+        for i in 0..traj.t.len() {
+            cert.push(traj.t[i], &traj.y[i..=i], &traj.u[i..=i]).expect("finite");
+            for (w, look) in cert.nonlinear_looks().iter().enumerate() {
+                let Some(look) = look else { continue };
+                assert_eq!(look.window, lengths[w]);
+                let risk = look_risk(cal.delta, shares[w], look.look);
+                let want = t_quantile(look.nu, risk);
+                assert!((look.multiplier - want).abs() <= 1e-12 * want, "{split:?}, window {w}");
+                last[w] = Some((look.look, look.nu, look.certificate));
+                checked += 1;
+            }
+        }
+        assert!(checked > 1000, "{split:?}: {checked} looks checked");
+        last
+    };
+    let (equal, squared) = (run(RiskSplit::Equal), run(RiskSplit::ByLengthSquared));
+    let longest = lengths.len() - 1;
+    for (w, cmp) in [(0, std::cmp::Ordering::Greater), (longest, std::cmp::Ordering::Less)] {
+        let (Some(e), Some(s)) = (equal[w], squared[w]) else { panic!("window {w} looked") };
+        // The same estimate at the same look (the split moves only the multiplier).
+        assert_eq!((e.0, e.1.to_bits()), (s.0, s.1.to_bits()));
+        assert_eq!(e.2.partial_cmp(&s.2), Some(cmp), "window {w}: {} against {}", e.2, s.2);
+    }
 }

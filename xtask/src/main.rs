@@ -109,6 +109,10 @@ enum Command {
         /// its seeds, so its rows equal the full study's.
         #[arg(long)]
         only: Option<String>,
+        /// The nonlinear certificates' split of δ over the windows: `equal`, `by_length` or
+        /// `by_length_squared` (default: the certificate's own, `by_length_squared`).
+        #[arg(long, value_parser = parse_split)]
+        split: Option<streamcert_certificate::RiskSplit>,
         /// Output folder.
         #[arg(long, default_value = "target/nonlinear")]
         out: PathBuf,
@@ -281,7 +285,9 @@ fn main() -> Result<()> {
         Command::Validity { runs, out, only_change: None, .. } => validity::run(runs, &out),
         Command::Validity { out, only_change: Some(runs), .. } => validity::change_only(runs, &out),
         Command::Real { from, out } => real::run(from.as_deref(), &out),
-        Command::Nonlinear { runs, only, out } => nonlinear::run(runs, only.as_deref(), &out),
+        Command::Nonlinear { runs, only, split, out } => {
+            nonlinear::run(runs, only.as_deref(), split, &out)
+        }
         Command::Network { subsystems, runs, coupling_runs, threads, out } => {
             network::run(subsystems, runs, coupling_runs, threads, &out)
         }
@@ -289,4 +295,10 @@ fn main() -> Result<()> {
         Command::Soak { subsystems, steps, out } => soak::run(subsystems, steps, &out),
         Command::Reliability { out } => reliability::run_all(&out),
     }
+}
+
+/// A risk split by its configuration name (`equal`, `by_length`, `by_length_squared`).
+fn parse_split(name: &str) -> Result<streamcert_certificate::RiskSplit, String> {
+    serde_json::from_value(serde_json::Value::String(name.into()))
+        .map_err(|_| format!("`{name}`: use equal, by_length or by_length_squared"))
 }

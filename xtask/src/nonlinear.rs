@@ -10,7 +10,7 @@ use anyhow::Result;
 use streamcert_certificate::nonlinear::simultaneous_multiplier;
 use streamcert_certificate::{
     Calibration, CertificateKind, Certifier, CertifierConfig, FeatureSet, Interval,
-    NonlinearConfig, RegionBound,
+    NonlinearConfig, RegionBound, RiskSplit,
 };
 use streamcert_regression::{InputIntegral, RegressionConfig};
 
@@ -81,8 +81,14 @@ const ROWS: [(CertificateKind, Lib, &str); 8] = [
     ),
 ];
 
-/// The study's certifier for `lib`.
-fn config(k: f64, lib: Lib, window: usize, windows: Option<usize>) -> CertifierConfig {
+/// The study's certifier for `lib`; `split`: the nonlinear certificates' split of `δ` over
+/// the windows (`None`: their default).
+fn config(
+    k: f64,
+    lib: Lib,
+    (window, windows): (usize, Option<usize>),
+    split: Option<RiskSplit>,
+) -> CertifierConfig {
     let reg = RegressionConfig {
         input_integral: InputIntegral::ZeroOrderHold,
         ..RegressionConfig::new(1, 1, window, H, 1e-4)
@@ -101,13 +107,16 @@ fn config(k: f64, lib: Lib, window: usize, windows: Option<usize>) -> CertifierC
             Lib::Default => None,
             Lib::Tanh(bound) => Some(NonlinearConfig {
                 bound,
+                risk_split: split.unwrap_or(NonlinearConfig::default().risk_split),
                 ..NonlinearConfig::with_features(
                     FeatureSet::from_names(&["y", "y*tanh(y)"]).expect("a valid library"),
                 )
             }),
-            Lib::Poly(degree, bound) => {
-                Some(NonlinearConfig { bound, ..NonlinearConfig::with_degree(degree) })
-            }
+            Lib::Poly(degree, bound) => Some(NonlinearConfig {
+                bound,
+                risk_split: split.unwrap_or(NonlinearConfig::default().risk_split),
+                ..NonlinearConfig::with_degree(degree)
+            }),
         },
         ..CertifierConfig::new(reg, vec![k], PAPER_C, MARGIN, 1)
     }
@@ -191,12 +200,17 @@ struct Outcome {
     one_look: Option<f64>,
 }
 
-fn one_run(cell: &Cell, seed: u64, table: &RateTable) -> Result<[Outcome; ROWS.len()]> {
+fn one_run(
+    cell: &Cell,
+    seed: u64,
+    table: &RateTable,
+    split: Option<RiskSplit>,
+) -> Result<[Outcome; ROWS.len()]> {
     let (ts, ys, us) = cell.data(seed)?;
     let rate = |x: f64| cell.rate(x);
     let mut certs = Vec::with_capacity(CERTIFIERS.len());
     for lib in CERTIFIERS {
-        certs.push(Certifier::new(config(cell.k, lib, cell.window, cell.windows))?);
+        certs.push(Certifier::new(config(cell.k, lib, (cell.window, cell.windows), split))?);
     }
     let slot = |lib: Lib| CERTIFIERS.iter().position(|&l| l == lib).expect("a certifier per row");
     let mut out = [Outcome::default(); ROWS.len()];
@@ -322,7 +336,14 @@ fn row(cell: &Cell, kind: CertificateKind, label: &str, outs: &[Outcome]) -> Vec
     ]
 }
 
-pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
+/// The study: `runs` per validity cell, the cells whose name contains `only`, the nonlinear
+/// certificates with the split `split` (`None`: their default), into `out`.
+pub(crate) fn run(
+    runs: usize,
+    only: Option<&str>,
+    split: Option<RiskSplit>,
+    out: &Path,
+) -> Result<()> {
     // Each cell keeps its index (its seeds) when others are left out.
     let cells: Vec<(usize, Cell)> = cells()
         .into_iter()
@@ -332,11 +353,15 @@ pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
     let power_runs = (runs / 5).max(runs.min(20));
     let total: usize = cells.iter().map(|(_, c)| if c.validity { runs } else { power_runs }).sum();
     let bar = progress(total, "nonlinear");
-    let only_arg = only.map_or(String::new(), |o| format!(" --only \"{o}\""));
+    let mut only_arg = only.map_or(String::new(), |o| format!(" --only \"{o}\""));
+    if let Some(split) = split {
+        let name = serde_json::to_value(split)?;
+        let _ = write!(only_arg, " --split {}", name.as_str().unwrap_or_default());
+    }
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}{only_arg}` ({power_runs} runs per power cell). Each run: 40 s (the seven cells before the last three: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Eight certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the default nonlinear certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 2, the default, over the default region, the 2.5–97.5 % quantiles of the window's outputs with the gate closed while the output is outside them, with the default pointwise multiplier `c = t_ν(1 − δ_{{w,k}})`; degree 2 with the simultaneous multiplier, Hotelling's `T²` over the span of `a(y)`, the rule before; degree 3 and the named library `y, y·tanh y` with the pointwise multiplier, and that library with the simultaneous one; each over the default region, from its own certifier, with the hidden-dynamics guard only; same windows and δ; each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, `y³, y⁴` for degree 2, and its order test: the past increment in a larger fit of its own). The paper's and the calibrated certificates' region is the range of `y` over the samples of their window (the paper's window, the standing calibrated window); the nonlinear certificate's is the region its standing look reports. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio, the spread factor).\n- **one look at the end, whole δ** (nonlinear rows of power cells): the share of runs whose last look of the longest window would have certified had it been the run's only look, spending the whole δ: `β̂_min − c_δ·s ≥ β_margin`, with `s = (β̂_min − β_nl)/c` that look's own spread at its worst cell and `c_δ` the row's multiplier (pointwise or simultaneous) at δ. The most a region-valid bound on the same estimates can open at the end (against the one-look oracle, which knows the spread over runs and bounds one point).\n- **edge-slope factor** (nonlinear rows of power cells): the median over runs of the last look's radius over the radius the same multiplier gives the rate at the region's midpoint, `(β̂_min − β_nl) / (c·s(y_mid))`: how much less the data say of the slope where the certificate is decided, at the region's edge, than at its centre.\n"
+        "# The nonlinear certificate against the true rate over its region\n\nProduced by `cargo xtask nonlinear --runs {runs}{only_arg}` ({power_runs} runs per power cell). Each run: 40 s (the seven cells before the last four: the length stated, with more calibrated windows; G5 cells at dt = 0.02) at dt = 0.01 of a scalar loop `dx = (f(x) + u) dt + 0.1 dW`, `y = x`, explored by `u = K_e y + PRBS` (±1.5 held 1 s unless stated), candidate gain K; the G5 cells run Experiment 2's data (γ = 0, dt = 0.02, 2000 steps, 10 000 in the 200 s cells, `cargo xtask reproduce`'s seed rule) through subsystem A (output x1, input u1) or B (output x4, input u4). Eight certificates on the same runs, each with a one-sample gate (n_s = 1) and margin {MARGIN}: the paper's Gaussian certificate (c = {PAPER_C}, window M = {WINDOW} unless stated, h = {H}), the linear calibrated certificate (δ = {DELTA}, windows doubling from {WINDOW}; twice: from a certifier with the default configuration, no `[nonlinear]` section, whose gate its guards close, and from the default nonlinear certifier with the hidden-dynamics guard only, whose gate the nonlinear certificate's test closes) and the nonlinear certificate (polynomial features of degree 2, the default, over the default region, the 2.5–97.5 % quantiles of the window's outputs with the gate closed while the output is outside them, with the default pointwise multiplier `c = t_ν(1 − δ_{{w,k}})`; degree 2 with the simultaneous multiplier, Hotelling's `T²` over the span of `a(y)`, the rule before; degree 3 and the named library `y, y·tanh y` with the pointwise multiplier, and that library with the simultaneous one; each over the default region, from its own certifier, with the hidden-dynamics guard only; same windows and δ, which each nonlinear certificate splits over the windows by its default rule, `M_w²` each (the linear certificate's: equal shares); each with its lack-of-fit check, `check_terms = 2`: the lowest two powers of `y` it lacks, `y³, y⁴` for degree 2, and its order test: the past increment in a larger fit of its own). The paper's and the calibrated certificates' region is the range of `y` over the samples of their window (the paper's window, the standing calibrated window); the nonlinear certificate's is the region its standing look reports. The truth at a sample is the smallest true rate `−(f'(x) + K)` over that region.\n\n- **false opening**: the gate was open at a sample whose region held a state with a true rate below the margin (validity cells); the 95 % Clopper–Pearson interval is over runs. The nonlinear and calibrated certificates promise at most δ = {DELTA} (the calibrated one only for linear dynamics).\n- **above truth**: share of samples with a value where the certificate exceeded the smallest true rate over its region.\n- **opened / median first opening**: power cells (smallest visited rate at least 3× the margin).\n- **90 % opened by**: the time by which the gate had opened in 90 % of the runs (`–` when fewer than 90 % opened within the run).\n- **one-look oracle at the end** (nonlinear rows of power cells): with `sd` the spread over the cell's runs of the longest window's last `β̂_min` (the estimate's own minimum over its region), the share of runs where `β̂_min − z(1 − δ)·sd >= β_margin` (an oracle that knows the spread and looks once, at the end: roughly the most any valid rule could open on that data), and the median over runs of the certificate's radius `β̂_min − β_nl` over `z·sd` (issue 12's efficiency ratio, the spread factor).\n- **one look at the end, whole δ** (nonlinear rows of power cells): the share of runs whose last look of the longest window would have certified had it been the run's only look, spending the whole δ: `β̂_min − c_δ·s ≥ β_margin`, with `s = (β̂_min − β_nl)/c` that look's own spread at its worst cell and `c_δ` the row's multiplier (pointwise or simultaneous) at δ. The most a region-valid bound on the same estimates can open at the end (against the one-look oracle, which knows the spread over runs and bounds one point).\n- **edge-slope factor** (nonlinear rows of power cells): the median over runs of the last look's radius over the radius the same multiplier gives the rate at the region's midpoint, `(β̂_min − β_nl) / (c·s(y_mid))`: how much less the data say of the slope where the certificate is decided, at the region's edge, than at its centre.\n"
     );
     let mut rows = Vec::new();
     for (ci, cell) in &cells {
@@ -344,7 +369,7 @@ pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
         let table = RateTable::new(|x| cell.rate(x));
         let mut results = Vec::with_capacity(n);
         for r in 0..n {
-            results.push(one_run(cell, 7_000_000 * (*ci as u64 + 1) + r as u64, &table)?);
+            results.push(one_run(cell, 7_000_000 * (*ci as u64 + 1) + r as u64, &table, split)?);
             bar.inc(1);
         }
         for (ki, (kind, _, label)) in ROWS.iter().enumerate() {
@@ -376,7 +401,7 @@ pub(crate) fn run(runs: usize, only: Option<&str>, out: &Path) -> Result<()> {
     );
     let _ = writeln!(
         s,
-        "\nThe nonlinear certificate bounds the smallest rate over its region from below. The default multiplier is one direction's (pointwise): the bound at the point where the true rate is smallest is below it with probability `1 − δ_{{w,k}}`, and the minimum of the bounds is below that one; the point is a fixed state or an end of the region the data chose, whose quantile settles as the window grows (see `RegionBound` in streamcert-certificate). The quadratic cells, the last two, are the case that argument leans on: a drift the default library holds exactly, whose smallest rate lies at the region's upper end and crosses the margin where the regions' upper quantile falls in about a third of the runs (K = −0.85) or above most of them (K = −0.9). The simultaneous rows (Hotelling's `T²` over the span of `a(y)`) hold at every point of every region at once, with no appeal to the region settling. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n\nPower is a matter of data: the last cells run the same loops (and G5's subsystems) longer, with calibrated windows doubling up to about the run's length, and show when 90 % of the runs had opened. The oracle column says where 40 s cannot suffice: where the one-look oracle opens in well under 90 % of the 40 s runs, no valid rule can open in 90 % of them on that data. A library that cannot represent the drift (degree 2 or `y, y·tanh y` on a cubic) may open early, but its value then exceeds the true minimum over the region (the `above truth` column): that is not power. The long near-margin cell checks that the longer windows keep the guarantee.\n\nThe cell before those is a linear loop at 5× the margin (VALIDITY.md's power cell, scaled to this margin): its rate is the same at every state, so the linear calibrated certificate's assumption holds and it is the one to deploy on; the nonlinear rows show what a bound at every state of a data-chosen region costs where the rate does not vary, the slope at the region's edge (the edge-slope factor) known far less well than the average slope.\n"
+        "\nThe nonlinear certificate bounds the smallest rate over its region from below. The default multiplier is one direction's (pointwise): the bound at the point where the true rate is smallest is below it with probability `1 − δ_{{w,k}}`, and the minimum of the bounds is below that one; the point is a fixed state or an end of the region the data chose, whose quantile settles as the window grows (see `RegionBound` in streamcert-certificate). The quadratic cells, the two before the last, are the case that argument leans on: a drift the default library holds exactly, whose smallest rate lies at the region's upper end and crosses the margin where the regions' upper quantile falls in about a third of the runs (K = −0.85) or above most of them (K = −0.9). The simultaneous rows (Hotelling's `T²` over the span of `a(y)`) hold at every point of every region at once, with no appeal to the region settling. The paper's and the linear calibrated certificates speak for one averaged Jacobian over their window; the calibrated gate also closes when the nonlinearity test of the same window is significant at δ. The tanh drift is not a polynomial: the cubic fit covers it only as far as the cubic is close over the region.\n\nPower is a matter of data: the seven long cells run the same loops (and G5's subsystems) longer, with calibrated windows doubling up to about the run's length, and show when 90 % of the runs had opened. The oracle column says where 40 s cannot suffice: where the one-look oracle opens in well under 90 % of the 40 s runs, no valid rule can open in 90 % of them on that data. A library that cannot represent the drift (degree 2 or `y, y·tanh y` on a cubic) may open early, but its value then exceeds the true minimum over the region (the `above truth` column): that is not power. The long near-margin cell checks that the longer windows keep the guarantee. Each nonlinear certificate splits δ over the windows by `M_w²` (its default), so the windows longer than a run, which never look, hold most of it: that is the cost of the split in the long cells (`--split equal` or `--split by_length` runs the same cells with the other rules). The last cell runs G5's subsystem B on its 40 s with windows that end at the run's length: the longest looks once, at the end, on every column, so its \"one look at the end, whole δ\" is what any bound on these estimates could open in 40 s.\n\nThe cell after the long ones is a linear loop at 5× the margin (VALIDITY.md's power cell, scaled to this margin): its rate is the same at every state, so the linear calibrated certificate's assumption holds and it is the one to deploy on; the nonlinear rows show what a bound at every state of a data-chosen region costs where the rate does not vary, the slope at the region's edge (the edge-slope factor) known far less well than the average slope.\n"
     );
     write(&out.join("NONLINEAR.md"), &s)?;
     bar.finish_and_clear();

@@ -11,6 +11,7 @@
 pub(crate) mod hotelling;
 pub(crate) mod larger;
 pub(crate) mod quantile;
+pub(crate) mod split;
 mod standing;
 
 pub(crate) use standing::{Look, standing};

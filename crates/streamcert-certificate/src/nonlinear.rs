@@ -61,9 +61,12 @@
 //! ([`polynomial_bounds`]); for a named library every slope `φ_k'` is bounded on the cell
 //! ([`Feature::slope_bounds`]), `β̂` by interval arithmetic and `s²`, convex in `a`, at the
 //! corners of the box of slopes. The certificate is the smallest cell bound (so it holds
-//! between grid points too). `ν` and the risk schedule are the calibrated certificate's: the effective
-//! number of blocks (weights in the direction `a` at the region's midpoint) less `D + m`, and
-//! `δ_{w,k} = (δ/W) / (k (k+1))`. With `D = 1` the certificate equals the linear
+//! between grid points too). `ν` is the calibrated certificate's: the effective number of
+//! blocks (weights in the direction `a` at the region's midpoint) less `D + m`. The looks are
+//! the calibrated one's, with a split of `δ` of its own, `δ_{w,k} = δ · share_w / (k (k+1))`
+//! with `share_w = M_w² / Σ_v M_v²` by default ([`NonlinearConfig::risk_split`]): the bound at
+//! the region's edge needs the most data a window holds, so most of `δ` goes to the longest
+//! windows. With `D = 1` and the linear certificate's split the certificate equals the linear
 //! calibrated certificate (up to rounding; a property test).
 //!
 //! ## Nonlinearity test
@@ -228,6 +231,9 @@ pub(crate) struct NonlinearState {
     /// `K` (`m` values).
     gain: Vec<f64>,
     latest: Vec<Option<NonlinearLook>>,
+    /// Each window's share of `δ` ([`NonlinearConfig::risk_split`]).
+    #[serde(default)]
+    shares: Vec<f64>,
     /// The lack-of-fit check, when `check_terms > 0`.
     #[serde(default)]
     check: Option<LackOfFit>,
@@ -293,6 +299,7 @@ impl NonlinearState {
             est: WindowEstimate::with_regressors(1, d, intervals),
             gain: gain.to_vec(),
             latest: vec![None; lengths.len()],
+            shares: cfg.risk_split.shares(lengths),
             z: vec![0.0; d],
             dir: vec![0.0; d],
             cov: vec![0.0; d * d],
@@ -314,6 +321,12 @@ impl NonlinearState {
     /// Whether the library is polynomial (its class is the same about any origin).
     pub(crate) fn is_polynomial(&self) -> bool {
         self.library.is_polynomial()
+    }
+
+    /// Window `w`'s share of `δ` ([`NonlinearConfig::risk_split`] over the configured window
+    /// lengths, as the linear certificate's shares are).
+    pub(crate) fn share(&self, w: usize) -> f64 {
+        self.shares[w]
     }
 
     /// The number of features `D`.

@@ -37,7 +37,7 @@ impl CalibratedState {
         self.look_cols[w] = self.seen;
         let k = self.looks[w];
         if let Some(n) = &mut self.nonlinear {
-            let risk = look_risk(self.cal.delta, self.shares[w], k);
+            let risk = look_risk(self.cal.delta, n.share(w), k);
             let (delta, ridge, min_pivot) = (self.cal.delta, self.ridge, self.min_pivot);
             let origin = self.nl_origin;
             n.look(w, LookAt { k, t, risk, delta, margin, ridge, min_pivot, origin });

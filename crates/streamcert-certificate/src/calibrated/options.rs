@@ -1,5 +1,7 @@
 //! The calibrated certificate's two option enums: the model guards' covariance
-//! ([`GuardVariance`]) and the split of `δ` across windows ([`RiskSplit`]).
+//! ([`GuardVariance`]) and the split of `δ` across windows ([`RiskSplit`], defined beneath
+//! the certificates in `look/split.rs`, since the nonlinear certificate splits its own `δ`
+//! by the same rules).
 
 use serde::{Deserialize, Serialize};
 
@@ -36,39 +38,4 @@ impl GuardVariance {
     }
 }
 
-/// How the calibrated certificate splits its risk `δ` across its `W` windows `M_w`; window
-/// `w`'s `k`-th look then spends `δ · share_w / (k (k + 1))`
-/// ([`look_risk`](crate::look_risk)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum RiskSplit {
-    /// `share_w = 1 / W` (the default): each doubling of the window is one more time scale
-    /// the loop may need, and none is favoured. The shortest window, which certifies a fast
-    /// loop first, keeps its share when longer windows are added.
-    #[default]
-    Equal,
-    /// `share_w = M_w / Σ_v M_v`: the longer windows, which look less often, get more (the
-    /// split before the default changed to [`Equal`](Self::Equal); with five windows the
-    /// shortest gets `1/31` of `δ`, and a fast loop waits a look longer).
-    ByLength,
-}
-
-impl RiskSplit {
-    /// Whether this is the default split.
-    #[must_use]
-    pub fn is_equal(&self) -> bool {
-        *self == Self::Equal
-    }
-
-    /// The shares `share_w` of the windows `lengths` (columns), summing to 1.
-    #[must_use]
-    pub fn shares(self, lengths: &[usize]) -> Vec<f64> {
-        match self {
-            Self::Equal => vec![1.0 / lengths.len().max(1) as f64; lengths.len()],
-            Self::ByLength => {
-                let total: f64 = lengths.iter().map(|&w| w as f64).sum();
-                lengths.iter().map(|&w| w as f64 / total).collect()
-            }
-        }
-    }
-}
+pub use crate::look::split::RiskSplit;

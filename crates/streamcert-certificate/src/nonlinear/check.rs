@@ -176,6 +176,7 @@ impl super::NonlinearState {
             && crate::look::same_windows(&self.windows, &fresh.windows)
             && self.est.matches(&fresh.est)
             && self.latest.len() == fresh.latest.len()
+            && self.shares == fresh.shares
             && [(&self.check, &fresh.check), (&self.order, &fresh.order)].iter().all(|p| match p {
                 (Some(a), Some(b)) => a.matches(b),
                 (None, None) => true,

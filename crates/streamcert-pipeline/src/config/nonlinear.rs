@@ -2,7 +2,7 @@
 //! nonlinear certificate.
 
 use serde::Deserialize;
-use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound};
+use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound, RiskSplit};
 
 /// The feature library of `[nonlinear]`: `"polynomial"` (with `degree`) or a list of named
 /// features starting with `"y"`.
@@ -52,6 +52,8 @@ pub(super) struct NonlinearSection {
     test_risk: Option<f64>,
     #[serde(default)]
     bound: RegionBound,
+    #[serde(default)]
+    risk_split: Option<RiskSplit>,
 }
 
 impl NonlinearSection {
@@ -96,6 +98,7 @@ impl NonlinearSection {
             check_terms: self.check_terms.unwrap_or(d.check_terms),
             region_trim: self.region_trim()?,
             bound: self.bound,
+            risk_split: self.risk_split.unwrap_or(d.risk_split),
         }))
     }
 }

@@ -1,7 +1,7 @@
 //! The configuration file: defaults, refusals, and what each section selects.
 
 use super::*;
-use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound};
+use streamcert_certificate::{FeatureSet, NonlinearConfig, RegionBound, RiskSplit};
 
 /// The printed configuration with G5 node b's required keys set.
 fn base() -> String {
@@ -102,6 +102,13 @@ fn nonlinear_section_selects_the_nonlinear_certificate() {
     assert_eq!((bound(&both), bound(&sim)), (RegionBound::Pointwise, RegionBound::Simultaneous));
     let typo = both.replace("# bound = \"pointwise\" ", "bound = \"both\" ");
     assert!(parse(&typo, "x").unwrap_err().to_string().contains("bound"));
+    // The certificate's own split of delta: M_w² by default, or as [calibration]'s.
+    let split = |t: &str| parse(t, "x").unwrap().certifier.nonlinear.unwrap().risk_split;
+    let key = "# risk_split = \"by_length_squared\" ";
+    let equal = both.replace(key, "risk_split = \"equal\" ");
+    assert_eq!((split(&both), split(&equal)), (RiskSplit::ByLengthSquared, RiskSplit::Equal));
+    let typo = both.replace(key, "risk_split = \"longest\" ");
+    assert!(parse(&typo, "x").unwrap_err().to_string().contains("risk_split"));
     let wide = both.replace("# region_trim = 0.025 ", "region_trim = 0.3 ");
     assert!(parse(&wide, "x").unwrap_err().to_string().contains("region_trim"));
     let off = both.replace("# check_terms = 2 ", "check_terms = 0 ");

@@ -107,7 +107,7 @@ pub enum RegionBound {
     /// near-margin cell, two of them a quadratic drift whose smallest rate is at the region's
     /// upper end and crosses the margin where that end falls (opened in 27 and 64 % of the
     /// runs, at 0.1 % of samples above the truth), and G5's subsystem B certified in 47 % of
-    /// 40 s runs against 18 %. A library that misses the drift loses more with it
+    /// 40 s runs against 18 % with the simultaneous bound. A library that misses the drift loses more with it
     /// (`y, y·tanh y` on those quadratic cells: 69 and 12 false openings against 31 and 12);
     /// the library is the assumption either way.
     #[default]
@@ -115,8 +115,7 @@ pub enum RegionBound {
     /// `c² = ν D/(ν − D + 1) · F_{D, ν−D+1}(1 − δ_{w,k})` (Hotelling's `T²`, Scheffé): the
     /// bound holds at every point of every region at once, so its validity does not depend on
     /// which region the data chose, and a drift just outside the library's span has the
-    /// slack of the larger multiplier (NONLINEAR.md's band cell with `y, y·tanh y`). The
-    /// rule before `Pointwise`.
+    /// slack of the larger multiplier (NONLINEAR.md's band cell with `y, y·tanh y`).
     Simultaneous,
 }
 

@@ -174,6 +174,9 @@ impl Certifier {
             };
         }
         let dt = previous.map_or(f64::NAN, |p| t - p);
+        if previous.is_none() {
+            self.gap.unforce();
+        }
         let gap = if dt > 0.0 { self.gap.observe(dt) } else { None };
         if gap.is_some() {
             // Start a new window at this sample; the calibrated windows follow the
@@ -262,6 +265,31 @@ impl Certifier {
         for r in computed.into_iter().flatten() {
             *r = Some(NotCertified::Gap { dt: g.dt, reference: g.reference });
         }
+    }
+
+    /// Declare that samples are missing before the next one (a live source's outage, a
+    /// signal too stale to form a row): the next [`push`](Self::push) treats its step as a
+    /// gap whatever its length, exactly as a step above `gap_factor` times the reference: the
+    /// windows restart at that sample, every gate closes, and its evidence gives
+    /// [`NotCertified::Gap`] with the step and the reference. Nothing is integrated across
+    /// the missing stretch. Before the first sample, and when declared twice, it is one gap.
+    ///
+    /// ```
+    /// use streamcert_certificate::{Certifier, CertifierConfig, NotCertified};
+    /// use streamcert_regression::RegressionConfig;
+    /// let cfg = CertifierConfig::new(RegressionConfig::new(1, 1, 20, 2, 1e-6), vec![-1.0], 0.1, 0.0, 3);
+    /// let mut c = Certifier::new(cfg).unwrap();
+    /// for k in 0..10 {
+    ///     c.push(0.1 * f64::from(k), &[1.0 / f64::from(k + 1)], &[0.0]).unwrap();
+    /// }
+    /// c.gap();
+    /// // One regular step later, but declared a gap: the windows restart here.
+    /// let ev = c.push(1.0, &[0.05], &[0.0]).unwrap();
+    /// assert!(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
+    /// assert_eq!((ev.columns, c.gaps()), (0, 1));
+    /// ```
+    pub fn gap(&mut self) {
+        self.gap.force();
     }
 
     /// A sample that cannot be used (a NaN or infinite value, a time not after the previous

@@ -33,6 +33,11 @@ pub(crate) struct GapDetector {
     #[serde(deserialize_with = "nan_from_null")]
     reference: f64,
     gaps: u64,
+    /// A gap the caller declared ([`Certifier::gap`](crate::Certifier::gap)): the next step is
+    /// one, whatever its length. Written only while set, so checkpoints without a pending
+    /// declared gap are byte for byte what they were.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    forced: bool,
 }
 
 /// An `f64` that JSON may hold as `null` (serde_json writes NaN so): `null` reads as NaN.
@@ -59,6 +64,7 @@ impl GapDetector {
             since: 0,
             reference: f64::NAN,
             gaps: 0,
+            forced: false,
         }
     }
 
@@ -80,9 +86,26 @@ impl GapDetector {
         if !(r > 0.0) || (dt - r).abs() <= 1e-6 * r { 1.0 } else { (r / dt).sqrt() }
     }
 
-    /// Observe a step `dt > 0`; `Some` when it is a gap (which is not recorded).
+    /// Declare that samples are missing before the next one: its step is a gap whatever its
+    /// length.
+    pub(crate) fn force(&mut self) {
+        self.forced = true;
+    }
+
+    /// Forget a declared gap (the next sample starts the stream: there is no step to span).
+    pub(crate) fn unforce(&mut self) {
+        self.forced = false;
+    }
+
+    /// Observe a step `dt > 0`; `Some` when it is a gap (which is not recorded): a declared
+    /// one, or one larger than `factor` times the reference.
     #[inline]
     pub(crate) fn observe(&mut self, dt: f64) -> Option<Gap> {
+        if self.forced {
+            self.forced = false;
+            self.gaps += 1;
+            return Some(Gap { dt, reference: self.reference });
+        }
         if self.reference > 0.0 && dt > self.factor * self.reference {
             self.gaps += 1;
             return Some(Gap { dt, reference: self.reference });

@@ -37,7 +37,30 @@ pub(super) fn run_certify(
         plot,
     };
     let mut out = open_output(&io.output)?;
-    let s = certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?;
+    let s = match &cfg.source {
+        Some(table) => {
+            if io.input != "-" {
+                return Err(CliError::Config {
+                    path,
+                    message: format!(
+                        "the configuration reads a live [source]; --input {} reads a file: \
+                         give one or the other",
+                        io.input
+                    ),
+                });
+            }
+            let live = streamcert_live::parse(table, &cfg.columns)
+                .map_err(|message| CliError::Config { path: path.clone(), message })?;
+            let checkpointing = opts.checkpoint.is_some();
+            let mut source = streamcert_live::MqttSource::new(
+                live.mqtt,
+                cfg.columns.outputs.len(),
+                checkpointing,
+            )?;
+            certify::run_source(&cfg, &mut source, "mqtt", &mut out, &opts)?
+        }
+        None => certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?,
+    };
     out.flush().map_err(|e| CliError::io("writing output", e))?;
     match summary {
         Some(file) => {
@@ -146,4 +169,44 @@ fn run_cluster(
         site.bytes_sent,
     );
     Ok(None)
+}
+
+/// `streamcert simulate g5 --publish URL`: the CSV rows `csv` published to the broker.
+pub(super) fn publish_csv(
+    csv: &[u8],
+    url: &str,
+    args: &super::Publish,
+) -> Result<Outcome, CliError> {
+    use streamcert_live::publish::{self, Layout, PublishOptions};
+    let (per_signal, pace) = (args.per_signal, args.pace);
+    let bad = |message: String| CliError::Config { path: "--publish".into(), message };
+    if !(pace >= 0.0 && pace.is_finite()) {
+        return Err(bad(format!("--pace must be finite and >= 0, got {pace}")));
+    }
+    let (server, topic) = publish::parse_url(url).map_err(bad)?;
+    if args.broker {
+        let addr = std::net::ToSocketAddrs::to_socket_addrs(&(server.host.as_str(), server.port))
+            .map_err(|e| bad(format!("{}: {e}", server.host)))?
+            .next()
+            .ok_or_else(|| bad(format!("{}: no address", server.host)))?;
+        streamcert_live::broker::serve(addr)?;
+        eprintln!("broker: serving MQTT on {addr}");
+    }
+    let text = std::str::from_utf8(csv).map_err(|e| bad(e.to_string()))?;
+    let mut lines = text.lines();
+    let header: Vec<String> =
+        lines.next().unwrap_or_default().split(',').map(String::from).collect();
+    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect());
+    let layout = if per_signal { Layout::Signals } else { Layout::Rows };
+    let client_id = format!("streamcert-simulate-{}", std::process::id());
+    let opts = PublishOptions { server, topic, client_id, layout, pace };
+    let sent = publish::publish(&opts, &header, 0, rows)?;
+    eprintln!("published {sent} messages to {url}");
+    if args.broker {
+        eprintln!("broker: still serving; stop it with Ctrl-C");
+        loop {
+            std::thread::park();
+        }
+    }
+    Ok(Outcome::Done)
 }

@@ -253,7 +253,29 @@ enum SimSystem {
         /// Coupling gain γ instead of the experiment's (1: 0.15, 2: 0).
         #[arg(long)]
         gamma: Option<f64>,
+        #[command(flatten)]
+        publish: Publish,
     },
+}
+
+/// A live plant: the simulated rows published to an MQTT broker instead of written out.
+#[derive(clap::Args)]
+pub(crate) struct Publish {
+    /// Publish to mqtt://HOST:PORT/TOPIC (QoS 1): a JSON object per row with every column,
+    /// or with --per-signal each column on TOPIC/COLUMN as {"t": ..., "value": ...}.
+    #[arg(long, value_name = "URL")]
+    publish: Option<String>,
+    /// One topic per column instead of one row per message.
+    #[arg(long, requires = "publish")]
+    per_signal: bool,
+    /// Wall-clock seconds per second of data (1: real time; 0: as fast as the broker takes
+    /// them).
+    #[arg(long, default_value_t = 1.0, requires = "publish")]
+    pace: f64,
+    /// Serve an embedded MQTT broker at the URL's address first (to try a live run without a
+    /// broker installed); it keeps serving after the last row until the process is stopped.
+    #[arg(long, requires = "publish")]
+    broker: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -323,13 +345,18 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
             Ok(Outcome::Done)
         }
         Command::Simulate {
-            system: SimSystem::G5 { experiment, seed, coupling, steps, gamma },
+            system: SimSystem::G5 { experiment, seed, coupling, steps, gamma, publish },
         } => {
             let experiment = if experiment == 1 { Experiment::One } else { Experiment::Two };
             let coupling = match coupling {
                 CouplingArg::Cascade => Coupling::Cascade,
                 CouplingArg::Bidirectional => Coupling::Bidirectional,
             };
+            if let Some(url) = &publish.publish {
+                let mut csv = Vec::new();
+                simulate::run(experiment, coupling, seed, steps, gamma, &mut csv)?;
+                return commands::publish_csv(&csv, url, &publish);
+            }
             let stdout = std::io::stdout();
             let mut out = BufWriter::new(stdout.lock());
             simulate::run(experiment, coupling, seed, steps, gamma, &mut out)?;

@@ -9,6 +9,7 @@ use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::{Flush, Format, Header};
+use crate::source::{Next, Source};
 pub use summary::Summary;
 pub(crate) use summary::{reason_phrase, reason_words};
 
@@ -72,48 +73,108 @@ pub fn run<R: Read + Send, W: Write>(
     out: &mut W,
     opts: &Options,
 ) -> Result<Summary, CliError> {
-    let (mut cert, mut summary) = start(cfg, opts)?;
+    let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
+    if opts.flush == Flush::EachRow {
+        return run_source(cfg, &mut reader, input_name, out, opts);
+    }
+    let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
+    let mut writer = evidence_writer(out, opts, &channels)?;
+    let replay = summary.last_time;
+    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
+    batched::run(step, &mut reader, &mut writer)?;
+    conclude(cfg, opts, &mut writer, &cert, &mut summary)?;
+    Ok(summary)
+}
+
+/// Certify what a [`Source`] yields, row by row on the calling thread, every row flushed as
+/// it is written ([`Options::flush`] is taken as [`Flush::EachRow`] whatever it says): a CSV
+/// pipe or a live plant source (the `streamcert-live` crate). A gap the source declares
+/// starts new windows ([`Certifier::gap`]); a bad payload closes every gate and is counted
+/// as a skipped row. With a checkpoint, one is written every `checkpoint_every` rows and
+/// whenever the source asks ([`Source::commit_due`]), and the source is told once it is on
+/// disk ([`Source::committed`]), so a source with at-least-once delivery acknowledges only
+/// what a checkpoint holds. The source's counts go into the summary.
+///
+/// # Errors
+/// As [`run`], and a source's error that ends its stream.
+pub fn run_source<W: Write>(
+    cfg: &Config,
+    source: &mut dyn Source,
+    input_name: &str,
+    out: &mut W,
+    opts: &Options,
+) -> Result<Summary, CliError> {
+    let live = Options { flush: Flush::EachRow, ..opts.clone() };
+    let opts = &live;
+    let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
+    if let Some(report) = &summary.source {
+        source.restore(report)?;
+    }
+    let mut writer = evidence_writer(out, opts, &channels)?;
+    let replay = summary.last_time;
+    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
+    let outcome = run_live(step, source, &mut writer, channels.len());
+    summary.source = source.report();
+    outcome?;
+    conclude(cfg, opts, &mut writer, &cert, &mut summary)?;
+    if opts.checkpoint.is_some() {
+        source.committed()?;
+    }
+    Ok(summary)
+}
+
+/// The certifier and summary a run starts from (fresh, or the checkpoint's), the picture's
+/// trace when one is asked for, and the region columns' channels: every output and input
+/// over the paper's window, then every output over the standing calibrated window.
+fn prepare(cfg: &Config, opts: &Options) -> Result<(Certifier, Summary, Vec<String>), CliError> {
+    let (cert, mut summary) = start(cfg, opts)?;
     if opts.plot.is_some() {
         summary.trace = Some(crate::picture::Trace::new());
     }
-    let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
-    let io = |e| CliError::io("writing output", e);
-    // The region columns: every output and input over the paper's window, then every output
-    // over the standing calibrated window.
     let mut channels: Vec<String> =
         cfg.columns.outputs.iter().chain(&cfg.columns.inputs).cloned().collect();
     if cfg.certifier.calibration.is_some() {
         channels.extend(cfg.columns.outputs.iter().map(|o| format!("calibrated_{o}")));
     }
-    let mut writer = EvidenceWriter::new(
+    Ok((cert, summary, channels))
+}
+
+/// The run's evidence writer: the header only on a fresh run, so that the outputs of a split
+/// run concatenate to the output of the whole run.
+fn evidence_writer<'w, W: Write>(
+    out: &'w mut W,
+    opts: &Options,
+    channels: &[String],
+) -> Result<EvidenceWriter<&'w mut W>, CliError> {
+    EvidenceWriter::new(
         out,
         opts.format,
         Header::when_fresh(opts.resume.as_ref()),
         opts.flush,
-        region_columns(&channels),
+        region_columns(channels),
     )
-    .map_err(io)?;
-    // Resuming: rows up to the checkpoint's last time at the start of the input are a replay
-    // of what the checkpoint already holds (the same file, or a live source restarted after a
-    // crash) and are passed over, counted; from the first later row on, times must increase
-    // as usual, so an out-of-order row later in the input is still an error.
-    let replay = summary.last_time;
-    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
-    if opts.flush == Flush::EachRow {
-        run_live(step, &mut reader, &mut writer, channels.len())?;
-    } else {
-        batched::run(step, &mut reader, &mut writer)?;
-    }
-    writer.flush().map_err(io)?;
-    finish(&cert, &mut summary);
+    .map_err(|e| CliError::io("writing output", e))
+}
+
+/// The end of a run: the output flushed, the summary closed, the final checkpoint and the
+/// picture written.
+fn conclude<W: Write>(
+    cfg: &Config,
+    opts: &Options,
+    writer: &mut EvidenceWriter<W>,
+    cert: &Certifier,
+    summary: &mut Summary,
+) -> Result<(), CliError> {
+    writer.flush().map_err(|e| CliError::io("writing output", e))?;
+    finish(cert, summary);
     if let Some(path) = &opts.checkpoint {
-        save(path, &cert, &summary)?;
+        save(path, cert, summary)?;
     }
     if let (Some(path), Some(trace)) = (&opts.plot, &summary.trace) {
         let name = cfg.columns.outputs.join(", ");
         trace.draw_certify(path, cfg.certifier.margin, &name)?;
     }
-    Ok(summary)
+    Ok(())
 }
 
 /// The configured certifier and an empty summary, or the checkpoint's to resume from.
@@ -138,25 +199,46 @@ fn write_checkpoint(opts: &Options, bytes: &[u8]) -> Result<(), CliError> {
     }
 }
 
-/// A live input: each row read, certified and written on the calling thread.
-fn run_live<R: Read, W: Write>(
+/// A live input: each item of the source taken, certified and written on the calling
+/// thread.
+fn run_live<W: Write>(
     mut step: Step<'_>,
-    reader: &mut SampleReader<R>,
+    source: &mut dyn Source,
     writer: &mut EvidenceWriter<W>,
     channels: usize,
 ) -> Result<(), CliError> {
     let io = |e| CliError::io("writing output", e);
     let mut s = Sample::default();
     let mut region = Vec::with_capacity(channels);
-    while let Some(next) = reader.next_into(&mut s) {
+    while let Some(next) = source.next_into(&mut s) {
         region.clear();
-        if let Some(ev) = step.row(next, &s, &mut region)? {
-            writer.write_with_region(&ev, &region).map_err(io)?;
-            if let Some(sealed) = step.due_checkpoint()? {
-                // The rows a checkpoint holds are on the output before it is written.
-                writer.flush().map_err(io)?;
-                write_checkpoint(step.opts, &sealed)?;
+        let row = match next {
+            Ok(Next::Row) => step.row(Ok(()), &s, &mut region)?,
+            Ok(Next::Gap(why)) => {
+                eprintln!("gap: {why}; the windows restart at the next row");
+                step.cert.gap();
+                None
             }
+            Ok(Next::Bad(e)) => {
+                // A live source's bad payload is skipped whatever the policy for a file's
+                // rows: the plant goes on publishing.
+                step.skip_bad(&e);
+                None
+            }
+            Err(e) => step.row(Err(e), &s, &mut region)?,
+        };
+        let wrote = row.is_some();
+        if let Some(ev) = row {
+            writer.write_with_region(&ev, &region).map_err(io)?;
+        }
+        let due = (wrote && step.checkpoint_every_due()) || source.commit_due();
+        if let Some(path) = step.opts.checkpoint.as_ref().filter(|_| due) {
+            // The rows a checkpoint holds are on the output before it is written, and the
+            // source acknowledges them only once it is on disk.
+            writer.flush().map_err(io)?;
+            step.summary.source = source.report();
+            write_atomic(path, &checkpoint_bytes(path, step.cert, step.summary)?)?;
+            source.committed()?;
         }
     }
     Ok(())
@@ -185,11 +267,7 @@ impl Step<'_> {
         match next {
             Ok(()) => {}
             Err(CliError::Row(e)) if opts.bad_rows == BadRows::Skip => {
-                // One skip semantics, the library's: not absorbed, counted, every gate closes.
-                eprintln!("skipped: {e}");
-                summary.skipped += 1;
-                self.cert.skip(f64::NAN);
-                summary.count_skip();
+                self.skip_bad(&e);
                 return Ok(None);
             }
             Err(e) => return Err(e),
@@ -224,15 +302,29 @@ impl Step<'_> {
         Ok(Some(ev))
     }
 
+    /// A malformed row or a bad payload, under the one skip semantics, the library's: not
+    /// absorbed, counted, every gate closes.
+    fn skip_bad(&mut self, e: &crate::RowError) {
+        eprintln!("skipped: {e}");
+        self.summary.skipped += 1;
+        self.cert.skip(f64::NAN);
+        self.summary.count_skip();
+    }
+
     /// The sealed checkpoint due after the row just certified (every `checkpoint_every`
     /// accepted rows), if any.
     fn due_checkpoint(&self) -> Result<Option<Vec<u8>>, CliError> {
-        match (&self.opts.checkpoint, self.opts.checkpoint_every) {
-            (Some(path), Some(every)) if every > 0 && self.summary.rows % every == 0 => {
+        match &self.opts.checkpoint {
+            Some(path) if self.checkpoint_every_due() => {
                 checkpoint_bytes(path, self.cert, self.summary).map(Some)
             }
             _ => Ok(None),
         }
+    }
+
+    /// Whether `checkpoint_every` accepted rows have passed since the last checkpoint.
+    fn checkpoint_every_due(&self) -> bool {
+        matches!(self.opts.checkpoint_every, Some(every) if every > 0 && self.summary.rows % every == 0)
     }
 }
 

@@ -33,6 +33,8 @@ struct File {
     calibration: CalibrationSection,
     #[serde(default)]
     nonlinear: NonlinearSection,
+    #[serde(default)]
+    source: Option<toml::Table>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -277,6 +279,11 @@ pub struct Config {
     pub columns: Columns,
     /// The certifier configuration.
     pub certifier: CertifierConfig,
+    /// The `[source]` section as written (a live plant source, read by the `streamcert-live`
+    /// crate, which validates it); `None` when the file has none (the input is a file or
+    /// stdin). It never enters the certifier's configuration, so a checkpoint resumes under
+    /// another source.
+    pub source: Option<toml::Table>,
 }
 
 /// How a TOML error names where it is.
@@ -370,7 +377,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
-    Ok(Config { columns: f.columns, certifier })
+    Ok(Config { columns: f.columns, certifier, source: f.source })
 }
 
 /// The columns named once each, at least one output and one input, and a gain of `m × p`:

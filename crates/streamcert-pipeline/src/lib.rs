@@ -19,6 +19,7 @@ pub mod output;
 pub mod picture;
 mod resume;
 pub mod simulate;
+pub mod source;
 
 use std::fmt;
 

@@ -72,6 +72,11 @@ pub struct Summary {
     /// for.
     #[serde(default)]
     pub nonlinear_region: Option<(f64, f64)>,
+    /// A live source's counts (messages, bad payloads by kind, late messages, gaps,
+    /// reconnections, silent signals) at the end of the run or the last checkpoint; `None`
+    /// for a file or a pipe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<crate::source::SourceReport>,
     /// The rows of the picture (`--plot`), not checkpointed: a resumed run's picture starts at
     /// the resume.
     #[serde(skip)]
@@ -309,6 +314,9 @@ impl Summary {
             100.0 * self.share_wass(),
             first(self.first_deploy_wass),
         ));
+        if let Some(report) = &self.source {
+            lines.push(report.line());
+        }
         lines.join("\n")
     }
 
@@ -396,6 +404,7 @@ impl Summary {
             "last_time": self.last_time,
             "output_scale_ratio": self.output_scale_ratio(),
             "warning": self.units_warning(cfg),
+            "source": self.source,
         })
     }
 }

@@ -1,0 +1,144 @@
+//! `certify` from a live MQTT source against Mosquitto (Debian's package, started by each
+//! test on loopback): killed with SIGKILL and resumed, the rows equal an uninterrupted run's;
+//! the broker restarted mid-run, the process goes on, with a gap at the outage. Built with
+//! the `mosquitto-tests` feature, which `.ci/run` turns on after installing Mosquitto
+//! (`cargo test --workspace` needs nothing installed: the embedded broker's tests are in
+//! `live.rs` and in the `streamcert-live` crate).
+#![cfg(feature = "mosquitto-tests")]
+
+use std::net::TcpStream;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use streamcert_live::publish::{self, PublishOptions};
+
+mod common;
+use common::live::{Certify, file_reference, g5, live_config, publisher, rows_of};
+use common::tmp;
+
+/// A Mosquitto broker on a loopback port, without persistence (a restart loses sessions),
+/// queueing without limit for offline persistent sessions.
+struct Mosquitto {
+    child: Child,
+    port: u16,
+}
+
+impl Mosquitto {
+    fn start(port: u16) -> Self {
+        let conf = tmp(&format!("mosquitto-{port}.conf"));
+        std::fs::write(
+            &conf,
+            format!(
+                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
+                 max_queued_messages 0\n"
+            ),
+        )
+        .unwrap();
+        let child = Command::new("mosquitto")
+            .args(["-c", conf.to_str().unwrap()])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("mosquitto (apt-get install mosquitto)");
+        let deadline = Instant::now() + Duration::from_secs(10);
+        while TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(Instant::now() < deadline, "mosquitto did not start");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Self { child, port }
+    }
+
+    fn stop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+impl Drop for Mosquitto {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
+
+fn free_port() -> u16 {
+    streamcert_live::broker::free_loopback().unwrap().port()
+}
+
+#[test]
+fn killed_with_sigkill_and_resumed_the_rows_equal_an_uninterrupted_run() {
+    let broker = Mosquitto::start(free_port());
+    let config = live_config("kill", broker.port, "g5/kill");
+    let (csv, header, rows) = g5("3000");
+    let want_path = file_reference("kill", &csv);
+    let (checkpoint, out1, out2) =
+        (tmp("live-kill.ckpt"), tmp("live-kill-1.csv"), tmp("live-kill-2.csv"));
+    let _ = std::fs::remove_file(&checkpoint);
+    let persist = ["--checkpoint", checkpoint.to_str().unwrap(), "--checkpoint-every", "100"];
+    let first =
+        Certify::start(&config, &[&["--output", out1.to_str().unwrap()], &persist[..]].concat());
+    let (head, tail) = rows.split_at(1500);
+    publish::publish(&publisher(broker.port, "g5/kill", "pub-kill-1"), &header, 0, head.to_vec())
+        .unwrap();
+    // Kill it mid-stream, once it has certified some of what was published.
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while rows_of(&out1).len() < 700 {
+        assert!(Instant::now() < deadline, "the first run certified too little");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    first.kill();
+    // The plant goes on publishing while streamcert is down; the broker queues it for the
+    // persistent session.
+    publish::publish(&publisher(broker.port, "g5/kill", "pub-kill-2"), &header, 0, tail.to_vec())
+        .unwrap();
+    let resume = ["--resume", checkpoint.to_str().unwrap()];
+    let second = Certify::start(
+        &config,
+        &[&["--output", out2.to_str().unwrap()], &persist[..], &resume[..]].concat(),
+    );
+    let (status, err) = second.finish();
+    assert!(status.success(), "{err}");
+    // The rows the first run wrote after its last checkpoint are certified again by the
+    // resumed one (their messages were not acknowledged): keep the first run's rows up to
+    // where the second starts.
+    let (a, b) = (rows_of(&out1), rows_of(&out2));
+    let start: f64 = b.first().expect("the resumed run wrote rows").0.parse().unwrap();
+    let mut got: Vec<String> =
+        a.into_iter().filter(|(t, _)| t.parse::<f64>().unwrap() < start).map(|(_, r)| r).collect();
+    got.extend(b.into_iter().map(|(_, r)| r));
+    let want: Vec<String> = rows_of(&want_path).into_iter().map(|(_, r)| r).collect();
+    assert_eq!(got.len(), want.len(), "rows; {err}");
+    assert!(got == want, "the resumed run differs from the uninterrupted one");
+}
+
+#[test]
+fn a_broker_restarted_mid_run_is_a_gap_and_the_process_goes_on() {
+    let port = free_port();
+    let mut broker = Mosquitto::start(port);
+    let config = live_config("restart", port, "g5/restart");
+    let (_, header, rows) = g5("2000");
+    let out = tmp("live-restart.csv");
+    let mut certify = Certify::start(&config, &["--output", out.to_str().unwrap()]);
+    let (before, after) = rows.split_at(1000);
+    publish::publish(&publisher(port, "g5/restart", "pub-r1"), &header, 0, before.to_vec())
+        .unwrap();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while rows_of(&out).len() < 1000 {
+        assert!(Instant::now() < deadline, "the rows before the restart were not certified");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    // The broker goes away and comes back without the session (no persistence).
+    broker.stop();
+    std::thread::sleep(Duration::from_millis(500));
+    let _broker = Mosquitto::start(port);
+    certify.wait_line("subscribed to", 2);
+    let opts = PublishOptions { ..publisher(port, "g5/restart", "pub-r2") };
+    publish::publish(&opts, &header, 0, after.to_vec()).unwrap();
+    let (status, err) = certify.finish();
+    assert!(status.success(), "{err}");
+    let times: Vec<f64> = rows_of(&out).into_iter().map(|(t, _)| t.parse().unwrap()).collect();
+    let published: Vec<f64> = rows.iter().map(|r| r[0]).collect();
+    assert_eq!(times, published, "every row published before and after the outage certified");
+    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    assert!(source.contains(" 1 gaps") && source.contains(" 1 reconnects"), "{source}");
+    assert!(err.contains("did not keep the session"), "{err}");
+}

@@ -1,0 +1,518 @@
+//! An MQTT subscription as a [`Source`]: rumqttc's blocking client on the calling thread.
+//!
+//! - **Delivery**: QoS 1 on a persistent session (`clean_session = false`, a stable client id),
+//!   so the broker queues what is published while streamcert is away. Without a checkpoint,
+//!   each message is acknowledged as it arrives. With one, acknowledgements wait until the
+//!   rows they carried are in a written checkpoint ([`Source::committed`]); at most
+//!   `max_unacked` wait ([`Source::commit_due`] asks for a checkpoint then), so a process
+//!   killed at any instant is redelivered exactly what its last checkpoint lacks, and
+//!   `--resume` passes over what it already holds by time.
+//! - **Outages**: a lost connection is retried with a doubling wait (`reconnect_min` to
+//!   `reconnect_max`), the next broker of `servers` each time; the process keeps running. On
+//!   reconnection the broker says whether it kept the session: if it did, what was published
+//!   meanwhile arrives and the stream goes on; if not, messages may be lost, so a gap is
+//!   yielded ([`Next::Gap`]) and the certifier restarts its windows.
+//! - **Bad payloads**: counted by kind, reported with the topic and an excerpt, yielded as
+//!   [`Next::Bad`] (every gate closes for that sample, as a skipped row in a file).
+//! - **Silence**: a topic that delivered nothing within `silent_after` is named on stderr
+//!   and in the summary.
+
+use std::collections::HashMap;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender};
+
+use rumqttc::{Client, ConnectionError, Event, MqttOptions, Packet, Publish, QoS};
+use streamcert_pipeline::input::Sample;
+use streamcert_pipeline::source::{Next, Source, SourceReport};
+use streamcert_pipeline::{CliError, RowError};
+
+use crate::align::{Aligned, Aligner};
+use crate::config::{Layout, MqttConfig, Server};
+use crate::payload::{PayloadError, parse_row, parse_signal};
+
+/// How long one wait for the broker lasts before the source checks its clocks (silence,
+/// idle timeout).
+const POLL: Duration = Duration::from_millis(50);
+
+/// A live MQTT source (see the module docs).
+pub struct MqttSource {
+    client: Client,
+    /// The connection's events, from the thread that drives it.
+    events: Receiver<Result<Event, ConnectionError>>,
+    /// Acknowledgements the client's queue had no room for yet, in order.
+    to_ack: std::collections::VecDeque<Publish>,
+    cfg: MqttConfig,
+    report: SourceReport,
+    /// With a checkpoint: messages not yet acknowledged, in order of arrival.
+    unacked: Vec<Publish>,
+    manual_acks: bool,
+    /// The last row's time (whole-row topics).
+    last_t: Option<f64>,
+    /// Per-signal topics: the aligner, each topic's signal, and the row buffer.
+    aligner: Option<Aligner>,
+    signal_of: HashMap<String, usize>,
+    row: Vec<f64>,
+    outputs: usize,
+    /// Topics (or filters) and whether each has delivered.
+    topics: Vec<(String, bool)>,
+    started: Instant,
+    last_message: Instant,
+    silence_reported: bool,
+    /// Connection state: ever connected, connected now, the server in use.
+    ever_connected: bool,
+    connected: bool,
+    server: usize,
+    /// A gap to yield before anything else.
+    gap: Option<String>,
+    /// Subscriptions acknowledged since the last request.
+    subacks: usize,
+    /// Messages received while waiting for the subscriptions.
+    early: std::collections::VecDeque<Publish>,
+}
+
+impl MqttSource {
+    /// Connect (lazily: the first [`next_into`](Source::next_into) does) and subscribe.
+    /// `outputs` is the number of outputs (the signals' first columns); `checkpointing`
+    /// holds acknowledgements for the checkpoints.
+    ///
+    /// # Errors
+    /// A TLS file that cannot be read.
+    pub fn new(cfg: MqttConfig, outputs: usize, checkpointing: bool) -> Result<Self, CliError> {
+        let (client, events) = connect(&cfg, 0, checkpointing)?;
+        let (aligner, signal_of, topics) = match &cfg.layout {
+            Layout::Rows { topics, .. } => {
+                (None, HashMap::new(), topics.iter().map(|t| (t.clone(), false)).collect())
+            }
+            Layout::Signals { signals, rule, .. } => {
+                let aligner = Aligner::new(signals.len(), *rule)
+                    .map_err(|m| CliError::Config { path: "[source]".into(), message: m })?;
+                let of = signals.iter().enumerate().map(|(i, s)| (s.topic.clone(), i)).collect();
+                let topics = signals.iter().map(|s| (s.topic.clone(), false)).collect();
+                (Some(aligner), of, topics)
+            }
+        };
+        let report = SourceReport { name: describe(&cfg), ..SourceReport::default() };
+        let n = signal_of.len();
+        let now = Instant::now();
+        let source = Self {
+            client,
+            events,
+            to_ack: std::collections::VecDeque::new(),
+            cfg,
+            report,
+            unacked: Vec::new(),
+            manual_acks: checkpointing,
+            last_t: None,
+            aligner,
+            signal_of,
+            row: vec![0.0; n],
+            outputs,
+            topics,
+            started: now,
+            last_message: now,
+            silence_reported: false,
+            ever_connected: false,
+            connected: false,
+            server: 0,
+            gap: None,
+            early: std::collections::VecDeque::new(),
+            subacks: 0,
+        };
+        // The subscriptions are asked for once the broker answers ([`Self::event`]): on every
+        // connection whose session the broker did not keep.
+        Ok(source)
+    }
+
+    /// Connect and wait until every topic's subscription is acknowledged, for at most
+    /// `timeout`: `true` once subscribed. Messages that arrive meanwhile (a persistent
+    /// session's queue) are kept for [`next_into`](Source::next_into). Without this, the first
+    /// `next_into` connects; a caller that must not miss messages published from now on
+    /// (a test, a script that starts its publisher next) calls it first.
+    pub fn wait_subscribed(&mut self, timeout: Duration) -> bool {
+        let deadline = Instant::now() + timeout;
+        let mut acked = 0;
+        while acked < self.topics.len() && Instant::now() < deadline {
+            match self.events.recv_timeout(POLL) {
+                Ok(Ok(Event::Incoming(Packet::SubAck(_)))) => {
+                    acked += 1;
+                    self.subscribed();
+                }
+                Ok(Ok(Event::Incoming(Packet::Publish(p)))) => self.early.push_back(p),
+                Ok(Ok(Event::Incoming(Packet::ConnAck(ack)))) => {
+                    if self.connack(ack.session_present).is_err() {
+                        return false;
+                    }
+                }
+                Ok(Ok(_) | Err(_)) | Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return false,
+            }
+        }
+        acked >= self.topics.len()
+    }
+
+    /// A subscription acknowledged: once all are, say so on stderr (an operator, or a script,
+    /// knows from then on that nothing published is missed).
+    fn subscribed(&mut self) {
+        self.subacks += 1;
+        if self.subacks == self.topics.len() {
+            let topics: Vec<&str> = self.topics.iter().map(|(t, _)| t.as_str()).collect();
+            eprintln!("source: {}: subscribed to {}", self.report.name, topics.join(", "));
+        }
+    }
+
+    /// Ask for the topics (queued until the connection is up).
+    fn subscribe(&mut self) -> Result<(), CliError> {
+        self.subacks = 0;
+        for (topic, _) in &self.topics {
+            self.client.subscribe(topic.clone(), QoS::AtLeastOnce).map_err(client_error)?;
+        }
+        Ok(())
+    }
+
+    /// The broker accepted a connection. After an outage, a broker that did not keep the
+    /// session may have lost messages: a gap. The topics are asked for on every connection
+    /// (asking again for a kept subscription changes nothing; a changed configuration's
+    /// topics are taken).
+    fn connack(&mut self, session_present: bool) -> Result<(), CliError> {
+        if self.ever_connected && !session_present {
+            self.gap = Some(format!(
+                "the broker {} did not keep the session: messages published during the \
+                 outage may be lost",
+                self.cfg.servers[self.server]
+            ));
+        }
+        self.ever_connected = true;
+        self.connected = true;
+        self.subscribe()
+    }
+
+    /// A connection event: `Some` to yield.
+    fn event(&mut self, event: Event, s: &mut Sample) -> Result<Option<Next>, CliError> {
+        match event {
+            Event::Incoming(Packet::ConnAck(ack)) => {
+                self.connack(ack.session_present)?;
+                Ok(None)
+            }
+            Event::Incoming(Packet::Publish(p)) => Ok(self.message(p, s)),
+            Event::Incoming(Packet::SubAck(_)) => {
+                self.subscribed();
+                Ok(None)
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// A lost or refused connection: counted and reported (the connection's thread waits
+    /// before trying again); with several brokers, the next is tried.
+    fn lost(&mut self, e: &ConnectionError) -> Result<(), CliError> {
+        if self.connected {
+            self.report.reconnects += 1;
+        }
+        self.connected = false;
+        // Unacknowledged messages belong to the session: redelivered if the broker keeps it.
+        self.unacked.clear();
+        self.to_ack.clear();
+        let server = &self.cfg.servers[self.server];
+        eprintln!("source: {server}: {e}; reconnecting");
+        if self.cfg.servers.len() > 1 {
+            self.server = (self.server + 1) % self.cfg.servers.len();
+            let (client, events) = connect(&self.cfg, self.server, self.manual_acks)?;
+            self.client = client;
+            self.events = events;
+            self.subscribe()?;
+        }
+        Ok(())
+    }
+
+    /// Send the acknowledgements waiting for room in the client's queue, in order.
+    fn flush_acks(&mut self) -> Result<(), CliError> {
+        while let Some(p) = self.to_ack.front() {
+            match self.client.try_ack(p) {
+                Ok(()) => {
+                    self.to_ack.pop_front();
+                }
+                Err(rumqttc::ClientError::TryRequest(_)) => return Ok(()),
+                Err(e) => return Err(client_error(e)),
+            }
+        }
+        Ok(())
+    }
+
+    /// One message: a row, a bad payload, or nothing yet (a signal's update, a redelivery);
+    /// acknowledged now, or held for the next checkpoint.
+    fn message(&mut self, p: Publish, s: &mut Sample) -> Option<Next> {
+        self.report.messages += 1;
+        self.last_message = Instant::now();
+        if let Some(seen) = self.topics.iter_mut().find(|(t, _)| rumqttc::matches(&p.topic, t)) {
+            seen.1 = true;
+        }
+        let next = self.parse(&p, s);
+        // Without a checkpoint the client acknowledges each message as it arrives.
+        if self.manual_acks {
+            self.unacked.push(p);
+        }
+        next
+    }
+
+    /// What a message yields.
+    fn parse(&mut self, p: &Publish, s: &mut Sample) -> Option<Next> {
+        match &self.cfg.layout {
+            Layout::Rows { format, fields, .. } => {
+                match parse_row(&p.payload, *format, fields, self.cfg.max_payload, s) {
+                    Ok(()) => self.ordered(s.t, p.dup, &p.payload),
+                    Err(e) => Some(self.bad(&p.topic, &e)),
+                }
+            }
+            Layout::Signals { signals, .. } => {
+                let i = *self.signal_of.get(&p.topic)?;
+                let sig = &signals[i];
+                let keys = (sig.time_key.as_str(), sig.value_key.as_str());
+                match parse_signal(&p.payload, sig.format, keys, now(), self.cfg.max_payload) {
+                    Ok((t, v)) => {
+                        let aligner = self.aligner.as_mut()?;
+                        if aligner.push(i, t, v).is_err() {
+                            if p.dup {
+                                self.report.redelivered += 1;
+                            } else {
+                                self.report.late += 1;
+                            }
+                        }
+                        None
+                    }
+                    Err(e) => Some(self.bad(&p.topic, &e)),
+                }
+            }
+        }
+    }
+
+    /// A whole row with time `t`: yielded if after the last, passed over if a redelivery,
+    /// bad otherwise.
+    fn ordered(&mut self, t: f64, dup: bool, payload: &[u8]) -> Option<Next> {
+        match self.last_t {
+            Some(last) if t <= last && dup => {
+                self.report.redelivered += 1;
+                None
+            }
+            Some(last) if t <= last => {
+                let what = format!("time {t} is not after the previous row's {last}");
+                let e = PayloadError::new("time_backwards", &what, payload);
+                Some(self.bad("", &e))
+            }
+            _ => {
+                self.last_t = Some(t);
+                self.report.rows += 1;
+                Some(Next::Row)
+            }
+        }
+    }
+
+    /// A bad payload: counted, named on stderr, yielded.
+    fn bad(&mut self, topic: &str, e: &PayloadError) -> Next {
+        self.report.count_bad(e.kind);
+        let topic = if topic.is_empty() { "(rows)" } else { topic };
+        Next::Bad(RowError {
+            file: format!("mqtt topic {topic}"),
+            line: self.report.messages,
+            column: None,
+            message: e.to_string(),
+        })
+    }
+
+    /// The aligner's next row or gap, into `s`.
+    fn aligned(&mut self, s: &mut Sample) -> Option<Next> {
+        let aligner = self.aligner.as_mut()?;
+        let next = aligner.pop(&mut self.row)?;
+        self.report.stale_rows = aligner.stale();
+        Some(match next {
+            Aligned::Row(t) => {
+                s.t = t;
+                s.y.clear();
+                s.y.extend_from_slice(&self.row[..self.outputs]);
+                s.u.clear();
+                s.u.extend_from_slice(&self.row[self.outputs..]);
+                s.line = self.report.messages;
+                self.report.rows += 1;
+                Next::Row
+            }
+            Aligned::Gap => {
+                self.report.gaps += 1;
+                Next::Gap("a signal was older than max_age or missing".into())
+            }
+        })
+    }
+
+    /// Name the topics that delivered nothing, once, after `silent_after`.
+    fn check_silence(&mut self) {
+        if self.silence_reported || self.started.elapsed() < self.cfg.silent_after {
+            return;
+        }
+        self.silence_reported = true;
+        let silent: Vec<String> =
+            self.topics.iter().filter(|(_, seen)| !seen).map(|(t, _)| t.clone()).collect();
+        if !silent.is_empty() {
+            eprintln!(
+                "source: nothing received after {:.0} s on {}",
+                self.cfg.silent_after.as_secs_f64(),
+                silent.join(", ")
+            );
+        }
+        self.report.silent = silent;
+    }
+}
+
+impl Source for MqttSource {
+    fn next_into(&mut self, s: &mut Sample) -> Option<Result<Next, CliError>> {
+        loop {
+            if let Some(why) = self.gap.take() {
+                self.report.gaps += 1;
+                return Some(Ok(Next::Gap(why)));
+            }
+            if let Some(next) = self.aligned(s) {
+                return Some(Ok(next));
+            }
+            if let Some(p) = self.early.pop_front() {
+                match self.message(p, s) {
+                    Some(next) => return Some(Ok(next)),
+                    None => continue,
+                }
+            }
+            self.check_silence();
+            if self.cfg.idle_timeout.is_some_and(|d| self.last_message.elapsed() >= d) {
+                return None;
+            }
+            if let Err(e) = self.flush_acks() {
+                return Some(Err(e));
+            }
+            match self.events.recv_timeout(POLL) {
+                Ok(Ok(event)) => match self.event(event, s) {
+                    Ok(Some(next)) => return Some(Ok(next)),
+                    Ok(None) => {}
+                    Err(e) => return Some(Err(e)),
+                },
+                Ok(Err(e)) => {
+                    if let Err(e) = self.lost(&e) {
+                        return Some(Err(e));
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                Err(RecvTimeoutError::Disconnected) => return None,
+            }
+        }
+    }
+
+    fn committed(&mut self) -> Result<(), CliError> {
+        // Never blocking: the connection's thread may be busy handing over messages; what
+        // finds no room is sent at the next call, still in order.
+        self.to_ack.extend(self.unacked.drain(..));
+        self.flush_acks()
+    }
+
+    fn commit_due(&self) -> bool {
+        self.manual_acks && self.unacked.len() >= self.cfg.max_unacked
+    }
+
+    fn report(&self) -> Option<SourceReport> {
+        let mut report = self.report.clone();
+        report.state = self.aligner.as_ref().and_then(|a| serde_json::to_value(a).ok());
+        Some(report)
+    }
+
+    fn restore(&mut self, report: &SourceReport) -> Result<(), CliError> {
+        let (Some(aligner), Some(state)) = (&mut self.aligner, &report.state) else {
+            return Ok(());
+        };
+        let bad = |message: String| CliError::Checkpoint { path: "[source]".into(), message };
+        let saved: Aligner = serde_json::from_value(state.clone())
+            .map_err(|e| bad(format!("the aligner's state does not parse: {e}")))?;
+        if saved.rule() != aligner.rule() || saved.signals() != aligner.signals() {
+            return Err(bad("the checkpoint was written with another [source.align]".into()));
+        }
+        *aligner = saved;
+        Ok(())
+    }
+}
+
+/// Seconds since the Unix epoch (a bare value's arrival time).
+fn now() -> f64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
+fn client_error(e: rumqttc::ClientError) -> CliError {
+    CliError::io("mqtt", std::io::Error::other(e.to_string()))
+}
+
+/// The source in words, without credentials.
+fn describe(cfg: &MqttConfig) -> String {
+    let servers: Vec<String> = cfg.servers.iter().map(Server::to_string).collect();
+    let what = match &cfg.layout {
+        Layout::Rows { topics, .. } => format!("{} row topic(s)", topics.len()),
+        Layout::Signals { signals, .. } => format!("{} signal topics", signals.len()),
+    };
+    format!("mqtt {} (client {}), {what}", servers.join(" "), cfg.client_id)
+}
+
+/// A client for the `i`-th server, and the events of its connection, driven on a thread of
+/// its own (so that the connection makes progress while the certifier works, and an
+/// acknowledgement never waits on the caller): each event is handed over through a bounded
+/// queue (a slow certifier holds the broker back rather than filling memory); after an error
+/// the thread waits, doubling from `reconnect_min` to `reconnect_max`, before the client
+/// reconnects. The thread ends when the client is dropped.
+fn connect(
+    cfg: &MqttConfig,
+    i: usize,
+    manual_acks: bool,
+) -> Result<(Client, Receiver<Result<Event, ConnectionError>>), CliError> {
+    let server = &cfg.servers[i];
+    let mut o = MqttOptions::new(cfg.client_id.clone(), server.host.clone(), server.port);
+    o.set_clean_session(!cfg.persistent_session);
+    o.set_keep_alive(Duration::from_secs(10));
+    o.set_manual_acks(manual_acks);
+    // Packets up to 16 times the payload limit are read whole, so that an oversized payload
+    // is named and counted (a larger packet is the client's protocol error: a reconnection).
+    o.set_max_packet_size(cfg.max_payload.saturating_mul(16).max(1 << 20), 64 * 1024);
+    if let Some((user, password)) = &cfg.credentials {
+        o.set_credentials(user.clone(), password.0.clone());
+    }
+    if server.tls || cfg.tls.is_some() {
+        o.set_transport(rumqttc::Transport::Tls(tls(cfg)?));
+    }
+    let (client, mut connection) = Client::new(o, cfg.max_unacked.max(16) * 4);
+    let (tx, rx): (SyncSender<_>, _) = std::sync::mpsc::sync_channel(1024);
+    let backoff = cfg.backoff;
+    std::thread::spawn(move || {
+        let mut wait = backoff.0;
+        while let Ok(event) = connection.recv() {
+            let failed = event.is_err();
+            if event.as_ref().is_ok_and(|e| matches!(e, Event::Incoming(Packet::ConnAck(_)))) {
+                wait = backoff.0;
+            }
+            if tx.send(event).is_err() {
+                break;
+            }
+            if failed {
+                std::thread::sleep(wait);
+                wait = (wait * 2).min(backoff.1);
+            }
+        }
+    });
+    Ok((client, rx))
+}
+
+/// The TLS configuration from the PEM files (rustls with the ring provider).
+fn tls(cfg: &MqttConfig) -> Result<rumqttc::TlsConfiguration, CliError> {
+    let files = cfg.tls.as_ref().ok_or_else(|| CliError::Config {
+        path: "[source]".into(),
+        message: "source.tls_ca: a TLS broker needs the CA certificate".into(),
+    })?;
+    let read = |p: &std::path::Path| {
+        std::fs::read(p).map_err(|e| CliError::io(format!("reading {}", p.display()), e))
+    };
+    // Installing the process's crypto provider a second time is refused, harmlessly.
+    let _ = rustls::crypto::ring::default_provider().install_default();
+    let client_auth = match &files.client {
+        Some((cert, key)) => Some((read(cert)?, read(key)?)),
+        None => None,
+    };
+    Ok(rumqttc::TlsConfiguration::Simple { ca: read(&files.ca)?, alpn: None, client_auth })
+}

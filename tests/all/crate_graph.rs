@@ -44,3 +44,21 @@ fn no_crate_depends_on_the_command_line_crate() {
     // The command line, the Python package, xtask and the root's benchmarks call the pipeline.
     assert!(pipeline_users >= 4, "{pipeline_users} crates use streamcert-pipeline");
 }
+
+/// Only the command line (and the root's benchmarks) link the live sources' MQTT client: the
+/// pipeline and the Python package read files, so a downstream user of either links none.
+#[test]
+fn only_the_command_line_links_the_live_sources() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for krate in ["streamcert-pipeline", "streamcert-python", "streamcert-certificate"] {
+        let text = std::fs::read_to_string(root.join("crates").join(krate).join("Cargo.toml"))
+            .expect("manifest");
+        let manifest: toml::Table = toml::from_str(&text).expect("a TOML manifest");
+        let deps = manifest.get("dependencies").and_then(toml::Value::as_table).expect("deps");
+        for client in ["streamcert-live", "rumqttc", "rumqttd"] {
+            assert!(!deps.contains_key(client), "{krate} links {client}");
+        }
+    }
+    let cli = std::fs::read_to_string(root.join("crates/streamcert-cli/Cargo.toml")).expect("cli");
+    assert!(cli.contains("streamcert-live"), "the command line reads live sources");
+}

@@ -78,6 +78,20 @@ pub(super) fn run_certify(
     Ok(verdict(require.require_certified, s.certified_at_end(&cfg.certifier)))
 }
 
+/// A configuration with a live `[source]` reads no `--input` file.
+fn one_input(input: &str, path: &str) -> Result<(), CliError> {
+    if input == "-" {
+        return Ok(());
+    }
+    Err(CliError::Config {
+        path: path.into(),
+        message: format!(
+            "the configuration reads a live [source]; --input {input} reads a file: give one \
+             or the other"
+        ),
+    })
+}
+
 /// `streamcert network`.
 pub(super) fn run_network(
     io: Stream,
@@ -115,7 +129,19 @@ pub(super) fn run_network(
                 .into(),
         });
     }
-    let s = if cluster.is_set() {
+    let s = if let Some(table) = &cfg.source {
+        one_input(&io.input, &path)?;
+        if cluster.is_set() {
+            return Err(CliError::Config {
+                path,
+                message: "a live [source] runs the network in one process (sites across \
+                          processes read files or pipes)"
+                    .into(),
+            });
+        }
+        let source = streamcert_live::open(table, &cfg.columns, opts.checkpoint.is_some())?;
+        network::run_source(&cfg, Box::new(source), "mqtt", &mut out, &opts)?
+    } else if cluster.is_set() {
         let Some(s) = run_cluster(&cfg, &io.input, &mut out, &opts, &cluster)? else {
             return Ok(Outcome::Done);
         };

@@ -32,3 +32,103 @@ fn the_simulated_plant_with_its_own_broker_is_certified_live() {
     assert!(err.contains("source: mqtt tcp://127.0.0.1"), "{err}");
     assert!(err.contains(" 0 bad"), "{err}");
 }
+
+/// The command of docs/live.md's code block whose first line is `# terminal N`, split into
+/// words, with `streamcert` dropped (the binary under test runs it).
+fn terminal(doc: &str, n: u8) -> Vec<String> {
+    let marker = format!("# terminal {n}:");
+    let mut lines = doc.lines().skip_while(|l| !l.starts_with(&marker));
+    lines.next().expect("the terminal's block");
+    let command = lines.next().expect("its command");
+    let words: Vec<String> = command.split_whitespace().map(String::from).collect();
+    assert_eq!(words[0], "streamcert");
+    words[1..].to_vec()
+}
+
+#[test]
+fn the_two_terminal_walk_through_of_docs_live_md_runs_as_written() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let doc = std::fs::read_to_string(root.join("docs/live.md")).unwrap();
+    // As written, but on a free port instead of 1883 (tests run in parallel, and a machine
+    // may run a broker of its own there), in the command and in the configuration.
+    let port = streamcert_live::broker::free_loopback().unwrap().port().to_string();
+    let on_port = |w: &String| w.replace("1883", &port);
+    let plant_args: Vec<String> = terminal(&doc, 1).iter().map(on_port).collect();
+    let mut certify_args: Vec<String> = terminal(&doc, 2).iter().map(on_port).collect();
+    let config = root.join("examples/data/g5_live.toml");
+    let text = std::fs::read_to_string(&config).unwrap().replace("1883", &port);
+    let local = common::tmp("live-docs.toml");
+    std::fs::write(&local, text).unwrap();
+    let evidence = common::tmp("live-docs-evidence.csv");
+    for w in &mut certify_args {
+        if w.as_str() == "examples/data/g5_live.toml" {
+            *w = local.display().to_string();
+        } else if w.as_str() == "evidence.csv" {
+            *w = evidence.display().to_string();
+        }
+    }
+    let mut plant = bin().args(&plant_args).stderr(Stdio::piped()).spawn().unwrap();
+    let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
+    let line = plant_err.next().unwrap().unwrap();
+    assert!(line.starts_with("broker: serving MQTT on"), "{line}");
+    let args: Vec<&str> = certify_args.iter().map(String::as_str).collect();
+    let certify = Certify::start_args(&args);
+    let (status, err) = certify.finish();
+    plant.kill().unwrap();
+    plant.wait().unwrap();
+    assert!(status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("verdict: ")), "{err}");
+    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    assert!(source.contains(" 0 bad, 0 late") && source.contains(" 0 gaps"), "{source}");
+    let rows = std::fs::read_to_string(&evidence).unwrap().lines().count();
+    assert!(rows > 1000, "{rows} evidence rows");
+}
+
+#[test]
+fn a_network_read_from_a_broker_writes_the_files_epochs_bit_for_bit() {
+    let port = streamcert_live::broker::free_loopback().unwrap();
+    streamcert_live::broker::serve(port).unwrap();
+    let port = port.port();
+    let example = common::network_example();
+    let sim = bin()
+        .args(["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"])
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let csv = common::text(&sim.stdout);
+    // The file's run.
+    let (file_cfg, data, want) =
+        (common::tmp("net-file.toml"), common::tmp("net.csv"), common::tmp("net-want.csv"));
+    std::fs::write(&file_cfg, &example).unwrap();
+    std::fs::write(&data, &csv).unwrap();
+    let path = |p: &std::path::Path| p.display().to_string();
+    let status = bin()
+        .args(["network", "--config", &path(&file_cfg), "--input", &path(&data)])
+        .args(["--output", &path(&want)])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    // The same rows, one JSON object per message, through the broker.
+    let live_cfg = common::tmp("net-live.toml");
+    let source = format!(
+        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\n\
+         client_id = \"streamcert-net\"\ntopics = [\"g5/net\"]\nidle_timeout = 2.0\n"
+    );
+    std::fs::write(&live_cfg, example + &source).unwrap();
+    let got = common::tmp("net-got.csv");
+    let run =
+        Certify::start_args(&["network", "--config", &path(&live_cfg), "--output", &path(&got)]);
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows: Vec<Vec<f64>> =
+        lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    let opts = common::live::publisher(port, "g5/net", "pub-net");
+    streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    let (status, err) = run.finish();
+    assert!(status.success(), "{err}");
+    assert!(err.lines().any(|l| l.contains(" messages, ") && l.contains(" 0 bad")), "{err}");
+    let (got, want) =
+        (std::fs::read_to_string(&got).unwrap(), std::fs::read_to_string(&want).unwrap());
+    assert!(want.lines().count() > 10, "{want}");
+    assert!(got == want, "the live network's epochs differ from the file's");
+}

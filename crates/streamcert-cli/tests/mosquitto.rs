@@ -25,15 +25,17 @@ struct Mosquitto {
 
 impl Mosquitto {
     fn start(port: u16) -> Self {
+        let conf = format!(
+            "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
+             max_queued_messages 0\n"
+        );
+        Self::start_with(port, &conf)
+    }
+
+    /// Mosquitto with the configuration `text`, waited for on `port`.
+    fn start_with(port: u16, text: &str) -> Self {
         let conf = tmp(&format!("mosquitto-{port}.conf"));
-        std::fs::write(
-            &conf,
-            format!(
-                "listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n\
-                 max_queued_messages 0\n"
-            ),
-        )
-        .unwrap();
+        std::fs::write(&conf, text).unwrap();
         let child = Command::new("mosquitto")
             .args(["-c", conf.to_str().unwrap()])
             .stdout(Stdio::null())
@@ -141,4 +143,63 @@ fn a_broker_restarted_mid_run_is_a_gap_and_the_process_goes_on() {
     let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
     assert!(source.contains(" 1 gaps") && source.contains(" 1 reconnects"), "{source}");
     assert!(err.contains("did not keep the session"), "{err}");
+}
+
+/// Run `program args` in `dir`, failing the test on a non-zero exit.
+fn sh(dir: &std::path::Path, program: &str, args: &[&str]) {
+    let out = Command::new(program).args(args).current_dir(dir).output().expect(program);
+    assert!(out.status.success(), "{program} {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+}
+
+/// A CA and a server certificate for 127.0.0.1 (openssl, from Debian's packages) in a
+/// scratch directory; its path.
+fn tls_files() -> std::path::PathBuf {
+    let dir = tmp("tls");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("ext.cnf"), "subjectAltName=IP:127.0.0.1\n").unwrap();
+    for command in [
+        "req -x509 -newkey rsa:2048 -nodes -days 2 -keyout ca.key -out ca.pem -subj /CN=streamcert-test-CA",
+        "req -newkey rsa:2048 -nodes -keyout server.key -out server.csr -subj /CN=127.0.0.1",
+        "x509 -req -in server.csr -CA ca.pem -CAkey ca.key -CAcreateserial -out server.pem -days 2 -extfile ext.cnf",
+    ] {
+        sh(&dir, "openssl", &command.split(' ').collect::<Vec<_>>());
+    }
+    // Mosquitto started as root reads its files as the `mosquitto` user: a test key may be
+    // world-readable.
+    sh(&dir, "chmod", &["644", "server.key"]);
+    dir
+}
+
+#[test]
+fn tls_with_a_password_from_a_file_certifies_and_never_shows_the_password() {
+    let dir = tls_files();
+    let secret = "pw-7f3a-never-shown";
+    sh(&dir, "mosquitto_passwd", &["-b", "-c", "passwd", "operator", secret]);
+    std::fs::write(dir.join("password"), format!("{secret}\n")).unwrap();
+    // One plain listener for the plant, one TLS listener with passwords for streamcert.
+    let (plain, tls) = (free_port(), free_port());
+    let d = dir.display();
+    let conf = format!(
+        "per_listener_settings true\nlistener {plain} 127.0.0.1\nallow_anonymous true\n\
+         listener {tls} 127.0.0.1\nallow_anonymous false\npassword_file {d}/passwd\n\
+         cafile {d}/ca.pem\ncertfile {d}/server.pem\nkeyfile {d}/server.key\n"
+    );
+    let broker = Mosquitto::start_with(plain, &conf);
+    let config = tmp("live-tls.toml");
+    let source = format!(
+        "\n[source]\nkind = \"mqtt\"\nservers = [\"ssl://127.0.0.1:{tls}\"]\n\
+         client_id = \"streamcert-tls\"\ntopics = [\"g5/tls\"]\nidle_timeout = 2.0\n\
+         tls_ca = \"{d}/ca.pem\"\nusername = \"operator\"\npassword_file = \"{d}/password\"\n"
+    );
+    std::fs::write(&config, streamcert_pipeline::config::g5_node_b() + &source).unwrap();
+    let summary = tmp("live-tls-summary.json");
+    let certify =
+        Certify::start(&config, &["--output", "/dev/null", "--summary", summary.to_str().unwrap()]);
+    let (_, header, rows) = g5("500");
+    publish::publish(&publisher(broker.port, "g5/tls", "pub-tls"), &header, 0, rows).unwrap();
+    let (status, err) = certify.finish();
+    assert!(status.success(), "{err}");
+    let json = std::fs::read_to_string(&summary).unwrap();
+    assert!(json.contains("\"rows\":501") || json.contains("\"rows\": 501"), "{json}");
+    assert!(!err.contains(secret) && !json.contains(secret), "the password was shown");
 }

@@ -35,3 +35,23 @@ pub use align::{AlignRule, Aligned, Aligner};
 pub use config::{SourceConfig, parse};
 #[cfg(feature = "mqtt")]
 pub use mqtt::MqttSource;
+
+/// The live source a configuration's `[source]` table names, for rows of `columns` (a
+/// `certify` configuration's, or a network's wide columns): parsed, checked and connected
+/// lazily. `checkpointing` holds acknowledgements for the run's checkpoints.
+///
+/// # Errors
+/// [`CliError::Config`](streamcert_pipeline::CliError::Config) naming the key at fault; a TLS
+/// file that cannot be read.
+#[cfg(feature = "mqtt")]
+pub fn open(
+    table: &toml::Table,
+    columns: &streamcert_pipeline::config::Columns,
+    checkpointing: bool,
+) -> Result<MqttSource, streamcert_pipeline::CliError> {
+    let cfg = parse(table, columns).map_err(|message| streamcert_pipeline::CliError::Config {
+        path: "[source]".into(),
+        message,
+    })?;
+    MqttSource::new(cfg.mqtt, columns.outputs.len(), checkpointing)
+}

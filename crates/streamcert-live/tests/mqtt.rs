@@ -306,3 +306,22 @@ fn a_broker_that_goes_away_is_reconnected_and_the_run_goes_on() {
         assert!(summary.gaps >= 1);
     }
 }
+
+#[test]
+fn a_topic_that_delivers_nothing_is_named() {
+    let port = broker();
+    let (_, header, rows) = g5(200);
+    let source_text = format!(
+        "kind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\nclient_id = \"silent\"\n\
+         topics = [\"g5/live\", \"g5/dead\"]\nidle_timeout = 1.5\nsilent_after = 0.5\n"
+    );
+    let cfg = config(&source_text);
+    let mut src = source(&cfg);
+    let opts = publisher(port, "g5/live", "pub-silent", Layout::Rows);
+    publish::publish(&opts, &header, 0, rows).unwrap();
+    let (_, summary) = live_run(&cfg, &mut src);
+    let report = summary.source.unwrap();
+    assert_eq!(report.rows, 201);
+    assert_eq!(report.silent, vec!["g5/dead".to_string()]);
+    assert!(report.line().contains("silent: g5/dead"), "{}", report.line());
+}

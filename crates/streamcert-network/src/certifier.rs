@@ -147,6 +147,15 @@ impl NetworkCertifier {
         Ok(ev)
     }
 
+    /// Declare that subsystem `i`'s samples are missing before its next one (a live source's
+    /// outage): its certifier's next sample starts new windows
+    /// ([`Certifier::gap`](streamcert_certificate::Certifier::gap)). Out of range, nothing.
+    pub fn gap(&mut self, i: usize) {
+        if let Some(c) = self.certifiers.get_mut(i) {
+            c.gap();
+        }
+    }
+
     /// Compose every epoch up to time `t` (for example at the end of a stream, or on a clock
     /// tick when no sample arrives: silent subsystems then turn stale).
     ///

@@ -34,13 +34,16 @@ pub(crate) struct Certify {
 impl Certify {
     /// Start `certify --config config <args>` and wait until it says it is subscribed.
     pub(crate) fn start(config: &Path, args: &[&str]) -> Self {
-        let mut child = bin()
-            .args(["certify", "--config", config.to_str().unwrap()])
-            .args(args)
-            .stdout(Stdio::null())
-            .stderr(Stdio::piped())
-            .spawn()
-            .unwrap();
+        let mut all = vec!["certify", "--config", config.to_str().unwrap()];
+        all.extend_from_slice(args);
+        Self::start_args(&all)
+    }
+
+    /// Start `streamcert <args>` (a certify on a live source) and wait until it says it is
+    /// subscribed.
+    pub(crate) fn start_args(args: &[&str]) -> Self {
+        let mut child =
+            bin().args(args).stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
         let stderr = BufReader::new(child.stderr.take().unwrap());
         let (tx, lines) = std::sync::mpsc::channel();
         std::thread::spawn(move || {

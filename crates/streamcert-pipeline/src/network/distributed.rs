@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_timely::{ComposerState, Output, Placement, Resume, Row, SiteState, TimelyError};
 
 use super::config::NetConfig;
-use super::input::Rows;
+use super::input::{Item, Rows};
 use super::output::EpochWriter;
 use super::{NetOptions, NetSummary, estimated_columns};
 use crate::output::Header;
@@ -193,6 +193,13 @@ impl<R: Read> Iterator for RowIter<R> {
             return Some(Err(e));
         }
         let next = self.rows.as_mut()?.next(&mut self.values, &mut self.items)?;
+        // A site reads a file or a pipe, whose rows are rows (a live source is refused
+        // before the run for sites).
+        let next = next.and_then(|item| match item {
+            Item::Row(line, t) => Ok((line, t)),
+            Item::Gap(why) => Err(CliError::Input { file: "input".into(), message: why }),
+            Item::Bad(e) => Err(CliError::Row(e)),
+        });
         Some(next.map(|(line, t)| {
             Row {
                 line,

@@ -5,8 +5,18 @@
 use std::io::Read;
 
 use super::config::{InputLayout, NetConfig};
-use crate::CliError;
 use crate::input::{RecordReader, Sample, SampleReader, read_error};
+use crate::source::{Next, Source};
+use crate::{CliError, RowError};
+
+/// What the input yielded next: a row `(line, t)` (its values and items filled), a gap
+/// before the next row (a live source's outage: every subsystem in the rows restarts its
+/// windows), or a bad payload (a live source's; skipped).
+pub(super) enum Item {
+    Row(u64, f64),
+    Gap(String),
+    Bad(RowError),
+}
 
 /// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
 /// the row, `(index, start of its outputs in values, p, m)`.
@@ -19,9 +29,28 @@ pub(super) enum Rows<R: Read> {
         ids: Vec<usize>,
     },
     Long(LongReader<R>),
+    /// Wide rows from a live source (`streamcert-live`).
+    Live {
+        source: Box<dyn Source>,
+        sample: Sample,
+        dims: Vec<(usize, usize)>,
+    },
 }
 
 impl<R: Read> Rows<R> {
+    /// Wide rows of every subsystem from a live source.
+    pub(super) fn live(cfg: &NetConfig, source: Box<dyn Source>) -> Self {
+        Self::Live { source, sample: Sample::default(), dims: cfg.dims.clone() }
+    }
+
+    /// The live source, if the rows come from one (for its acknowledgements).
+    pub(super) fn source(&mut self) -> Option<&mut dyn Source> {
+        match self {
+            Self::Live { source, .. } => Some(source.as_mut()),
+            _ => None,
+        }
+    }
+
     pub(super) fn new(cfg: &NetConfig, input: R, name: &str) -> Result<Self, CliError> {
         Ok(match cfg.layout {
             InputLayout::Wide => Self::Wide {
@@ -74,7 +103,7 @@ impl<R: Read> Rows<R> {
         &mut self,
         values: &mut Vec<f64>,
         items: &mut Vec<(usize, usize, usize, usize)>,
-    ) -> Option<Result<(u64, f64), CliError>> {
+    ) -> Option<Result<Item, CliError>> {
         values.clear();
         items.clear();
         match self {
@@ -82,19 +111,41 @@ impl<R: Read> Rows<R> {
                 if let Err(e) = reader.next_into(sample)? {
                     return Some(Err(e));
                 }
-                // The reader gives all outputs, then all inputs, in subsystem order.
-                let (mut yo, mut uo) = (0, 0);
-                for (&i, &(p, m)) in ids.iter().zip(dims.iter()) {
-                    items.push((i, values.len(), p, m));
-                    values.extend_from_slice(&sample.y[yo..yo + p]);
-                    values.extend_from_slice(&sample.u[uo..uo + m]);
-                    yo += p;
-                    uo += m;
-                }
-                Some(Ok((sample.line, sample.t)))
+                split(sample, dims, |k| ids[k], values, items);
+                Some(Ok(Item::Row(sample.line, sample.t)))
             }
-            Self::Long(reader) => reader.next(values, items),
+            Self::Long(reader) => {
+                reader.next(values, items).map(|r| r.map(|(l, t)| Item::Row(l, t)))
+            }
+            Self::Live { source, sample, dims } => Some(match source.next_into(sample)? {
+                Ok(Next::Row) => {
+                    split(sample, dims, |k| k, values, items);
+                    Ok(Item::Row(sample.line, sample.t))
+                }
+                Ok(Next::Gap(why)) => Ok(Item::Gap(why)),
+                Ok(Next::Bad(e)) => Ok(Item::Bad(e)),
+                Err(e) => Err(e),
+            }),
         }
+    }
+}
+
+/// A wide row's values per subsystem: the sample holds all outputs, then all inputs, in
+/// subsystem order; `id(k)` is the `k`-th subsystem's index.
+fn split(
+    sample: &Sample,
+    dims: &[(usize, usize)],
+    id: impl Fn(usize) -> usize,
+    values: &mut Vec<f64>,
+    items: &mut Vec<(usize, usize, usize, usize)>,
+) {
+    let (mut yo, mut uo) = (0, 0);
+    for (k, &(p, m)) in dims.iter().enumerate() {
+        items.push((id(k), values.len(), p, m));
+        values.extend_from_slice(&sample.y[yo..yo + p]);
+        values.extend_from_slice(&sample.u[uo..uo + m]);
+        yo += p;
+        uo += m;
     }
 }
 

@@ -22,7 +22,7 @@ use streamcert_network::NetworkCertifier;
 
 pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse, template};
 pub use distributed::{Cluster, Reopen, SiteReport, run_timely};
-use input::Rows;
+use input::{Item, Rows};
 use output::EpochWriter;
 pub use verdict::{summary_json, summary_text, verdict_line};
 
@@ -61,6 +61,12 @@ pub struct NetSummary {
     /// Why the gate was closed at the last epoch, in words (`None`: open).
     #[serde(default)]
     pub last_reason: Option<String>,
+    /// Bad payloads of a live source, skipped.
+    #[serde(default)]
+    pub skipped: u64,
+    /// A live source's counts ([`crate::source::SourceReport`]); `None` for a file or a pipe.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<crate::source::SourceReport>,
     /// The epochs of the picture (`--plot`), not checkpointed.
     #[serde(skip)]
     pub trace: Option<crate::picture::Trace>,
@@ -141,6 +147,45 @@ pub fn run<R: Read, W: Write>(
     out: W,
     opts: &NetOptions,
 ) -> Result<NetSummary, CliError> {
+    run_rows(cfg, Rows::new(cfg, input, input_name)?, input_name, out, opts)
+}
+
+/// Run the network over wide rows from a live source (`streamcert-live`: every subsystem's
+/// columns in one message), in one process, every epoch row flushed. A gap the source
+/// declares starts new windows in every subsystem; a bad payload is counted and skipped.
+/// With a checkpoint, one is written every `checkpoint_every` rows and whenever the source
+/// asks, and the source acknowledges only what a written checkpoint holds.
+///
+/// # Errors
+/// As [`run`], and a source's error that ends its stream.
+pub fn run_source<W: Write>(
+    cfg: &NetConfig,
+    source: Box<dyn crate::source::Source>,
+    input_name: &str,
+    out: W,
+    opts: &NetOptions,
+) -> Result<NetSummary, CliError> {
+    if cfg.layout != InputLayout::Wide {
+        return Err(CliError::Config {
+            path: input_name.into(),
+            message: "a live [source] gives wide rows (every subsystem's columns in one \
+                      message): set [network] input = \"wide\""
+                .into(),
+        });
+    }
+    let opts = NetOptions { flush: Flush::EachRow, ..opts.clone() };
+    run_rows(cfg, Rows::<std::io::Empty>::live(cfg, source), input_name, out, &opts)
+}
+
+/// The run over `rows`: the network built (or resumed), every row certified, the epochs
+/// written, the checkpoints and the picture.
+fn run_rows<R: Read, W: Write>(
+    cfg: &NetConfig,
+    mut rows: Rows<R>,
+    input_name: &str,
+    out: W,
+    opts: &NetOptions,
+) -> Result<NetSummary, CliError> {
     let (mut net, mut summary) = match &opts.resume {
         Some(path) => load(path, cfg)?,
         None => (
@@ -155,8 +200,9 @@ pub fn run<R: Read, W: Write>(
     if opts.plot.is_some() {
         summary.trace = Some(crate::picture::Trace::new());
     }
-    let mut rows = Rows::new(cfg, input, input_name)?;
-    let io = |e: std::io::Error| CliError::io("writing output", e);
+    if let (Some(source), Some(report)) = (rows.source(), &summary.source) {
+        source.restore(report)?;
+    }
     let estimated = estimated_columns(&cfg.network, &names);
     let mut writer = EpochWriter::new(
         out,
@@ -165,37 +211,113 @@ pub fn run<R: Read, W: Write>(
         Header::when_fresh(opts.resume.as_ref()),
         estimated,
     );
-    // Resuming: rows at the start of the input whose samples every subsystem in them already
-    // holds (time not after its newest) are a replay and are passed over, counted.
-    let mut replaying = opts.resume.is_some();
-    let mut failed: Option<CliError> = None;
-    let (mut values, mut items) = (Vec::new(), Vec::new());
-    while let Some(next) = rows.next(&mut values, &mut items) {
-        let (line, t) = next?;
-        if replaying {
+    let mut run = NetRun { net: &mut net, summary: &mut summary, names: &names, input_name };
+    let outcome = run.rows(&mut rows, &mut writer, opts);
+    summary.source = rows.source().and_then(|s| s.report());
+    outcome?;
+    writer.flush().map_err(|e| CliError::io("writing output", e))?;
+    if let Some(path) = &opts.checkpoint {
+        save(path, &net, &summary)?;
+        if let Some(source) = rows.source() {
+            source.committed()?;
+        }
+    }
+    if let (Some(path), Some(trace)) = (&opts.plot, &summary.trace) {
+        trace.draw_network(path, cfg.network.margin, &names)?;
+    }
+    Ok(summary)
+}
+
+/// The certifying side of one `network` run.
+struct NetRun<'a> {
+    net: &'a mut NetworkCertifier,
+    summary: &'a mut NetSummary,
+    names: &'a [String],
+    input_name: &'a str,
+}
+
+impl NetRun<'_> {
+    /// Every row of `rows` certified and its epochs written, with the due checkpoints.
+    fn rows<R: Read, W: Write>(
+        &mut self,
+        rows: &mut Rows<R>,
+        writer: &mut EpochWriter<W>,
+        opts: &NetOptions,
+    ) -> Result<(), CliError> {
+        let io = |e: std::io::Error| CliError::io("writing output", e);
+        // Resuming: rows at the start of the input whose samples every subsystem in them
+        // already holds (time not after its newest) are a replay and are passed over, counted.
+        let mut replaying = opts.resume.is_some();
+        let (mut values, mut items) = (Vec::new(), Vec::new());
+        while let Some(next) = rows.next(&mut values, &mut items) {
+            let certified = match next? {
+                Item::Row(line, t) => self.row(line, t, &values, &items, writer, &mut replaying)?,
+                Item::Gap(why) => {
+                    eprintln!("gap: {why}; every subsystem's windows restart at the next row");
+                    (0..self.names.len()).for_each(|i| self.net.gap(i));
+                    false
+                }
+                Item::Bad(e) => {
+                    eprintln!("skipped: {e}");
+                    self.summary.skipped += 1;
+                    false
+                }
+            };
+            let every =
+                matches!(opts.checkpoint_every, Some(n) if n > 0 && self.summary.rows % n == 0);
+            let asked = rows.source().is_some_and(|s| s.commit_due());
+            if let Some(path) = opts.checkpoint.as_ref().filter(|_| (certified && every) || asked) {
+                writer.flush().map_err(io)?;
+                self.summary.source = rows.source().and_then(|s| s.report());
+                save(path, self.net, self.summary)?;
+                if let Some(source) = rows.source() {
+                    source.committed()?;
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// One row at time `t` (`items` index `values` per subsystem): `true` once certified,
+    /// `false` when passed over as a replay.
+    fn row<W: Write>(
+        &mut self,
+        line: u64,
+        t: f64,
+        values: &[f64],
+        items: &[(usize, usize, usize, usize)],
+        writer: &mut EpochWriter<W>,
+        replaying: &mut bool,
+    ) -> Result<bool, CliError> {
+        if *replaying {
             let held = |i: usize| {
-                net.subsystem(i).and_then(|c| c.regression().last_time()).is_some_and(|l| t <= l)
+                self.net
+                    .subsystem(i)
+                    .and_then(|c| c.regression().last_time())
+                    .is_some_and(|l| t <= l)
             };
             if items.iter().all(|&(i, ..)| held(i)) {
-                summary.replayed += 1;
-                continue;
+                self.summary.replayed += 1;
+                return Ok(false);
             }
-            replaying = false;
+            *replaying = false;
         }
-        summary.rows += 1;
-        summary.last_time = Some(t);
-        for &(i, start, p, m) in &items {
+        self.summary.rows += 1;
+        self.summary.last_time = Some(t);
+        let mut failed: Option<CliError> = None;
+        for &(i, start, p, m) in items {
             let (y, u) = (&values[start..start + p], &values[start + p..start + p + m]);
-            let pushed = net.push(i, t, y, u, |r| {
+            let (names, summary) = (self.names, &mut *self.summary);
+            let pushed = self.net.push(i, t, y, u, |r| {
                 if failed.is_none() {
-                    if let Err(e) = writer.write(r, &names, &mut summary) {
-                        failed = Some(io(e));
+                    if let Err(e) = writer.write(r, names, summary) {
+                        failed = Some(CliError::io("writing output", e));
                     }
                 }
             });
             if let Err(e) = pushed {
                 return Err(CliError::Row(crate::RowError {
-                    file: input_name.into(),
+                    file: self.input_name.into(),
                     line,
                     column: None,
                     message: e.to_string(),
@@ -205,19 +327,6 @@ pub fn run<R: Read, W: Write>(
                 return Err(e);
             }
         }
-        if let (Some(path), Some(every)) = (&opts.checkpoint, opts.checkpoint_every) {
-            if every > 0 && summary.rows % every == 0 {
-                writer.flush().map_err(io)?;
-                save(path, &net, &summary)?;
-            }
-        }
+        Ok(true)
     }
-    writer.flush().map_err(io)?;
-    if let Some(path) = &opts.checkpoint {
-        save(path, &net, &summary)?;
-    }
-    if let (Some(path), Some(trace)) = (&opts.plot, &summary.trace) {
-        trace.draw_network(path, cfg.network.margin, &names)?;
-    }
-    Ok(summary)
 }

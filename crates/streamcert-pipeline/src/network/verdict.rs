@@ -126,7 +126,7 @@ pub fn verdict_line(cfg: &NetworkConfig, s: &NetSummary) -> String {
 /// The summary as text (stderr): the verdict line, then the counts.
 #[must_use]
 pub fn summary_text(cfg: &NetworkConfig, s: &NetSummary) -> String {
-    format!(
+    let mut text = format!(
         "{}\nsummary: {} rows ({} replayed), {} epochs, certified in {}, network gate open in {} \
          ({})",
         verdict_line(cfg, s),
@@ -136,7 +136,12 @@ pub fn summary_text(cfg: &NetworkConfig, s: &NetSummary) -> String {
         s.certified,
         s.open,
         s.first_open.map_or("never opened".into(), |t| format!("first at t = {}", Sig(t))),
-    )
+    );
+    if let Some(report) = &s.source {
+        text.push('\n');
+        text.push_str(&report.line());
+    }
+    text
 }
 
 /// The summary as the JSON object `network --summary FILE` writes: the verdict line first,
@@ -154,6 +159,8 @@ pub fn summary_json(cfg: &NetworkConfig, s: &NetSummary) -> serde_json::Value {
         "subsystems": cfg.subsystems.len(),
         "rows": s.rows,
         "replayed": s.replayed,
+        "skipped": s.skipped,
+        "source": s.source,
         "epochs": s.epochs,
         "certified_epochs": s.certified,
         "open_epochs": s.open,

@@ -62,6 +62,15 @@ impl Drop for Mosquitto {
     }
 }
 
+/// Wait (30 s at most) until the evidence file `path` holds `n` rows; fail saying `what`.
+fn wait_rows(path: &std::path::Path, n: usize, what: &str) {
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while rows_of(path).len() < n {
+        assert!(Instant::now() < deadline, "{what}");
+        std::thread::sleep(Duration::from_millis(5));
+    }
+}
+
 fn free_port() -> u16 {
     streamcert_live::broker::free_loopback().unwrap().port()
 }
@@ -82,11 +91,7 @@ fn killed_with_sigkill_and_resumed_the_rows_equal_an_uninterrupted_run() {
     publish::publish(&publisher(broker.port, "g5/kill", "pub-kill-1"), &header, 0, head.to_vec())
         .unwrap();
     // Kill it mid-stream, once it has certified some of what was published.
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while rows_of(&out1).len() < 700 {
-        assert!(Instant::now() < deadline, "the first run certified too little");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    wait_rows(&out1, 700, "the first run certified too little");
     first.kill();
     // The plant goes on publishing while streamcert is down; the broker queues it for the
     // persistent session.
@@ -123,11 +128,7 @@ fn a_broker_restarted_mid_run_is_a_gap_and_the_process_goes_on() {
     let (before, after) = rows.split_at(1000);
     publish::publish(&publisher(port, "g5/restart", "pub-r1"), &header, 0, before.to_vec())
         .unwrap();
-    let deadline = Instant::now() + Duration::from_secs(30);
-    while rows_of(&out).len() < 1000 {
-        assert!(Instant::now() < deadline, "the rows before the restart were not certified");
-        std::thread::sleep(Duration::from_millis(5));
-    }
+    wait_rows(&out, 1000, "the rows before the restart were not certified");
     // The broker goes away and comes back without the session (no persistence).
     broker.stop();
     std::thread::sleep(Duration::from_millis(500));

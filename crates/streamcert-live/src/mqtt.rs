@@ -20,7 +20,8 @@
 use std::collections::HashMap;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender};
+use std::sync::mpsc::{Receiver, RecvTimeoutError};
+use std::thread::JoinHandle;
 
 use rumqttc::{Client, ConnectionError, Event, MqttOptions, Packet, Publish, QoS};
 use streamcert_pipeline::input::Sample;
@@ -38,8 +39,9 @@ const POLL: Duration = Duration::from_millis(50);
 /// A live MQTT source (see the module docs).
 pub struct MqttSource {
     client: Client,
-    /// The connection's events, from the thread that drives it.
-    events: Receiver<Result<Event, ConnectionError>>,
+    /// The connection's events, from the thread that drives it, and that thread.
+    events: Events,
+    driver: Option<JoinHandle<()>>,
     /// Acknowledgements the client's queue had no room for yet, in order.
     to_ack: std::collections::VecDeque<Publish>,
     cfg: MqttConfig,
@@ -79,7 +81,7 @@ impl MqttSource {
     /// # Errors
     /// A TLS file that cannot be read.
     pub fn new(cfg: MqttConfig, outputs: usize, checkpointing: bool) -> Result<Self, CliError> {
-        let (client, events) = connect(&cfg, 0, checkpointing)?;
+        let (client, events, driver) = connect(&cfg, 0, checkpointing)?;
         let (aligner, signal_of, topics) = match &cfg.layout {
             Layout::Rows { topics, .. } => {
                 (None, HashMap::new(), topics.iter().map(|t| (t.clone(), false)).collect())
@@ -98,6 +100,7 @@ impl MqttSource {
         let source = Self {
             client,
             events,
+            driver: Some(driver),
             to_ack: std::collections::VecDeque::new(),
             cfg,
             report,
@@ -217,9 +220,10 @@ impl MqttSource {
         eprintln!("source: {server}: {e}; reconnecting");
         if self.cfg.servers.len() > 1 {
             self.server = (self.server + 1) % self.cfg.servers.len();
-            let (client, events) = connect(&self.cfg, self.server, self.manual_acks)?;
+            let (client, events, driver) = connect(&self.cfg, self.server, self.manual_acks)?;
             self.client = client;
             self.events = events;
+            self.driver = Some(driver);
             self.subscribe()?;
         }
         Ok(())
@@ -433,6 +437,21 @@ impl Source for MqttSource {
     }
 }
 
+/// A source that ends says goodbye: the broker sees a clean disconnection (the session, if
+/// persistent, is kept for the next run) rather than a dropped connection.
+impl Drop for MqttSource {
+    fn drop(&mut self) {
+        // The acknowledgements queued before the disconnection go out first; the connection's
+        // thread ends once it is sent (waited for at most 2 s).
+        let _ = self.flush_acks();
+        let _ = self.client.try_disconnect();
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while self.driver.as_ref().is_some_and(|d| !d.is_finished()) && Instant::now() < deadline {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+    }
+}
+
 /// Seconds since the Unix epoch (a bare value's arrival time).
 fn now() -> f64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
@@ -452,17 +471,22 @@ fn describe(cfg: &MqttConfig) -> String {
     format!("mqtt {} (client {}), {what}", servers.join(" "), cfg.client_id)
 }
 
-/// A client for the `i`-th server, and the events of its connection, driven on a thread of
-/// its own (so that the connection makes progress while the certifier works, and an
-/// acknowledgement never waits on the caller): each event is handed over through a bounded
-/// queue (a slow certifier holds the broker back rather than filling memory); after an error
-/// the thread waits, doubling from `reconnect_min` to `reconnect_max`, before the client
-/// reconnects. The thread ends when the client is dropped.
+/// A connection's events, handed over by the thread that drives it.
+type Events = Receiver<Result<Event, ConnectionError>>;
+
+/// A client for the `i`-th server, the events of its connection and the thread that drives
+/// it. The thread polls the connection without pause and hands every event over as it comes,
+/// so that acknowledgements go out as soon as they are asked for, whatever the certifier is
+/// doing (memory then holds what the broker sends ahead of the certifier, where a bounded
+/// hand-over would hold the acknowledgements back and have the broker deliver again, after a
+/// crash, messages a checkpoint already holds). After an error the thread waits, doubling
+/// from `reconnect_min` to `reconnect_max`, before the client reconnects. It ends when the
+/// client disconnects or is dropped.
 fn connect(
     cfg: &MqttConfig,
     i: usize,
     manual_acks: bool,
-) -> Result<(Client, Receiver<Result<Event, ConnectionError>>), CliError> {
+) -> Result<(Client, Events, JoinHandle<()>), CliError> {
     let server = &cfg.servers[i];
     let mut o = MqttOptions::new(cfg.client_id.clone(), server.host.clone(), server.port);
     o.set_clean_session(!cfg.persistent_session);
@@ -478,14 +502,16 @@ fn connect(
         o.set_transport(rumqttc::Transport::Tls(tls(cfg)?));
     }
     let (client, mut connection) = Client::new(o, cfg.max_unacked.max(16) * 4);
-    let (tx, rx): (SyncSender<_>, _) = std::sync::mpsc::sync_channel(1024);
+    let (tx, rx) = std::sync::mpsc::channel();
     let backoff = cfg.backoff;
-    std::thread::spawn(move || {
+    let driver = std::thread::spawn(move || {
         let mut wait = backoff.0;
         while let Ok(event) = connection.recv() {
             let failed = event.is_err();
-            if event.as_ref().is_ok_and(|e| matches!(e, Event::Incoming(Packet::ConnAck(_)))) {
-                wait = backoff.0;
+            match &event {
+                Ok(Event::Incoming(Packet::ConnAck(_))) => wait = backoff.0,
+                Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => break,
+                _ => {}
             }
             if tx.send(event).is_err() {
                 break;
@@ -496,7 +522,7 @@ fn connect(
             }
         }
     });
-    Ok((client, rx))
+    Ok((client, rx, driver))
 }
 
 /// The TLS configuration from the PEM files (rustls with the ring provider).

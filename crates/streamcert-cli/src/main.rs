@@ -44,8 +44,9 @@ enum Command {
     /// t, beta_hat, rho, eps, kurtosis, spike_fraction, cert_gauss, cert_wass, the gates
     /// (0/1) and the reasons when not certified, then the calibrated certificate's columns.
     /// From a live input (a pipe or a terminal on stdin) every row is flushed as it is
-    /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. A
-    /// summary goes to stderr (or to --summary FILE as JSON).
+    /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. With a
+    /// [source] section in the configuration it reads an MQTT broker instead (docs/live.md).
+    /// A summary goes to stderr (or to --summary FILE as JSON).
     #[command(
         after_help = EXIT_CODES,
         override_usage = "streamcert certify --config <CONFIG> [--input <FILE>] [OPTIONS]\n       \

@@ -1,12 +1,14 @@
-//! An MQTT subscription as a [`Source`]: rumqttc's blocking client on the calling thread.
+//! An MQTT subscription as a [`Source`]: rumqttc's client, its connection driven on a thread
+//! of its own, the messages taken on the calling thread.
 //!
 //! - **Delivery**: QoS 1 on a persistent session (`clean_session = false`, a stable client id),
 //!   so the broker queues what is published while streamcert is away. Without a checkpoint,
 //!   each message is acknowledged as it arrives. With one, acknowledgements wait until the
 //!   rows they carried are in a written checkpoint ([`Source::committed`]); at most
 //!   `max_unacked` wait ([`Source::commit_due`] asks for a checkpoint then), so a process
-//!   killed at any instant is redelivered exactly what its last checkpoint lacks, and
-//!   `--resume` passes over what it already holds by time.
+//!   killed at any instant is redelivered every message its last checkpoint lacks (and, of
+//!   what it holds, at most the acknowledgements not yet sent), and `--resume` passes over
+//!   what it already holds by time.
 //! - **Outages**: a lost connection is retried with a doubling wait (`reconnect_min` to
 //!   `reconnect_max`), the next broker of `servers` each time; the process keeps running. On
 //!   reconnection the broker says whether it kept the session: if it did, what was published
@@ -18,10 +20,9 @@
 //!   and in the summary.
 
 use std::collections::HashMap;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-
 use std::sync::mpsc::{Receiver, RecvTimeoutError};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
 use rumqttc::{Client, ConnectionError, Event, MqttOptions, Packet, Publish, QoS};
 use streamcert_pipeline::input::Sample;

@@ -71,6 +71,32 @@ fn wait_rows(path: &std::path::Path, n: usize, what: &str) {
     }
 }
 
+/// Resume the killed run of `config` from `checkpoint`, writing `outputs.1`, until it ends;
+/// the rows of both runs as one run's (and the resumed run's stderr). The rows the first run
+/// wrote after its last checkpoint are certified again by the resumed one (their messages
+/// were not acknowledged): the first run's rows are kept up to where the second starts.
+fn resume(
+    config: &std::path::Path,
+    persist: &[&str],
+    checkpoint: &std::path::Path,
+    outputs: (&std::path::Path, &std::path::Path),
+) -> (Vec<String>, String) {
+    let args = [
+        &["--output", outputs.1.to_str().unwrap()],
+        persist,
+        &["--resume", checkpoint.to_str().unwrap()],
+    ]
+    .concat();
+    let (status, err) = Certify::start(config, &args).finish();
+    assert!(status.success(), "{err}");
+    let (a, b) = (rows_of(outputs.0), rows_of(outputs.1));
+    let start: f64 = b.first().expect("the resumed run wrote rows").0.parse().unwrap();
+    let mut got: Vec<String> =
+        a.into_iter().filter(|(t, _)| t.parse::<f64>().unwrap() < start).map(|(_, r)| r).collect();
+    got.extend(b.into_iter().map(|(_, r)| r));
+    (got, err)
+}
+
 fn free_port() -> u16 {
     streamcert_live::broker::free_loopback().unwrap().port()
 }
@@ -97,21 +123,7 @@ fn killed_with_sigkill_and_resumed_the_rows_equal_an_uninterrupted_run() {
     // persistent session.
     publish::publish(&publisher(broker.port, "g5/kill", "pub-kill-2"), &header, 0, tail.to_vec())
         .unwrap();
-    let resume = ["--resume", checkpoint.to_str().unwrap()];
-    let second = Certify::start(
-        &config,
-        &[&["--output", out2.to_str().unwrap()], &persist[..], &resume[..]].concat(),
-    );
-    let (status, err) = second.finish();
-    assert!(status.success(), "{err}");
-    // The rows the first run wrote after its last checkpoint are certified again by the
-    // resumed one (their messages were not acknowledged): keep the first run's rows up to
-    // where the second starts.
-    let (a, b) = (rows_of(&out1), rows_of(&out2));
-    let start: f64 = b.first().expect("the resumed run wrote rows").0.parse().unwrap();
-    let mut got: Vec<String> =
-        a.into_iter().filter(|(t, _)| t.parse::<f64>().unwrap() < start).map(|(_, r)| r).collect();
-    got.extend(b.into_iter().map(|(_, r)| r));
+    let (got, err) = resume(&config, &persist, &checkpoint, (&out1, &out2));
     let want: Vec<String> = rows_of(&want_path).into_iter().map(|(_, r)| r).collect();
     assert_eq!(got.len(), want.len(), "rows; {err}");
     assert!(got == want, "the resumed run differs from the uninterrupted one");
@@ -256,18 +268,7 @@ fn per_signal_topics_killed_and_resumed_form_the_uninterrupted_rows() {
     wait_rows(&out1, 300, "the first run certified too little");
     first.kill();
     publish_signals(broker.port, "sigkill", "2", tail);
-    let resume = ["--resume", checkpoint.to_str().unwrap()];
-    let second = Certify::start(
-        &config,
-        &[&["--output", out2.to_str().unwrap()], &persist[..], &resume[..]].concat(),
-    );
-    let (status, err) = second.finish();
-    assert!(status.success(), "{err}");
-    let (a, b) = (rows_of(&out1), rows_of(&out2));
-    let start: f64 = b.first().expect("the resumed run wrote rows").0.parse().unwrap();
-    let mut got: Vec<String> =
-        a.into_iter().filter(|(t, _)| t.parse::<f64>().unwrap() < start).map(|(_, r)| r).collect();
-    got.extend(b.into_iter().map(|(_, r)| r));
+    let (got, err) = resume(&config, &persist, &checkpoint, (&out1, &out2));
     let want: Vec<String> = rows_of(&reference).into_iter().map(|(_, r)| r).collect();
     assert!(want.len() > 1000, "{} reference rows", want.len());
     assert_eq!(got.len(), want.len(), "rows; {err}");

@@ -43,7 +43,7 @@ impl PayloadError {
     }
 }
 
-/// At most [`EXCERPT`] characters of `payload`, lossy UTF-8, control characters escaped.
+/// At most 60 characters of `payload`, lossy UTF-8, control characters escaped.
 #[must_use]
 pub fn excerpt(payload: &[u8]) -> String {
     let text = String::from_utf8_lossy(&payload[..payload.len().min(4 * EXCERPT)]);

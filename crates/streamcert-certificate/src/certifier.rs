@@ -267,12 +267,10 @@ impl Certifier {
         }
     }
 
-    /// Declare that samples are missing before the next one (a live source's outage, a
-    /// signal too stale to form a row): the next [`push`](Self::push) treats its step as a
-    /// gap whatever its length, exactly as a step above `gap_factor` times the reference: the
-    /// windows restart at that sample, every gate closes, and its evidence gives
-    /// [`NotCertified::Gap`] with the step and the reference. Nothing is integrated across
-    /// the missing stretch. Before the first sample, and when declared twice, it is one gap.
+    /// Declare that samples are missing before the next one (a live source's outage): the
+    /// next [`push`](Self::push) treats its step as a gap whatever its length, as a step above
+    /// `gap_factor` times the reference ([`NotCertified::Gap`]: new windows, gates closed);
+    /// nothing is integrated across it. Declared twice, or before the first sample, one gap.
     ///
     /// ```
     /// use streamcert_certificate::{Certifier, CertifierConfig, NotCertified};

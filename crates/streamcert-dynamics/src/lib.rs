@@ -1,7 +1,7 @@
 //! # streamcert-dynamics
 //!
 //! Simulation substrate for streamcert: the [`Dynamics`] trait, the paper's five-node
-//! benchmark network G5 (`../shared/paper.tex`, eqs. SA1 to SB5), seeded disturbance
+//! benchmark network G5 (the paper's eqs. SA1 to SB5; docs/paper.md), seeded disturbance
 //! processes for the three regimes of Experiment 1, probing inputs (dither), and the two
 //! integrators (Euler–Maruyama and RK4).
 //!

@@ -140,6 +140,24 @@ impl Aligner {
         self.held.len()
     }
 
+    /// `true` when the state is one [`push`](Self::push) and [`pop`](Self::pop) could have
+    /// produced (every per-signal buffer sized for the signals, each queue in order of time,
+    /// every time finite): what a restored state is checked against.
+    #[must_use]
+    pub fn is_consistent(&self) -> bool {
+        let n = self.held.len();
+        let ordered = |q: &VecDeque<(f64, f64)>| {
+            q.iter().all(|(t, v)| t.is_finite() && v.is_finite())
+                && q.iter().zip(q.iter().skip(1)).all(|(a, b)| a.0 <= b.0)
+        };
+        self.rule.validate().is_ok()
+            && n > 0
+            && self.pending.len() == n
+            && self.out.len() == n
+            && self.pending.iter().all(ordered)
+            && self.held.iter().flatten().all(|(t, v)| t.is_finite() && v.is_finite())
+    }
+
     /// The rule.
     #[must_use]
     pub fn rule(&self) -> AlignRule {

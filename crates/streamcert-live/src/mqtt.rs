@@ -433,6 +433,9 @@ impl Source for MqttSource {
         let bad = |message: String| CliError::Checkpoint { path: "[source]".into(), message };
         let saved: Aligner = serde_json::from_value(state.clone())
             .map_err(|e| bad(format!("the aligner's state does not parse: {e}")))?;
+        if !saved.is_consistent() {
+            return Err(bad("the aligner's state is inconsistent".into()));
+        }
         if saved.rule() != aligner.rule() || saved.signals() != aligner.signals() {
             return Err(bad("the checkpoint was written with another [source.align]".into()));
         }

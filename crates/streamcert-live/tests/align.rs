@@ -125,6 +125,12 @@ fn a_resumed_aligner_continues_as_the_uninterrupted_one() {
     let text = serde_json::to_string(&a).unwrap();
     let mut b: Aligner = serde_json::from_str(&text).unwrap();
     assert_eq!(a, b);
+    assert!(b.is_consistent());
+    // A state whose buffers do not fit its signals is refused before it is used.
+    let mut value: serde_json::Value = serde_json::from_str(&text).unwrap();
+    value["out"] = serde_json::json!([1.0]);
+    let damaged: Aligner = serde_json::from_value(value).unwrap();
+    assert!(!damaged.is_consistent());
     for u in &ups[cut..] {
         let _ = b.push(u.signal, u.t, u.v);
         while let Some(next) = b.pop(&mut row) {

@@ -97,9 +97,9 @@ fn live(c: &mut Criterion) {
                  client_id = \"bench-{n}\"\ntopics = [\"{topic}\"]\npersistent_session = false\n"
             );
             let cfg = config::parse(&text, "live").expect("configuration");
-            let live = streamcert_live::parse(cfg.source.as_ref().expect("source"), &cfg.columns)
-                .expect("source");
-            let mut source = MqttSource::new(live.mqtt, 1, false).expect("client");
+            let parsed = streamcert_live::parse(cfg.source.as_ref().expect("source"), &cfg.columns);
+            let Ok(streamcert_live::SourceConfig::Mqtt(live)) = parsed else { panic!("mqtt") };
+            let mut source = MqttSource::new(live, 1, false).expect("client");
             assert!(source.wait_subscribed(Duration::from_secs(10)));
             let server =
                 streamcert_live::config::Server { host: "127.0.0.1".into(), port, tls: false };

@@ -49,8 +49,11 @@ fn main() -> Result<()> {
         config::g5_node_b()
     );
     let cfg = config::parse(&text, "latency")?;
-    let live = streamcert_live::parse(cfg.source.as_ref().expect("source"), &cfg.columns)?;
-    let mut source = MqttSource::new(live.mqtt, 1, false)?;
+    let parsed = streamcert_live::parse(cfg.source.as_ref().expect("source"), &cfg.columns)?;
+    let streamcert_live::SourceConfig::Mqtt(live) = parsed else {
+        return Err("an MQTT source".into());
+    };
+    let mut source = MqttSource::new(live, 1, false)?;
     if !source.wait_subscribed(Duration::from_secs(10)) {
         return Err("not subscribed".into());
     }

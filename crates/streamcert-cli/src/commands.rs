@@ -39,25 +39,15 @@ pub(super) fn run_certify(
     let mut out = open_output(&io.output)?;
     let s = match &cfg.source {
         Some(table) => {
-            if io.input != "-" {
-                return Err(CliError::Config {
-                    path,
-                    message: format!(
-                        "the configuration reads a live [source]; --input {} reads a file: \
-                         give one or the other",
-                        io.input
-                    ),
-                });
-            }
-            let live = streamcert_live::parse(table, &cfg.columns)
-                .map_err(|message| CliError::Config { path: path.clone(), message })?;
-            let checkpointing = opts.checkpoint.is_some();
-            let mut source = streamcert_live::MqttSource::new(
-                live.mqtt,
-                cfg.columns.outputs.len(),
-                checkpointing,
-            )?;
-            certify::run_source(&cfg, &mut source, "mqtt", &mut out, &opts)?
+            one_input(&io.input, &path)?;
+            let mut source = streamcert_live::open(table, &cfg.columns, opts.checkpoint.is_some())
+                .map_err(|e| match e {
+                    CliError::Config { message, .. } => {
+                        CliError::Config { path: path.clone(), message }
+                    }
+                    other => other,
+                })?;
+            certify::run_source(&cfg, source.as_mut(), "live", &mut out, &opts)?
         }
         None => certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?,
     };
@@ -140,7 +130,7 @@ pub(super) fn run_network(
             });
         }
         let source = streamcert_live::open(table, &cfg.columns, opts.checkpoint.is_some())?;
-        network::run_source(&cfg, Box::new(source), "mqtt", &mut out, &opts)?
+        network::run_source(&cfg, source, "live", &mut out, &opts)?
     } else if cluster.is_set() {
         let Some(s) = run_cluster(&cfg, &io.input, &mut out, &opts, &cluster)? else {
             return Ok(Outcome::Done);
@@ -197,6 +187,68 @@ fn run_cluster(
     Ok(None)
 }
 
+/// The CSV text `csv` as a header and rows of numbers.
+fn csv_rows(
+    csv: &[u8],
+    bad: impl Fn(String) -> CliError,
+) -> Result<(Vec<String>, Vec<Vec<f64>>), CliError> {
+    let text = std::str::from_utf8(csv).map_err(|e| bad(e.to_string()))?;
+    let mut lines = text.lines();
+    let header: Vec<String> =
+        lines.next().unwrap_or_default().split(',').map(String::from).collect();
+    let rows =
+        lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect()).collect();
+    Ok((header, rows))
+}
+
+/// `streamcert simulate g5 --opcua URL`: the CSV rows `csv` served by an OPC UA server, one
+/// variable per column, each sample written at its time (`--pace`).
+pub(super) fn serve_opcua(
+    csv: &[u8],
+    url: &str,
+    args: &super::Publish,
+) -> Result<Outcome, CliError> {
+    use streamcert_live::opcua::server::PlantServer;
+    let bad = |message: String| CliError::Config { path: "--opcua".into(), message };
+    let pace = args.pace;
+    if !(pace >= 0.0 && pace.is_finite()) {
+        return Err(bad(format!("--pace must be finite and >= 0, got {pace}")));
+    }
+    let hostport = url
+        .strip_prefix("opc.tcp://")
+        .map(|r| r.trim_end_matches('/'))
+        .ok_or_else(|| bad(format!("`{url}`: expected opc.tcp://HOST:PORT")))?;
+    let addr = std::net::ToSocketAddrs::to_socket_addrs(hostport)
+        .map_err(|e| bad(format!("`{url}`: {e}")))?
+        .next()
+        .ok_or_else(|| bad(format!("`{url}`: no address")))?;
+    let (header, rows) = csv_rows(csv, bad)?;
+    let server = PlantServer::start(addr, &header[1..], &args.pki)?;
+    eprintln!(
+        "opcua: serving {} at {} (nodes {}); certificate {}",
+        header[1..].join(", "),
+        server.endpoint(),
+        server.node_ids().join(" "),
+        args.pki.join("own/cert.der").display()
+    );
+    let start = std::time::Instant::now();
+    let t0 = rows.first().map_or(0.0, |r| r[0]);
+    for row in &rows {
+        let due = std::time::Duration::from_secs_f64(((row[0] - t0) * pace).max(0.0));
+        if let Some(wait) = due.checked_sub(start.elapsed()) {
+            std::thread::sleep(wait);
+        }
+        server.publish(row[0], &row[1..])?;
+    }
+    eprintln!(
+        "opcua: served {} samples; the last values stay until the process is stopped",
+        rows.len()
+    );
+    loop {
+        std::thread::park();
+    }
+}
+
 /// `streamcert simulate g5 --publish URL`: the CSV rows `csv` published to the broker.
 pub(super) fn publish_csv(
     csv: &[u8],
@@ -218,11 +270,7 @@ pub(super) fn publish_csv(
         streamcert_live::broker::serve(addr)?;
         eprintln!("broker: serving MQTT on {addr}");
     }
-    let text = std::str::from_utf8(csv).map_err(|e| bad(e.to_string()))?;
-    let mut lines = text.lines();
-    let header: Vec<String> =
-        lines.next().unwrap_or_default().split(',').map(String::from).collect();
-    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap_or(f64::NAN)).collect());
+    let (header, rows) = csv_rows(csv, bad)?;
     let layout = if per_signal { Layout::Signals } else { Layout::Rows };
     let client_id = format!("streamcert-simulate-{}", std::process::id());
     let opts = PublishOptions { server, topic, client_id, layout, pace };

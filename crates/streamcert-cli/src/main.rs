@@ -45,7 +45,8 @@ enum Command {
     /// (0/1) and the reasons when not certified, then the calibrated certificate's columns.
     /// From a live input (a pipe or a terminal on stdin) every row is flushed as it is
     /// written, so `tail -f plant.csv | streamcert certify --config c.toml` works live. With a
-    /// [source] section in the configuration it reads an MQTT broker instead (docs/live.md).
+    /// [source] section in the configuration it reads an MQTT broker or an OPC UA server
+    /// instead (docs/live.md).
     /// A summary goes to stderr (or to --summary FILE as JSON).
     #[command(
         after_help = EXIT_CODES,
@@ -259,19 +260,30 @@ enum SimSystem {
     },
 }
 
-/// A live plant: the simulated rows published to an MQTT broker instead of written out.
+/// A live plant: the simulated rows published to an MQTT broker, or served by an OPC UA
+/// server, instead of written out.
 #[derive(clap::Args)]
+#[command(group = clap::ArgGroup::new("live").args(["publish", "opcua"]))]
 pub(crate) struct Publish {
     /// Publish to mqtt://HOST:PORT/TOPIC (QoS 1): a JSON object per row with every column,
     /// or with --per-signal each column on TOPIC/COLUMN as {"t": ..., "value": ...}.
     #[arg(long, value_name = "URL")]
     publish: Option<String>,
+    /// Serve the plant at opc.tcp://HOST:PORT: one variable per column (ns of
+    /// urn:streamcert:simulated-plant:signals, string ids: the column names), each sample
+    /// written with its source timestamp (the simulation's time, from the Unix epoch).
+    #[arg(long, value_name = "URL", conflicts_with = "publish")]
+    opcua: Option<String>,
+    /// The OPC UA server's PKI directory (its certificate and key are created there on first
+    /// start; `own/cert.der` is the certificate a client trusts).
+    #[arg(long, value_name = "DIR", default_value = "pki-plant", requires = "opcua")]
+    pki: PathBuf,
     /// One topic per column instead of one row per message.
     #[arg(long, requires = "publish")]
     per_signal: bool,
-    /// Wall-clock seconds per second of data (1: real time; 0: as fast as the broker takes
-    /// them).
-    #[arg(long, default_value_t = 1.0, requires = "publish")]
+    /// Wall-clock seconds per second of data (1: real time; 0: as fast as the broker or the
+    /// server takes them).
+    #[arg(long, default_value_t = 1.0, requires = "live")]
     pace: f64,
     /// Serve an embedded MQTT broker at the URL's address first (to try a live run without a
     /// broker installed); it keeps serving after the last row until the process is stopped.
@@ -357,6 +369,11 @@ fn run(cli: Cli) -> Result<Outcome, CliError> {
                 let mut csv = Vec::new();
                 simulate::run(experiment, coupling, seed, steps, gamma, &mut csv)?;
                 return commands::publish_csv(&csv, url, &publish);
+            }
+            if let Some(url) = &publish.opcua {
+                let mut csv = Vec::new();
+                simulate::run(experiment, coupling, seed, steps, gamma, &mut csv)?;
+                return commands::serve_opcua(&csv, url, &publish);
             }
             let stdout = std::io::stdout();
             let mut out = BufWriter::new(stdout.lock());

@@ -1,5 +1,6 @@
-//! `certify` from a live MQTT source, as a process, against the embedded broker (rumqttd) on
-//! loopback: the simulated plant that serves its own broker, certified live.
+//! `certify` from a live source, as a process: against the embedded broker (rumqttd) on
+//! loopback, the simulated plant that serves its own broker, certified live; and the plant
+//! served by an OPC UA server (async-opcua's), certified from its nodes.
 //! (`mosquitto.rs` runs the process against Mosquitto: killed and resumed, broker restarted.)
 
 use std::io::{BufRead, BufReader};
@@ -80,6 +81,47 @@ fn the_two_terminal_walk_through_of_docs_live_md_runs_as_written() {
     assert!(err.lines().any(|l| l.starts_with("verdict: ")), "{err}");
     let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
     assert!(source.contains(" 0 bad, 0 late") && source.contains(" 0 gaps"), "{source}");
+    let rows = std::fs::read_to_string(&evidence).unwrap().lines().count();
+    assert!(rows > 1000, "{rows} evidence rows");
+}
+
+#[test]
+fn the_opcua_walk_through_of_docs_live_md_runs_as_written() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let doc = std::fs::read_to_string(root.join("docs/live.md")).unwrap();
+    // As written, on a free port instead of 4840, the plant's PKI in a scratch directory.
+    let port = streamcert_live::broker::free_loopback().unwrap().port().to_string();
+    let on_port = |w: &String| w.replace("4840", &port);
+    let pki = common::tmp("opcua-docs-pki");
+    let mut plant_args: Vec<String> = terminal(&doc, 3).iter().map(on_port).collect();
+    plant_args.extend(["--pki".to_string(), pki.display().to_string()]);
+    let mut certify_args: Vec<String> = terminal(&doc, 4).iter().map(on_port).collect();
+    let config = root.join("examples/data/g5_opcua.toml");
+    let text = std::fs::read_to_string(&config).unwrap().replace("4840", &port);
+    let local = common::tmp("opcua-docs.toml");
+    std::fs::write(&local, text).unwrap();
+    let evidence = common::tmp("opcua-docs-evidence.csv");
+    for w in &mut certify_args {
+        if w.as_str() == "examples/data/g5_opcua.toml" {
+            *w = local.display().to_string();
+        } else if w.as_str() == "evidence.csv" {
+            *w = evidence.display().to_string();
+        }
+    }
+    let mut plant = bin().args(&plant_args).stderr(Stdio::piped()).spawn().unwrap();
+    let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
+    let line = plant_err.next().unwrap().unwrap();
+    assert!(line.starts_with("opcua: serving") && line.contains("ns=2;s=y_b"), "{line}");
+    let args: Vec<&str> = certify_args.iter().map(String::as_str).collect();
+    let certify = Certify::start_args(&args);
+    let (status, err) = certify.finish();
+    plant.kill().unwrap();
+    plant.wait().unwrap();
+    assert!(status.success(), "{err}");
+    assert!(err.contains("subscribed to 2 nodes"), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("verdict: ")), "{err}");
+    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    assert!(source.starts_with("source: opcua") && source.contains(" 0 bad"), "{source}");
     let rows = std::fs::read_to_string(&evidence).unwrap().lines().count();
     assert!(rows > 1000, "{rows} evidence rows");
 }

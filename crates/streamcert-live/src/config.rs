@@ -1,5 +1,5 @@
-//! The `[source]` section of a certify configuration: a live plant source, with the names
-//! Telegraf's `mqtt_consumer` input uses (`servers`, `topics`, `client_id`, `qos`,
+//! The `[source]` section of a certify configuration: a live plant source. `kind = "mqtt"`
+//! takes the names Telegraf's `mqtt_consumer` input uses (`servers`, `topics`, `client_id`, `qos`,
 //! `persistent_session`, `username`, `password`, `tls_ca`, `tls_cert`, `tls_key`,
 //! `data_format`, `json_time_key`), so that a plant's existing settings carry over.
 //!
@@ -16,6 +16,8 @@
 //! `data_format` `"json"` or `"value"`) and the alignment rule in `[source.align]`
 //! (`period`, `max_age`, `reorder_window`; see [`crate::align`]).
 //!
+//! `kind = "opcua"` takes the names of Telegraf's `opcua_listener` ([`opcua`]).
+//!
 //! Credentials are never written in the file: `username` and `password` take `"${VAR}"`
 //! (read from the environment) or `password_file` a path; a literal password is refused.
 //! Neither appears in a log line, the summary or a printed configuration.
@@ -29,11 +31,17 @@ use streamcert_pipeline::config::Columns;
 use crate::align::AlignRule;
 use crate::payload::{DEFAULT_MAX_PAYLOAD, RowFormat, SignalFormat};
 
-/// A validated `[source]` section.
+pub mod opcua;
+
+pub use opcua::{Node, OpcUaConfig, SecurityMode, Timestamp};
+
+/// A validated `[source]` section: which kind of live source, with its settings.
 #[derive(Debug, Clone)]
-pub struct SourceConfig {
-    /// The MQTT settings (the only kind of live source so far).
-    pub mqtt: MqttConfig,
+pub enum SourceConfig {
+    /// `kind = "mqtt"`: a broker's topics.
+    Mqtt(MqttConfig),
+    /// `kind = "opcua"`: an OPC UA server's nodes.
+    OpcUa(OpcUaConfig),
 }
 
 /// Where an MQTT source connects and what it reads.
@@ -147,6 +155,8 @@ pub struct Signal {
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Raw {
+    /// Read by [`parse`] before this table is.
+    #[allow(dead_code)]
     kind: String,
     servers: Vec<String>,
     client_id: Option<String>,
@@ -189,10 +199,29 @@ struct RawSignal {
 
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
-struct RawAlign {
+pub(crate) struct RawAlign {
     period: f64,
     max_age: Option<f64>,
-    reorder_window: Option<f64>,
+    pub(crate) reorder_window: Option<f64>,
+}
+
+/// The alignment rule of `[source.align]`: `max_age` 2T and `reorder_window` T by default.
+pub(crate) fn align_rule(a: Option<&RawAlign>) -> Result<AlignRule, String> {
+    let a = a.ok_or("source.align: give the grid's period (seconds)")?;
+    let rule = AlignRule {
+        period: a.period,
+        max_age: a.max_age.unwrap_or(2.0 * a.period),
+        reorder_window: a.reorder_window.unwrap_or(a.period),
+    };
+    rule.validate().map_err(|e| format!("source.align: {e}"))?;
+    Ok(rule)
+}
+
+/// A duration in seconds, `default` when not given.
+pub(crate) fn secs(v: Option<f64>, default: f64, key: &str) -> Result<Duration, String> {
+    let v = v.unwrap_or(default);
+    Duration::try_from_secs_f64(v)
+        .map_err(|_| format!("source.{key}: {v} is not a duration in seconds"))
 }
 
 fn yes() -> bool {
@@ -208,12 +237,20 @@ fn one() -> u8 {
 /// # Errors
 /// What is wrong, naming the key (`source.servers`, `source.signal[1].topic`, ...).
 pub fn parse(table: &toml::Table, columns: &Columns) -> Result<SourceConfig, String> {
+    match table.get("kind").and_then(toml::Value::as_str) {
+        Some("mqtt") => parse_mqtt(table, columns).map(SourceConfig::Mqtt),
+        Some("opcua") => opcua::parse(table, columns).map(SourceConfig::OpcUa),
+        Some(other) => {
+            Err(format!("source.kind: \"{other}\" is not a source; use \"mqtt\" or \"opcua\""))
+        }
+        None => Err("source.kind: say which source, \"mqtt\" or \"opcua\"".into()),
+    }
+}
+
+fn parse_mqtt(table: &toml::Table, columns: &Columns) -> Result<MqttConfig, String> {
     let raw: Raw = toml::Value::Table(table.clone())
         .try_into()
         .map_err(|e: toml::de::Error| format!("[source]: {}", e.message()))?;
-    if raw.kind != "mqtt" {
-        return Err(format!("source.kind: \"{}\" is not a source; use \"mqtt\"", raw.kind));
-    }
     if raw.qos != 1 {
         return Err(format!(
             "source.qos: {} is not supported: QoS 1 (at least once, with the persistent \
@@ -228,32 +265,25 @@ pub fn parse(table: &toml::Table, columns: &Columns) -> Result<SourceConfig, Str
         );
     }
     let client_id = raw.client_id.clone().unwrap_or_else(|| "streamcert".into());
-    let secs = |v: Option<f64>, default: f64, key: &str| -> Result<Duration, String> {
-        let v = v.unwrap_or(default);
-        Duration::try_from_secs_f64(v)
-            .map_err(|_| format!("source.{key}: {v} is not a duration in seconds"))
-    };
     let idle_timeout = match raw.idle_timeout {
         Some(_) => Some(secs(raw.idle_timeout, 0.0, "idle_timeout")?),
         None => None,
     };
-    Ok(SourceConfig {
-        mqtt: MqttConfig {
-            servers,
-            client_id,
-            persistent_session: raw.persistent_session,
-            credentials: credentials(&raw)?,
-            tls: tls(&raw)?,
-            layout: layout(&raw, columns)?,
-            max_payload: raw.max_payload.unwrap_or(DEFAULT_MAX_PAYLOAD),
-            silent_after: secs(raw.silent_after, 10.0, "silent_after")?,
-            idle_timeout,
-            max_unacked: raw.max_unacked.unwrap_or(16).max(1),
-            backoff: (
-                secs(raw.reconnect_min, 0.1, "reconnect_min")?,
-                secs(raw.reconnect_max, 10.0, "reconnect_max")?,
-            ),
-        },
+    Ok(MqttConfig {
+        servers,
+        client_id,
+        persistent_session: raw.persistent_session,
+        credentials: credentials(&raw)?,
+        tls: tls(&raw)?,
+        layout: layout(&raw, columns)?,
+        max_payload: raw.max_payload.unwrap_or(DEFAULT_MAX_PAYLOAD),
+        silent_after: secs(raw.silent_after, 10.0, "silent_after")?,
+        idle_timeout,
+        max_unacked: raw.max_unacked.unwrap_or(16).max(1),
+        backoff: (
+            secs(raw.reconnect_min, 0.1, "reconnect_min")?,
+            secs(raw.reconnect_max, 10.0, "reconnect_max")?,
+        ),
     })
 }
 
@@ -299,7 +329,16 @@ fn from_env(value: &str, key: &str, literal_ok: bool) -> Result<String, String> 
 }
 
 fn credentials(raw: &Raw) -> Result<Option<(String, Secret)>, String> {
-    let password = match (&raw.password, &raw.password_file) {
+    user_password(raw.username.as_deref(), raw.password.as_deref(), raw.password_file.as_deref())
+}
+
+/// A user name (literal or `${VAR}`) and its password (`${VAR}` or a file's first line).
+pub(crate) fn user_password(
+    username: Option<&str>,
+    password: Option<&str>,
+    password_file: Option<&str>,
+) -> Result<Option<(String, Secret)>, String> {
+    let password = match (password, password_file) {
         (Some(_), Some(_)) => return Err("source: give password or password_file, not both".into()),
         (Some(p), None) => Some(from_env(p, "password", false)?),
         (None, Some(path)) => Some(
@@ -310,7 +349,7 @@ fn credentials(raw: &Raw) -> Result<Option<(String, Secret)>, String> {
         ),
         (None, None) => None,
     };
-    match (&raw.username, password) {
+    match (username, password) {
         (Some(u), p) => Ok(Some((from_env(u, "username", true)?, Secret(p.unwrap_or_default())))),
         (None, Some(_)) => Err("source: a password needs a username".into()),
         (None, None) => Ok(None),
@@ -415,77 +454,9 @@ fn signals(raw: &Raw, columns: &Columns) -> Result<Layout, String> {
     if let Some(extra) = raw.signal.iter().find(|s| !wanted.contains(&&s.column)) {
         return Err(format!("source.signal: `{}` is not a column of [columns]", extra.column));
     }
-    let a = raw.align.as_ref().ok_or("source.align: give the grid's period (seconds)")?;
-    let rule = AlignRule {
-        period: a.period,
-        max_age: a.max_age.unwrap_or(2.0 * a.period),
-        reorder_window: a.reorder_window.unwrap_or(a.period),
-    };
-    rule.validate().map_err(|e| format!("source.align: {e}"))?;
+    let rule = align_rule(raw.align.as_ref())?;
     Ok(Layout::Signals { signals, rule, arrival_time })
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    fn columns() -> Columns {
-        toml::from_str("time = \"t\"\noutputs = [\"y\"]\ninputs = [\"u\"]").unwrap()
-    }
-
-    fn parse_text(text: &str) -> Result<SourceConfig, String> {
-        parse(&toml::from_str(text).unwrap(), &columns())
-    }
-
-    #[test]
-    fn servers_are_parsed_and_credentials_in_them_refused() {
-        assert_eq!(
-            server("tcp://127.0.0.1:1884").unwrap(),
-            Server { host: "127.0.0.1".into(), port: 1884, tls: false }
-        );
-        assert_eq!(server("mqtts://broker").unwrap().port, 8883);
-        assert!(server("tcp://user:pw@host:1883").unwrap_err().contains("refused"));
-        assert!(server("http://host").is_err());
-    }
-
-    #[test]
-    fn a_literal_password_is_refused_and_never_shown() {
-        let base =
-            "kind = \"mqtt\"\nservers = [\"tcp://h\"]\ntopics = [\"a\"]\nusername = \"op\"\n";
-        let e = parse_text(&format!("{base}password = \"hunter2\"")).unwrap_err();
-        assert!(!e.contains("hunter2") && e.contains("${VAR}"), "{e}");
-        let file = std::env::temp_dir().join(format!("streamcert-pw-{}", std::process::id()));
-        std::fs::write(&file, "s3cret-from-a-file\n").unwrap();
-        let with_file = format!("{base}password_file = {:?}", file.display().to_string());
-        let ok = parse_text(&with_file).unwrap();
-        std::fs::remove_file(&file).unwrap();
-        let Some((_, secret)) = &ok.mqtt.credentials else { panic!("credentials") };
-        assert_eq!(secret.0, "s3cret-from-a-file");
-        let shown = format!("{ok:?}");
-        assert!(!shown.contains("s3cret") && shown.contains("<redacted>"), "{shown}");
-        // From the environment (PATH is set wherever tests run).
-        let path = std::env::var("PATH").unwrap();
-        let ok = parse_text(&format!("{base}password = \"${{PATH}}\"")).unwrap();
-        assert!(!format!("{ok:?}").contains(&path));
-        let e =
-            parse_text(&format!("{base}password = \"${{STREAMCERT_NO_SUCH_VAR}}\"")).unwrap_err();
-        assert!(e.contains("STREAMCERT_NO_SUCH_VAR is not set"), "{e}");
-    }
-
-    #[test]
-    fn signals_need_every_column_a_period_and_a_timestamp() {
-        let base = "kind = \"mqtt\"\nservers = [\"tcp://h\"]\n";
-        let y = "[[signal]]\ncolumn = \"y\"\ntopic = \"p/y\"\n";
-        let u = "[[signal]]\ncolumn = \"u\"\ntopic = \"p/u\"\n";
-        let e = parse_text(&format!("{base}{y}")).unwrap_err();
-        assert!(e.contains("no topic for the column `u`"), "{e}");
-        let e = parse_text(&format!("{base}{y}{u}")).unwrap_err();
-        assert!(e.contains("period"), "{e}");
-        let ok = parse_text(&format!("{base}{y}{u}[align]\nperiod = 0.1\n")).unwrap();
-        let Layout::Signals { rule, .. } = ok.mqtt.layout else { panic!("signals") };
-        assert_eq!((rule.max_age, rule.reorder_window), (0.2, 0.1));
-        let bare = "[[signal]]\ncolumn = \"u\"\ntopic = \"p/u\"\ndata_format = \"value\"\n";
-        let e = parse_text(&format!("{base}{y}{bare}[align]\nperiod = 0.1\n")).unwrap_err();
-        assert!(e.contains("time = \\\"arrival\\\"") || e.contains("arrival"), "{e}");
-    }
-}
+mod tests;

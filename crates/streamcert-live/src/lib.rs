@@ -27,31 +27,48 @@ pub mod broker;
 pub mod config;
 #[cfg(feature = "mqtt")]
 pub mod mqtt;
+#[cfg(feature = "opcua")]
+pub mod opcua;
 pub mod payload;
 #[cfg(feature = "mqtt")]
 pub mod publish;
+mod rows;
 
 pub use align::{AlignRule, Aligned, Aligner};
 pub use config::{SourceConfig, parse};
 #[cfg(feature = "mqtt")]
 pub use mqtt::MqttSource;
+#[cfg(feature = "opcua")]
+pub use opcua::OpcUaSource;
 
 /// The live source a configuration's `[source]` table names, for rows of `columns` (a
 /// `certify` configuration's, or a network's wide columns): parsed, checked and connected
-/// lazily. `checkpointing` holds acknowledgements for the run's checkpoints.
+/// lazily. `checkpointing` holds an MQTT source's acknowledgements for the run's checkpoints.
 ///
 /// # Errors
-/// [`CliError::Config`](streamcert_pipeline::CliError::Config) naming the key at fault; a TLS
-/// file that cannot be read.
-#[cfg(feature = "mqtt")]
+/// [`CliError::Config`](streamcert_pipeline::CliError::Config) naming the key at fault, or a
+/// kind this build does not include; a TLS file that cannot be read.
 pub fn open(
     table: &toml::Table,
     columns: &streamcert_pipeline::config::Columns,
     checkpointing: bool,
-) -> Result<MqttSource, streamcert_pipeline::CliError> {
-    let cfg = parse(table, columns).map_err(|message| streamcert_pipeline::CliError::Config {
+) -> Result<Box<dyn streamcert_pipeline::source::Source>, streamcert_pipeline::CliError> {
+    let config = |message: String| streamcert_pipeline::CliError::Config {
         path: "[source]".into(),
         message,
-    })?;
-    MqttSource::new(cfg.mqtt, columns.outputs.len(), checkpointing)
+    };
+    let outputs = columns.outputs.len();
+    match parse(table, columns).map_err(config)? {
+        #[cfg(feature = "mqtt")]
+        SourceConfig::Mqtt(cfg) => Ok(Box::new(MqttSource::new(cfg, outputs, checkpointing)?)),
+        #[cfg(feature = "opcua")]
+        SourceConfig::OpcUa(cfg) => {
+            let _ = checkpointing;
+            Ok(Box::new(OpcUaSource::new(cfg, outputs)?))
+        }
+        #[allow(unreachable_patterns)]
+        _ => Err(config(
+            "this build has no client for this source kind (features mqtt, opcua)".into(),
+        )),
+    }
 }

@@ -29,9 +29,9 @@ use streamcert_pipeline::input::Sample;
 use streamcert_pipeline::source::{Next, Source, SourceReport};
 use streamcert_pipeline::{CliError, RowError};
 
-use crate::align::{Aligned, Aligner};
 use crate::config::{Layout, MqttConfig, Server};
 use crate::payload::{PayloadError, parse_row, parse_signal};
+use crate::rows::{SignalRows, Silence};
 
 mod connection;
 use connection::{Events, connect};
@@ -55,16 +55,13 @@ pub struct MqttSource {
     manual_acks: bool,
     /// The last row's time (whole-row topics).
     last_t: Option<f64>,
-    /// Per-signal topics: the aligner, each topic's signal, and the row buffer.
-    aligner: Option<Aligner>,
+    /// Per-signal topics: the rows they form, and each topic's signal.
+    rows: Option<SignalRows>,
     signal_of: HashMap<String, usize>,
-    row: Vec<f64>,
-    outputs: usize,
     /// Topics (or filters) and whether each has delivered.
     topics: Vec<(String, bool)>,
-    started: Instant,
+    silence: Silence,
     last_message: Instant,
-    silence_reported: bool,
     /// Connection state: ever connected, connected now, the server in use.
     ever_connected: bool,
     connected: bool,
@@ -86,21 +83,19 @@ impl MqttSource {
     /// A TLS file that cannot be read.
     pub fn new(cfg: MqttConfig, outputs: usize, checkpointing: bool) -> Result<Self, CliError> {
         let (client, events, driver) = connect(&cfg, 0, checkpointing)?;
-        let (aligner, signal_of, topics) = match &cfg.layout {
+        let (rows, signal_of, topics) = match &cfg.layout {
             Layout::Rows { topics, .. } => {
                 (None, HashMap::new(), topics.iter().map(|t| (t.clone(), false)).collect())
             }
             Layout::Signals { signals, rule, .. } => {
-                let aligner = Aligner::new(signals.len(), *rule)
-                    .map_err(|m| CliError::Config { path: "[source]".into(), message: m })?;
+                let rows = SignalRows::new(signals.len(), outputs, *rule)?;
                 let of = signals.iter().enumerate().map(|(i, s)| (s.topic.clone(), i)).collect();
                 let topics = signals.iter().map(|s| (s.topic.clone(), false)).collect();
-                (Some(aligner), of, topics)
+                (Some(rows), of, topics)
             }
         };
         let report = SourceReport { name: describe(&cfg), ..SourceReport::default() };
-        let n = signal_of.len();
-        let now = Instant::now();
+        let silence = Silence::new(cfg.silent_after);
         let source = Self {
             client,
             events,
@@ -111,14 +106,11 @@ impl MqttSource {
             unacked: Vec::new(),
             manual_acks: checkpointing,
             last_t: None,
-            aligner,
+            rows,
             signal_of,
-            row: vec![0.0; n],
-            outputs,
             topics,
-            started: now,
-            last_message: now,
-            silence_reported: false,
+            silence,
+            last_message: Instant::now(),
             ever_connected: false,
             connected: false,
             server: 0,
@@ -278,8 +270,8 @@ impl MqttSource {
                 let keys = (sig.time_key.as_str(), sig.value_key.as_str());
                 match parse_signal(&p.payload, sig.format, keys, now(), self.cfg.max_payload) {
                     Ok((t, v)) => {
-                        let aligner = self.aligner.as_mut()?;
-                        if aligner.push(i, t, v).is_err() {
+                        let rows = self.rows.as_mut()?;
+                        if rows.push(i, t, v).is_err() {
                             if p.dup {
                                 self.report.redelivered += 1;
                             } else {
@@ -326,47 +318,6 @@ impl MqttSource {
             message: e.to_string(),
         })
     }
-
-    /// The aligner's next row or gap, into `s`.
-    fn aligned(&mut self, s: &mut Sample) -> Option<Next> {
-        let aligner = self.aligner.as_mut()?;
-        let next = aligner.pop(&mut self.row)?;
-        self.report.stale_rows = aligner.stale();
-        Some(match next {
-            Aligned::Row(t) => {
-                s.t = t;
-                s.y.clear();
-                s.y.extend_from_slice(&self.row[..self.outputs]);
-                s.u.clear();
-                s.u.extend_from_slice(&self.row[self.outputs..]);
-                s.line = self.report.messages;
-                self.report.rows += 1;
-                Next::Row
-            }
-            Aligned::Gap => {
-                self.report.gaps += 1;
-                Next::Gap("a signal was older than max_age or missing".into())
-            }
-        })
-    }
-
-    /// Name the topics that delivered nothing, once, after `silent_after`.
-    fn check_silence(&mut self) {
-        if self.silence_reported || self.started.elapsed() < self.cfg.silent_after {
-            return;
-        }
-        self.silence_reported = true;
-        let silent: Vec<String> =
-            self.topics.iter().filter(|(_, seen)| !seen).map(|(t, _)| t.clone()).collect();
-        if !silent.is_empty() {
-            eprintln!(
-                "source: nothing received after {:.0} s on {}",
-                self.cfg.silent_after.as_secs_f64(),
-                silent.join(", ")
-            );
-        }
-        self.report.silent = silent;
-    }
 }
 
 impl Source for MqttSource {
@@ -376,7 +327,7 @@ impl Source for MqttSource {
                 self.report.gaps += 1;
                 return Some(Ok(Next::Gap(why)));
             }
-            if let Some(next) = self.aligned(s) {
+            if let Some(next) = self.rows.as_mut().and_then(|r| r.next(s, &mut self.report)) {
                 return Some(Ok(next));
             }
             if let Some(p) = self.early.pop_front() {
@@ -385,7 +336,7 @@ impl Source for MqttSource {
                     None => continue,
                 }
             }
-            self.check_silence();
+            self.silence.check(&self.topics, &mut self.report);
             if self.cfg.idle_timeout.is_some_and(|d| self.last_message.elapsed() >= d) {
                 return None;
             }
@@ -422,25 +373,15 @@ impl Source for MqttSource {
 
     fn report(&self) -> Option<SourceReport> {
         let mut report = self.report.clone();
-        report.state = self.aligner.as_ref().and_then(|a| serde_json::to_value(a).ok());
+        report.state = self.rows.as_ref().and_then(SignalRows::state);
         Some(report)
     }
 
     fn restore(&mut self, report: &SourceReport) -> Result<(), CliError> {
-        let (Some(aligner), Some(state)) = (&mut self.aligner, &report.state) else {
-            return Ok(());
-        };
-        let bad = |message: String| CliError::Checkpoint { path: "[source]".into(), message };
-        let saved: Aligner = serde_json::from_value(state.clone())
-            .map_err(|e| bad(format!("the aligner's state does not parse: {e}")))?;
-        if !saved.is_consistent() {
-            return Err(bad("the aligner's state is inconsistent".into()));
+        match (&mut self.rows, &report.state) {
+            (Some(rows), Some(state)) => rows.restore(state),
+            _ => Ok(()),
         }
-        if saved.rule() != aligner.rule() || saved.signals() != aligner.signals() {
-            return Err(bad("the checkpoint was written with another [source.align]".into()));
-        }
-        *aligner = saved;
-        Ok(())
     }
 }
 

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use streamcert_experiments::Experiment;
 use streamcert_live::publish::{self, Layout, PublishOptions};
-use streamcert_live::{AlignRule, MqttSource};
+use streamcert_live::{AlignRule, MqttSource, SourceConfig};
 use streamcert_pipeline::certify::{self, Options, Summary};
 use streamcert_pipeline::config::{self, Config};
 use streamcert_pipeline::source::Source;
@@ -52,7 +52,8 @@ fn file_run(cfg: &Config, csv: &str) -> (Vec<u8>, Summary) {
 /// A subscribed source for `cfg`'s `[source]`.
 fn source(cfg: &Config) -> MqttSource {
     let parsed = streamcert_live::parse(cfg.source.as_ref().unwrap(), &cfg.columns).unwrap();
-    let mut s = MqttSource::new(parsed.mqtt, cfg.columns.outputs.len(), false).unwrap();
+    let SourceConfig::Mqtt(mqtt) = parsed else { panic!("an MQTT source") };
+    let mut s = MqttSource::new(mqtt, cfg.columns.outputs.len(), false).unwrap();
     assert!(s.wait_subscribed(Duration::from_secs(10)), "not subscribed");
     s
 }

@@ -119,19 +119,14 @@ pub(super) fn run_network(
                 .into(),
         });
     }
-    let s = if let Some(table) = &cfg.source {
+    let s = if let (Some(table), false) = (&cfg.source, cluster.is_set()) {
         one_input(&io.input, &path)?;
-        if cluster.is_set() {
-            return Err(CliError::Config {
-                path,
-                message: "a live [source] runs the network in one process (sites across \
-                          processes read files or pipes)"
-                    .into(),
-            });
-        }
         let source = streamcert_live::open(table, &cfg.columns, opts.checkpoint.is_some())?;
         network::run_source(&cfg, source, "live", &mut out, &opts)?
     } else if cluster.is_set() {
+        if cfg.source.is_some() {
+            one_input(&io.input, &path)?;
+        }
         let Some(s) = run_cluster(&cfg, &io.input, &mut out, &opts, &cluster)? else {
             return Ok(Outcome::Done);
         };
@@ -172,10 +167,24 @@ fn run_cluster(
         }
         Ok(Box::new(open_input(&name)?))
     };
-    if cluster.index() == 0 {
-        return Ok(Some(network::run_timely(cfg, &open, input, out, opts, cluster)?.0));
+    // A live [source]: each site subscribes to its own subsystems' signals, under a client id
+    // of its own (a persistent session per site); acknowledged on arrival (a site's
+    // checkpoints are written on timely's epochs, not held against its messages).
+    let process = cluster.index();
+    let live = |columns: &streamcert_pipeline::config::Columns| {
+        let table = cfg.source.clone().unwrap_or_default();
+        let site = streamcert_live::for_site(&table, columns, process);
+        streamcert_live::open(&site, columns, false)
+    };
+    let input_of = if cfg.source.is_some() {
+        network::SiteInput::Live(&live)
+    } else {
+        network::SiteInput::File(&open)
+    };
+    if process == 0 {
+        return Ok(Some(network::run_timely(cfg, input_of, input, out, opts, cluster)?.0));
     }
-    let (_, site) = network::run_timely(cfg, &open, input, std::io::sink(), opts, cluster)?;
+    let (_, site) = network::run_timely(cfg, input_of, input, std::io::sink(), opts, cluster)?;
     let rejoins =
         if site.rejoins > 0 { format!(", {} rejoins", site.rejoins) } else { String::new() };
     eprintln!(

@@ -174,3 +174,79 @@ fn a_network_read_from_a_broker_writes_the_files_epochs_bit_for_bit() {
     assert!(want.lines().count() > 10, "{want}");
     assert!(got == want, "the live network's epochs differ from the file's");
 }
+
+#[test]
+fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
+    let port = streamcert_live::broker::free_loopback().unwrap();
+    streamcert_live::broker::serve(port).unwrap();
+    let port = port.port();
+    // A on process 0, B on process 1.
+    let example = common::network_example()
+        .replace("# process = 0           #", "process = 0           #")
+        .replace("gain = [[-3.0]]\n", "gain = [[-3.0]]\nprocess = 1\n");
+    assert!(example.contains("process = 1"), "{example}");
+    let sim = bin()
+        .args(["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"])
+        .output()
+        .unwrap();
+    assert!(sim.status.success());
+    let csv = common::text(&sim.stdout);
+    let path = |p: &std::path::Path| p.display().to_string();
+    // The one-process run of the file.
+    let (file_cfg, data, want) =
+        (common::tmp("sites-file.toml"), common::tmp("sites.csv"), common::tmp("sites-want.csv"));
+    std::fs::write(&file_cfg, &example).unwrap();
+    std::fs::write(&data, &csv).unwrap();
+    let status = bin()
+        .args(["network", "--config", &path(&file_cfg), "--input", &path(&data)])
+        .args(["--output", &path(&want)])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    // Two sites, each subscribed to the wide rows for its own subsystem's columns.
+    let live_cfg = common::tmp("sites-live.toml");
+    let source = format!(
+        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\n\
+         client_id = \"streamcert-sites\"\ntopics = [\"g5/sites\"]\nidle_timeout = 2.0\n"
+    );
+    std::fs::write(&live_cfg, example + &source).unwrap();
+    let hosts = common::tmp("sites-live-hosts.txt");
+    let ports: Vec<u16> = (0..2)
+        .map(|_| std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port())
+        .collect();
+    std::fs::write(&hosts, format!("127.0.0.1:{}\n127.0.0.1:{}\n", ports[0], ports[1])).unwrap();
+    let got = common::tmp("sites-got.csv");
+    let _ = std::fs::remove_file(&got);
+    // Both start together (timely waits for every process), and say they are subscribed.
+    let sites: Vec<_> = (0..2)
+        .map(|i| {
+            let (cfg, hosts, got) = (path(&live_cfg), path(&hosts), path(&got));
+            std::thread::spawn(move || {
+                let index = i.to_string();
+                let mut args = vec!["network", "--config", &cfg, "--processes", "2"];
+                args.extend(["--process", &index, "--hostfile", &hosts, "--silence", "30"]);
+                if i == 0 {
+                    args.extend(["--output", &got]);
+                }
+                Certify::start_args(&args)
+            })
+        })
+        .collect();
+    let sites: Vec<Certify> = sites.into_iter().map(|h| h.join().unwrap()).collect();
+    let mut lines = csv.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows: Vec<Vec<f64>> =
+        lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    let opts = common::live::publisher(port, "g5/sites", "pub-sites");
+    streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    for (i, site) in sites.into_iter().enumerate() {
+        let (status, err) = site.finish();
+        assert!(status.success(), "process {i}: {err}");
+        // Each site's session is its own: the configured client id, suffixed.
+        assert!(err.contains(&format!("client streamcert-sites-site{i}")), "{err}");
+    }
+    let (got, want) =
+        (std::fs::read_to_string(&got).unwrap(), std::fs::read_to_string(&want).unwrap());
+    assert!(want.lines().count() > 10, "{want}");
+    assert!(got == want, "the sites' epochs differ from the file's");
+}

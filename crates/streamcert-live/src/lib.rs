@@ -41,6 +41,34 @@ pub use mqtt::MqttSource;
 #[cfg(feature = "opcua")]
 pub use opcua::OpcUaSource;
 
+/// The `[source]` table of a network's site: its `[[source.signal]]` (MQTT) or
+/// `[[source.node]]` (OPC UA) entries restricted to `columns` (the site's subsystems'), and
+/// an MQTT client id suffixed `-site{process}` (a persistent session per site). The shared
+/// configuration lists every subsystem's signals; each site subscribes to its own.
+#[must_use]
+pub fn for_site(
+    table: &toml::Table,
+    columns: &streamcert_pipeline::config::Columns,
+    process: usize,
+) -> toml::Table {
+    let mut table = table.clone();
+    let wanted: Vec<&String> = columns.outputs.iter().chain(&columns.inputs).collect();
+    let column_of = |v: &toml::Value| {
+        v.get("column").or_else(|| v.get("name")).and_then(toml::Value::as_str).map(String::from)
+    };
+    for key in ["signal", "node"] {
+        if let Some(toml::Value::Array(entries)) = table.get_mut(key) {
+            entries.retain(|e| column_of(e).is_some_and(|c| wanted.contains(&&c)));
+        }
+    }
+    if table.get("kind").and_then(toml::Value::as_str) == Some("mqtt") {
+        let id = table.get("client_id").and_then(toml::Value::as_str).unwrap_or("streamcert");
+        let id = format!("{id}-site{process}");
+        table.insert("client_id".into(), toml::Value::String(id));
+    }
+    table
+}
+
 /// The live source a configuration's `[source]` table names, for rows of `columns` (a
 /// `certify` configuration's, or a network's wide columns): parsed, checked and connected
 /// lazily. `checkpointing` holds an MQTT source's acknowledgements for the run's checkpoints.
@@ -52,7 +80,7 @@ pub fn open(
     table: &toml::Table,
     columns: &streamcert_pipeline::config::Columns,
     checkpointing: bool,
-) -> Result<Box<dyn streamcert_pipeline::source::Source>, streamcert_pipeline::CliError> {
+) -> Result<Box<dyn streamcert_pipeline::source::Source + Send>, streamcert_pipeline::CliError> {
     let config = |message: String| streamcert_pipeline::CliError::Config {
         path: "[source]".into(),
         message,

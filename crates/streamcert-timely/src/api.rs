@@ -17,6 +17,10 @@ pub struct Row {
     pub t: f64,
     /// The samples of the row.
     pub samples: Vec<(usize, Vec<f64>)>,
+    /// A gap before this row (a live source's outage): the windows of its subsystems
+    /// restart here ([`Certifier::gap`](streamcert_certificate::Certifier::gap)), as at a gap
+    /// in the time column.
+    pub gap: bool,
 }
 
 /// Which process reads and certifies each subsystem, this process, and timely's setup.

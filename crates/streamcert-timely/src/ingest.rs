@@ -284,10 +284,10 @@ where
                 return Some(f);
             }
             let refused = bad.map(|b| refuse(r.samples[b].0));
-            let (line, t) = (r.line, r.t);
+            let (line, t, gap) = (r.line, r.t, r.gap);
             for (i, values) in r.samples.into_iter().take(bad.unwrap_or(usize::MAX)) {
                 if let Some(pos) = self.site.position(i) {
-                    self.pending.push(Pending { pos, seq: count, line, t, values });
+                    self.pending.push(Pending { pos, seq: count, line, t, values, gap });
                 }
             }
             if refused.is_some() {

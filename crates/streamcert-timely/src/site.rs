@@ -23,6 +23,8 @@ pub(crate) struct Pending {
     pub(crate) line: u64,
     pub(crate) t: f64,
     pub(crate) values: Vec<f64>,
+    /// The windows restart at this sample (a declared gap).
+    pub(crate) gap: bool,
 }
 
 /// A sample its certifier rejected.
@@ -384,6 +386,9 @@ fn certify_part(
             continue;
         }
         let cert = &mut c[k];
+        if p.gap {
+            cert.gap();
+        }
         let m = cert.config().regression.outputs.min(p.values.len());
         let (y, u) = p.values.split_at(m);
         match cert.push(p.t, y, u) {

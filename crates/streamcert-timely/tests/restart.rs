@@ -36,6 +36,7 @@ fn rows(n: usize, steps: usize, seed: u64) -> Vec<Row> {
                 line: out.len() as u64 + 2,
                 t: k as f64 * 0.01 + 0.001 * i as f64,
                 samples: vec![(i, vec![y[i], u])],
+                gap: false,
             });
             y[i] += 0.01 * (-0.2 * y[i] + u) + 0.01 * rng.random_range(-1.0..1.0);
         }

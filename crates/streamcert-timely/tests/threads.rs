@@ -30,7 +30,7 @@ fn rows(n: usize, steps: usize, seed: u64) -> Vec<Row> {
                     s
                 })
                 .collect();
-            Row { line: k as u64 + 2, t, samples }
+            Row { line: k as u64 + 2, t, samples, gap: false }
         })
         .collect()
 }
@@ -52,6 +52,9 @@ fn serial(cfg: &NetworkConfig, rows: &[Row]) -> (Vec<EpochReport>, Option<String
     let mut out = Vec::new();
     for r in rows {
         for (i, v) in &r.samples {
+            if r.gap {
+                net.gap(*i);
+            }
             if let Err(e) = net.push(*i, r.t, &v[..1], &v[1..], |e| out.push(e.clone())) {
                 return (out, Some(e.to_string()));
             }
@@ -106,6 +109,23 @@ fn worker_threads_give_the_one_process_reports() {
 }
 
 #[test]
+fn a_declared_gap_restarts_the_rows_subsystems_windows_as_in_one_process() {
+    let cfg = network(3);
+    let mut data = rows(3, 1500, 7);
+    let (plain, _) = serial(&cfg, &data);
+    // A live source's outage before row 700: every subsystem in it restarts its windows.
+    data[700].gap = true;
+    let (want, none) = serial(&cfg, &data);
+    assert!(none.is_none());
+    assert_ne!(want, plain, "the gap changes the reports");
+    for workers in [1, 2] {
+        let (got, err) = timely(&cfg, data.clone(), workers);
+        assert!(err.is_none(), "{err:?}");
+        assert_eq!(got, want, "{workers} workers");
+    }
+}
+
+#[test]
 fn a_rejected_sample_stops_where_one_process_stops() {
     let cfg = network(4);
     let mut data = rows(4, 1500, 5);
@@ -137,7 +157,7 @@ fn a_bad_row_and_a_time_jump_stop_the_run() {
     assert!(matches!(result, Err(TimelyError::Source { row: 401, .. })));
     assert_eq!(out, want);
     let mut jump = data[..400].to_vec();
-    jump.push(Row { line: 999, t: 1e9, samples: vec![(0, vec![0.0, 0.0])] });
+    jump.push(Row { line: 999, t: 1e9, samples: vec![(0, vec![0.0, 0.0])], gap: false });
     let mut out = Vec::new();
     let result = run(
         cfg,
@@ -162,7 +182,12 @@ fn unaligned_subsystem_rows_give_the_one_process_reports() {
             let (t, line) = (r.t, r.line);
             r.samples.into_iter().filter_map(move |(i, v)| {
                 let silent = i == 1 && (6.0..9.0).contains(&t);
-                (!silent).then(|| Row { line, t: t + 0.001 * i as f64, samples: vec![(i, v)] })
+                (!silent).then(|| Row {
+                    line,
+                    t: t + 0.001 * i as f64,
+                    samples: vec![(i, v)],
+                    gap: false,
+                })
             })
         })
         .collect();

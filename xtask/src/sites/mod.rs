@@ -111,7 +111,7 @@ impl Iterator for Rows {
         }
         let u = -2.0 * self.y[k] + self.d[k];
         let t = self.step as f64 * dt;
-        let row = Row { line: 0, t, samples: vec![(self.ids[k], vec![self.y[k], u])] };
+        let row = Row { line: 0, t, samples: vec![(self.ids[k], vec![self.y[k], u])], gap: false };
         let w: f64 = self.rng.sample(StandardNormal);
         self.y[k] += dt * (self.a[k] * self.y[k] + u) + SIGMA * dt.sqrt() * w;
         self.k += 1;

@@ -66,3 +66,23 @@ fn signals_need_every_column_a_period_and_a_timestamp() {
     let e = parse_text(&format!("{base}{y}{bare}[align]\nperiod = 0.1\n")).unwrap_err();
     assert!(e.contains("time = \\\"arrival\\\"") || e.contains("arrival"), "{e}");
 }
+
+#[test]
+fn a_site_keeps_its_own_signals_and_session() {
+    let table: toml::Table = toml::from_str(
+        "kind = \"mqtt\"\nservers = [\"tcp://h\"]\nclient_id = \"net\"\n\
+         [[signal]]\ncolumn = \"y\"\ntopic = \"p/y\"\n[[signal]]\ncolumn = \"u\"\ntopic = \"p/u\"\n\
+         [[signal]]\ncolumn = \"y_other\"\ntopic = \"q/y\"\n[[signal]]\ncolumn = \"u_other\"\n\
+         topic = \"q/u\"\n[align]\nperiod = 0.1\n",
+    )
+    .unwrap();
+    // The whole table is refused for the site's columns (other subsystems' topics); the
+    // site's own is accepted, under a client id of its own.
+    assert!(parse(&table, &columns()).unwrap_err().contains("y_other"));
+    let site = crate::for_site(&table, &columns(), 1);
+    let m = mqtt(parse(&site, &columns()).unwrap());
+    assert_eq!(m.client_id, "net-site1");
+    let Layout::Signals { signals, .. } = m.layout else { panic!("signals") };
+    let topics: Vec<&str> = signals.iter().map(|s| s.topic.as_str()).collect();
+    assert_eq!(topics, ["p/y", "p/u"]);
+}

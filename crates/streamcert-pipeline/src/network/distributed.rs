@@ -13,18 +13,20 @@
 //! the dead process is restarted with `--resume FILE`. Process 0 writes no epoch row twice
 //! while it stays up.
 
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use serde::{Deserialize, Serialize};
-use streamcert_timely::{ComposerState, Output, Placement, Resume, Row, SiteState, TimelyError};
+use streamcert_timely::{ComposerState, Output, Placement, Resume, SiteState, TimelyError};
 
 use super::config::NetConfig;
-use super::input::{Item, Rows};
+mod site_input;
 use super::output::EpochWriter;
 use super::{NetOptions, NetSummary, estimated_columns};
 use crate::output::Header;
 use crate::{CliError, RowError};
+pub use site_input::{OpenLive, Reopen, SiteInput};
+use site_input::{RowIter, check_live, open_site};
 
 /// Timely's process configuration.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -159,61 +161,6 @@ fn load(path: &Path, cfg: &NetConfig, place: &Placement) -> Result<SiteFile, Cli
     Ok(SiteFile { site, composer, ..file })
 }
 
-/// The rows of `input` as timely rows.
-struct RowIter<R: Read> {
-    rows: Option<Rows<R>>,
-    first: Option<CliError>,
-    values: Vec<f64>,
-    items: Vec<(usize, usize, usize, usize)>,
-}
-
-impl<R: Read> RowIter<R> {
-    /// The rows of `input` this process reads (its subsystems' columns); a refused input is
-    /// the iterator's first item.
-    fn for_site(
-        cfg: &NetConfig,
-        process_of: &[usize],
-        process: usize,
-        input: R,
-        name: &str,
-    ) -> Self {
-        let (rows, first) = match Rows::for_site(cfg, process_of, process, input, name) {
-            Ok(rows) => (Some(rows), None),
-            Err(e) => (None, Some(e)),
-        };
-        Self { rows, first, values: Vec::new(), items: Vec::new() }
-    }
-}
-
-impl<R: Read> Iterator for RowIter<R> {
-    type Item = Result<Row, CliError>;
-
-    fn next(&mut self) -> Option<Self::Item> {
-        if let Some(e) = self.first.take() {
-            return Some(Err(e));
-        }
-        let next = self.rows.as_mut()?.next(&mut self.values, &mut self.items)?;
-        // A site reads a file or a pipe, whose rows are rows (a live source is refused
-        // before the run for sites).
-        let next = next.and_then(|item| match item {
-            Item::Row(line, t) => Ok((line, t)),
-            Item::Gap(why) => Err(CliError::Input { file: "input".into(), message: why }),
-            Item::Bad(e) => Err(CliError::Row(e)),
-        });
-        Some(next.map(|(line, t)| {
-            Row {
-                line,
-                t,
-                samples: self
-                    .items
-                    .iter()
-                    .map(|&(i, start, p, m)| (i, self.values[start..start + p + m].to_vec()))
-                    .collect(),
-            }
-        }))
-    }
-}
-
 /// What a distributed run reports beside the summary.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct SiteReport {
@@ -263,18 +210,22 @@ fn announce_resume(process: usize, k: u64, restarted: &[usize]) {
     eprintln!("process {process}: every process is back; the run resumes at epoch {k}{again}");
 }
 
-/// Opens this process's input again (the run reads it from the start after a restart).
-pub type Reopen = dyn Fn() -> Result<Box<dyn Read + Send>, CliError>;
+/// Why `--checkpoint-every` is refused over timely.
+const CHECKPOINT_EVERY: &str = "--checkpoint-every counts rows of a one-process run: over \
+    timely, every process checkpoints at epoch boundaries (every epoch boundary, or \
+    --checkpoint-epochs N)";
 
 /// Run this process of the network on timely: read its own input (`open` opens it, again
-/// after a lost peer), certify its subsystems; process 0 also writes the epoch rows to `out`.
+/// after a lost peer: a file, or a live source for its subsystems' columns), certify its
+/// subsystems; process 0 also writes the epoch rows to `out`. A live source's gap or bad
+/// payload restarts the windows of this site's subsystems at its next row.
 ///
 /// # Errors
 /// Timely's configuration; this process's input, row, output and checkpoint errors; a
 /// refused start; a lost peer when the run cannot rejoin (no checkpoint, or standard input).
 pub fn run_timely<W: Write>(
     cfg: &NetConfig,
-    open: &Reopen,
+    open: SiteInput<'_>,
     input_name: &str,
     out: W,
     opts: &NetOptions,
@@ -282,15 +233,12 @@ pub fn run_timely<W: Write>(
 ) -> Result<(NetSummary, SiteReport), CliError> {
     let bad = |message: String| CliError::Config { path: "timely".into(), message };
     let place = cluster.placement(cfg).map_err(bad)?;
+    check_live(cfg, open, &place).map_err(bad)?;
+    if opts.checkpoint_every.is_some() {
+        return Err(bad(CHECKPOINT_EVERY.into()));
+    }
     if place.processes > 1 {
         quiet_timely_panics();
-    }
-    if opts.checkpoint_every.is_some() {
-        return Err(bad(
-            "--checkpoint-every counts rows of a one-process run: over timely, every process \
-             checkpoints at epoch boundaries (every epoch boundary, or --checkpoint-epochs N)"
-                .into(),
-        ));
     }
     let names: Vec<String> = cfg.network.subsystems.iter().map(|s| s.name.clone()).collect();
     let (mut resume, mut summary) = match &opts.resume {
@@ -320,8 +268,8 @@ pub fn run_timely<W: Write>(
         h.composer = None;
         let (rows_cfg, name, process) = (cfg.clone(), input_name.to_string(), place.process);
         let process_of = place.process_of.clone();
-        let input = open()?;
-        let source = move || RowIter::for_site(&rows_cfg, &process_of, process, input, &name);
+        let input = open_site(cfg, open, &process_of, process)?;
+        let source = move || RowIter::opened(&rows_cfg, &process_of, process, input, &name);
         let every = opts.checkpoint.as_ref().map(|_| cluster.checkpoint_epochs.unwrap_or(1).max(1));
         let result = streamcert_timely::run(
             cfg.network.clone(),

@@ -29,18 +29,55 @@ pub(super) enum Rows<R: Read> {
         ids: Vec<usize>,
     },
     Long(LongReader<R>),
-    /// Wide rows from a live source (`streamcert-live`).
+    /// Wide rows from a live source (`streamcert-live`); `ids` as for `Wide`.
     Live {
         source: Box<dyn Source>,
         sample: Sample,
         dims: Vec<(usize, usize)>,
+        ids: Vec<usize>,
     },
+}
+
+/// The columns, `(p, m)` and indices of the subsystems placed on `process` (wide layout).
+pub(super) fn site(
+    cfg: &NetConfig,
+    process_of: &[usize],
+    process: usize,
+) -> (crate::config::Columns, Vec<(usize, usize)>, Vec<usize>) {
+    let mut columns = cfg.columns.clone();
+    columns.outputs.clear();
+    columns.inputs.clear();
+    let (mut dims, mut ids) = (Vec::new(), Vec::new());
+    let (mut yo, mut uo) = (0, 0);
+    for (i, &(p, m)) in cfg.dims.iter().enumerate() {
+        if process_of.get(i) == Some(&process) {
+            columns.outputs.extend_from_slice(&cfg.columns.outputs[yo..yo + p]);
+            columns.inputs.extend_from_slice(&cfg.columns.inputs[uo..uo + m]);
+            dims.push((p, m));
+            ids.push(i);
+        }
+        yo += p;
+        uo += m;
+    }
+    (columns, dims, ids)
 }
 
 impl<R: Read> Rows<R> {
     /// Wide rows of every subsystem from a live source.
     pub(super) fn live(cfg: &NetConfig, source: Box<dyn Source>) -> Self {
-        Self::Live { source, sample: Sample::default(), dims: cfg.dims.clone() }
+        let ids = (0..cfg.dims.len()).collect();
+        Self::Live { source, sample: Sample::default(), dims: cfg.dims.clone(), ids }
+    }
+
+    /// Wide rows of one site's subsystems from a live source opened for their columns.
+    pub(super) fn live_for_site(
+        cfg: &NetConfig,
+        process_of: &[usize],
+        process: usize,
+        source: Box<dyn Source>,
+    ) -> Self {
+        let (_, dims, ids) = site(cfg, process_of, process);
+        Self::Live { source, sample: Sample::default(), dims, ids }
     }
 
     /// The live source, if the rows come from one (for its acknowledgements).
@@ -76,21 +113,7 @@ impl<R: Read> Rows<R> {
         if cfg.layout == InputLayout::Long {
             return Self::new(cfg, input, name);
         }
-        let mut columns = cfg.columns.clone();
-        columns.outputs.clear();
-        columns.inputs.clear();
-        let (mut dims, mut ids) = (Vec::new(), Vec::new());
-        let (mut yo, mut uo) = (0, 0);
-        for (i, &(p, m)) in cfg.dims.iter().enumerate() {
-            if process_of.get(i) == Some(&process) {
-                columns.outputs.extend_from_slice(&cfg.columns.outputs[yo..yo + p]);
-                columns.inputs.extend_from_slice(&cfg.columns.inputs[uo..uo + m]);
-                dims.push((p, m));
-                ids.push(i);
-            }
-            yo += p;
-            uo += m;
-        }
+        let (columns, dims, ids) = site(cfg, process_of, process);
         Ok(Self::Wide {
             reader: SampleReader::new(input, name, &columns)?,
             sample: Sample::default(),
@@ -117,9 +140,9 @@ impl<R: Read> Rows<R> {
             Self::Long(reader) => {
                 reader.next(values, items).map(|r| r.map(|(l, t)| Item::Row(l, t)))
             }
-            Self::Live { source, sample, dims } => Some(match source.next_into(sample)? {
+            Self::Live { source, sample, dims, ids } => Some(match source.next_into(sample)? {
                 Ok(Next::Row) => {
-                    split(sample, dims, |k| k, values, items);
+                    split(sample, dims, |k| ids[k], values, items);
                     Ok(Item::Row(sample.line, sample.t))
                 }
                 Ok(Next::Gap(why)) => Ok(Item::Gap(why)),

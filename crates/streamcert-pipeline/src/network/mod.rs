@@ -21,7 +21,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_network::NetworkCertifier;
 
 pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse, template};
-pub use distributed::{Cluster, Reopen, SiteReport, run_timely};
+pub use distributed::{Cluster, OpenLive, Reopen, SiteInput, SiteReport, run_timely};
 use input::{Item, Rows};
 use output::EpochWriter;
 pub use verdict::{summary_json, summary_text, verdict_line};

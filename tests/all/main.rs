@@ -19,6 +19,7 @@ mod nonlinear;
 mod nonlinear_bound;
 mod nonlinear_region;
 mod order;
+mod packages;
 mod regression;
 mod reliability;
 mod support;

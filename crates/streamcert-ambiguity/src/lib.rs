@@ -21,15 +21,28 @@
 //!
 //! ```
 //! use streamcert_ambiguity::{AmbiguityConfig, AmbiguityRadius, SpikeScale};
-//! let mut amb = AmbiguityRadius::new(AmbiguityConfig {
+//! let config = AmbiguityConfig {
 //!     spike_scale: SpikeScale::Fixed { sigma0: 1.0 },
 //!     ..AmbiguityConfig::paper(150)
-//! })?;
+//! };
+//! // A light-tailed, bounded stream (uniform on [-1, 1]): negative excess kurtosis, no
+//! // value beyond 3 sigma0, so the radius sits at its floor.
+//! let mut calm = AmbiguityRadius::new(config.clone())?;
 //! for k in 0..300 {
-//!     amb.push(((k * 7919) % 13) as f64 - 6.0)?; // a light-tailed, bounded stream
+//!     calm.push(((k * 7919) % 1000) as f64 / 500.0 - 1.0)?;
 //! }
-//! let s = amb.snapshot();
-//! assert!(s.eps >= 0.015 && s.eps <= 0.32);
+//! let s = calm.snapshot();
+//! assert!(s.kurtosis.is_some_and(|k| k < 0.0) && s.spike_fraction == 0.0);
+//! assert_eq!(s.eps, 0.015);
+//! // The same stream with a spike of 3.5 every 50 values: heavier tails widen the radius,
+//! // below its cap.
+//! let mut spiky = AmbiguityRadius::new(config)?;
+//! for k in 0..300 {
+//!     let x = ((k * 7919) % 1000) as f64 / 500.0 - 1.0;
+//!     spiky.push(if k % 50 == 0 { 3.5 } else { x })?;
+//! }
+//! let w = spiky.snapshot();
+//! assert!(w.eps > 0.1 && w.eps < 0.32, "{}", w.eps);
 //! # Ok::<(), streamcert_ambiguity::AmbiguityError>(())
 //! ```
 

@@ -46,23 +46,32 @@ fn terminal(doc: &str, n: u8) -> Vec<String> {
     words[1..].to_vec()
 }
 
-#[test]
-fn the_two_terminal_walk_through_of_docs_live_md_runs_as_written() {
+/// What a walk-through of docs/live.md printed: the plant's first stderr line, and the
+/// certify run's stderr and evidence rows.
+struct WalkThrough {
+    plant_says: String,
+    stderr: String,
+    rows: usize,
+}
+
+/// docs/live.md's terminals `plant` and `certify` (`certify` reading `config`, under
+/// examples/data), as written but on a free port instead of `port` (tests run in parallel,
+/// and a machine may run a broker or a server of its own there), in the commands and in the
+/// configuration; `extra` appended to the plant's command.
+fn walk_through(plant: u8, certify: u8, port: &str, config: &str, extra: &[String]) -> WalkThrough {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let doc = std::fs::read_to_string(root.join("docs/live.md")).unwrap();
-    // As written, but on a free port instead of 1883 (tests run in parallel, and a machine
-    // may run a broker of its own there), in the command and in the configuration.
-    let port = streamcert_live::broker::free_loopback().unwrap().port().to_string();
-    let on_port = |w: &String| w.replace("1883", &port);
-    let plant_args: Vec<String> = terminal(&doc, 1).iter().map(on_port).collect();
-    let mut certify_args: Vec<String> = terminal(&doc, 2).iter().map(on_port).collect();
-    let config = root.join("examples/data/g5_live.toml");
-    let text = std::fs::read_to_string(&config).unwrap().replace("1883", &port);
-    let local = common::tmp("live-docs.toml");
-    std::fs::write(&local, text).unwrap();
-    let evidence = common::tmp("live-docs-evidence.csv");
+    let free = streamcert_live::broker::free_loopback().unwrap().port().to_string();
+    let on_port = |w: &String| w.replace(port, &free);
+    let mut plant_args: Vec<String> = terminal(&doc, plant).iter().map(on_port).collect();
+    plant_args.extend_from_slice(extra);
+    let mut certify_args: Vec<String> = terminal(&doc, certify).iter().map(on_port).collect();
+    let text = std::fs::read_to_string(root.join("examples/data").join(config)).unwrap();
+    let local = common::tmp(&format!("docs-{config}"));
+    std::fs::write(&local, text.replace(port, &free)).unwrap();
+    let evidence = common::tmp(&format!("docs-{config}-evidence.csv"));
     for w in &mut certify_args {
-        if w.as_str() == "examples/data/g5_live.toml" {
+        if *w == format!("examples/data/{config}") {
             *w = local.display().to_string();
         } else if w.as_str() == "evidence.csv" {
             *w = evidence.display().to_string();
@@ -70,60 +79,37 @@ fn the_two_terminal_walk_through_of_docs_live_md_runs_as_written() {
     }
     let mut plant = bin().args(&plant_args).stderr(Stdio::piped()).spawn().unwrap();
     let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
-    let line = plant_err.next().unwrap().unwrap();
-    assert!(line.starts_with("broker: serving MQTT on"), "{line}");
+    let plant_says = plant_err.next().unwrap().unwrap();
     let args: Vec<&str> = certify_args.iter().map(String::as_str).collect();
-    let certify = Certify::start_args(&args);
-    let (status, err) = certify.finish();
+    let (status, stderr) = Certify::start_args(&args).finish();
     plant.kill().unwrap();
     plant.wait().unwrap();
-    assert!(status.success(), "{err}");
-    assert!(err.lines().any(|l| l.starts_with("verdict: ")), "{err}");
-    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
-    assert!(source.contains(" 0 bad, 0 late") && source.contains(" 0 gaps"), "{source}");
+    assert!(status.success(), "{stderr}");
+    assert!(stderr.lines().any(|l| l.starts_with("verdict: ")), "{stderr}");
     let rows = std::fs::read_to_string(&evidence).unwrap().lines().count();
-    assert!(rows > 1000, "{rows} evidence rows");
+    WalkThrough { plant_says, stderr, rows }
+}
+
+#[test]
+fn the_two_terminal_walk_through_of_docs_live_md_runs_as_written() {
+    let w = walk_through(1, 2, "1883", "g5_live.toml", &[]);
+    assert!(w.plant_says.starts_with("broker: serving MQTT on"), "{}", w.plant_says);
+    let source = w.stderr.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    assert!(source.contains(" 0 bad, 0 late") && source.contains(" 0 gaps"), "{source}");
+    assert!(w.rows > 1000, "{} evidence rows", w.rows);
 }
 
 #[test]
 fn the_opcua_walk_through_of_docs_live_md_runs_as_written() {
-    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let doc = std::fs::read_to_string(root.join("docs/live.md")).unwrap();
-    // As written, on a free port instead of 4840, the plant's PKI in a scratch directory.
-    let port = streamcert_live::broker::free_loopback().unwrap().port().to_string();
-    let on_port = |w: &String| w.replace("4840", &port);
-    let pki = common::tmp("opcua-docs-pki");
-    let mut plant_args: Vec<String> = terminal(&doc, 3).iter().map(on_port).collect();
-    plant_args.extend(["--pki".to_string(), pki.display().to_string()]);
-    let mut certify_args: Vec<String> = terminal(&doc, 4).iter().map(on_port).collect();
-    let config = root.join("examples/data/g5_opcua.toml");
-    let text = std::fs::read_to_string(&config).unwrap().replace("4840", &port);
-    let local = common::tmp("opcua-docs.toml");
-    std::fs::write(&local, text).unwrap();
-    let evidence = common::tmp("opcua-docs-evidence.csv");
-    for w in &mut certify_args {
-        if w.as_str() == "examples/data/g5_opcua.toml" {
-            *w = local.display().to_string();
-        } else if w.as_str() == "evidence.csv" {
-            *w = evidence.display().to_string();
-        }
-    }
-    let mut plant = bin().args(&plant_args).stderr(Stdio::piped()).spawn().unwrap();
-    let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
-    let line = plant_err.next().unwrap().unwrap();
+    // The plant's PKI in a scratch directory.
+    let pki = common::tmp("opcua-docs-pki").display().to_string();
+    let w = walk_through(3, 4, "4840", "g5_opcua.toml", &["--pki".into(), pki]);
+    let line = &w.plant_says;
     assert!(line.starts_with("opcua: serving") && line.contains("ns=2;s=y_b"), "{line}");
-    let args: Vec<&str> = certify_args.iter().map(String::as_str).collect();
-    let certify = Certify::start_args(&args);
-    let (status, err) = certify.finish();
-    plant.kill().unwrap();
-    plant.wait().unwrap();
-    assert!(status.success(), "{err}");
-    assert!(err.contains("subscribed to 2 nodes"), "{err}");
-    assert!(err.lines().any(|l| l.starts_with("verdict: ")), "{err}");
-    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    assert!(w.stderr.contains("subscribed to 2 nodes"), "{}", w.stderr);
+    let source = w.stderr.lines().find(|l| l.contains(" messages, ")).expect("the source line");
     assert!(source.starts_with("source: opcua") && source.contains(" 0 bad"), "{source}");
-    let rows = std::fs::read_to_string(&evidence).unwrap().lines().count();
-    assert!(rows > 1000, "{rows} evidence rows");
+    assert!(w.rows > 1000, "{} evidence rows", w.rows);
 }
 
 #[test]

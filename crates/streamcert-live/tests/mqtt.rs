@@ -5,7 +5,6 @@
 
 use std::time::Duration;
 
-use streamcert_experiments::Experiment;
 use streamcert_live::publish::{self, Layout, PublishOptions};
 use streamcert_live::{AlignRule, MqttSource, SourceConfig};
 use streamcert_pipeline::certify::{self, Options, Summary};
@@ -13,29 +12,9 @@ use streamcert_pipeline::config::{self, Config};
 use streamcert_pipeline::source::Source;
 
 mod support;
-use support::{Item, Relay, Update, broker, oracle};
+use support::{Item, Relay, Update, broker, g5, oracle};
 
 const G5_B: &str = include_str!("../../../examples/data/g5_node_b.toml");
-
-/// `steps` rows of G5 (experiment 1, seed 3) as `simulate` writes them: the CSV text, its
-/// header and its rows.
-fn g5(steps: usize) -> (String, Vec<String>, Vec<Vec<f64>>) {
-    let mut out = Vec::new();
-    streamcert_pipeline::simulate::run(
-        Experiment::One,
-        streamcert_dynamics::Coupling::Cascade,
-        3,
-        Some(steps),
-        None,
-        &mut out,
-    )
-    .unwrap();
-    let text = String::from_utf8(out).unwrap();
-    let mut lines = text.lines();
-    let header = lines.next().unwrap().split(',').map(String::from).collect();
-    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-    (text, header, rows)
-}
 
 /// The node-b configuration with this `[source]` section.
 fn config(source: &str) -> Config {

@@ -9,12 +9,13 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use opcua::types::{DataValue, DateTime, StatusCode, Variant};
-use streamcert_experiments::Experiment;
 use streamcert_live::SourceConfig;
 use streamcert_live::opcua::server::PlantServer;
 use streamcert_live::opcua::{self as live_opcua, OpcUaSource};
 use streamcert_pipeline::certify::{self, Options, Summary};
 use streamcert_pipeline::config::{self, Config};
+
+mod support;
 
 const G5_B: &str = include_str!("../../../examples/data/g5_node_b.toml");
 /// The simulation's step (and the grid's period).
@@ -26,27 +27,10 @@ const WINDOW: f64 = 2.0;
 
 /// `steps + 1` samples `(t, y_b, u_b)` of G5 (experiment 1, seed 3).
 fn g5(steps: usize) -> Vec<[f64; 3]> {
-    let mut out = Vec::new();
-    streamcert_pipeline::simulate::run(
-        Experiment::One,
-        streamcert_dynamics::Coupling::Cascade,
-        3,
-        Some(steps),
-        None,
-        &mut out,
-    )
-    .unwrap();
-    let text = String::from_utf8(out).unwrap();
-    let mut lines = text.lines();
-    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
-    let at = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (_, header, rows) = support::g5(steps);
+    let at = |name: &str| header.iter().position(|h| h == name).unwrap();
     let (t, y, u) = (at("t"), at("y_b"), at("u_b"));
-    lines
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-            [v[t], v[y], v[u]]
-        })
-        .collect()
+    rows.iter().map(|v| [v[t], v[y], v[u]]).collect()
 }
 
 /// The samples as a CSV file whose times are the grid's, `k·T` (the rows a live run forms).

@@ -106,14 +106,13 @@ pub struct Node {
 }
 
 /// The policies the client speaks, as OPC UA names them.
-const POLICIES: [&str; 7] = [
+pub(crate) const POLICIES: [&str; 6] = [
     "None",
     "Basic128Rsa15",
     "Basic256",
     "Basic256Sha256",
     "Aes128_Sha256_RsaOaep",
     "Aes256_Sha256_RsaPss",
-    "ECC_nistP256",
 ];
 
 #[derive(Deserialize)]

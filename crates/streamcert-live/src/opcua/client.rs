@@ -180,8 +180,8 @@ async fn connect(
         builder = builder.certificate_path(absolute(cert)).private_key_path(absolute(key));
     }
     let mut client = builder.client().map_err(|e| Fatal(e.join("; ")))?;
-    let policy = SecurityPolicy::from_str(&cfg.security_policy)
-        .map_err(|_| Fatal(format!("unknown security policy {}", cfg.security_policy)))?;
+    let policy = policy(&cfg.security_policy)
+        .ok_or_else(|| Fatal(format!("unknown security policy {}", cfg.security_policy)))?;
     let mode = match cfg.security_mode {
         SecurityMode::None => MessageSecurityMode::None,
         SecurityMode::Sign => MessageSecurityMode::Sign,
@@ -206,6 +206,13 @@ async fn connect(
             Retry(format!("cannot connect: {text}"))
         }
     })
+}
+
+/// A security policy by its OPC UA name (`Aes128_Sha256_RsaOaep`, as in the policy's URI;
+/// async-opcua spells the two AES policies with hyphens).
+fn policy(name: &str) -> Option<SecurityPolicy> {
+    let p = SecurityPolicy::from_str(&name.replace('_', "-")).ok()?;
+    (p != SecurityPolicy::Unknown).then_some(p)
 }
 
 /// A path made absolute against the working directory (the client reads certificates
@@ -266,4 +273,18 @@ async fn subscribe(
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_policy_the_configuration_accepts_is_one_the_client_speaks() {
+        for name in crate::config::opcua::POLICIES {
+            assert!(policy(name).is_some(), "{name}");
+        }
+        assert_eq!(policy("Aes128_Sha256_RsaOaep"), Some(SecurityPolicy::Aes128Sha256RsaOaep));
+        assert!(policy("auto").is_none());
+    }
 }

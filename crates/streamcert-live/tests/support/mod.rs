@@ -1,5 +1,5 @@
 //! What the live tests share: an embedded MQTT broker on loopback, a TCP relay that can cut
-//! a connection, and the batch oracle of the alignment rule.
+//! a connection, the batch oracle of the alignment rule, and G5's rows.
 #![allow(dead_code, unreachable_pub)]
 
 use std::io::{Read, Write};
@@ -9,6 +9,26 @@ use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use streamcert_live::AlignRule;
+
+/// `steps` rows of G5 (experiment 1, seed 3) as `simulate` writes them: the CSV text, its
+/// header and its rows.
+pub fn g5(steps: usize) -> (String, Vec<String>, Vec<Vec<f64>>) {
+    let mut out = Vec::new();
+    streamcert_pipeline::simulate::run(
+        streamcert_experiments::Experiment::One,
+        streamcert_dynamics::Coupling::Cascade,
+        3,
+        Some(steps),
+        None,
+        &mut out,
+    )
+    .unwrap();
+    let text = String::from_utf8(out).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap().split(',').map(String::from).collect();
+    let rows = lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+    (text, header, rows)
+}
 
 /// Start the embedded broker on a free loopback port (for the rest of the test run); its
 /// port.

@@ -112,90 +112,99 @@ fn the_opcua_walk_through_of_docs_live_md_runs_as_written() {
     assert!(w.rows > 1000, "{} evidence rows", w.rows);
 }
 
-#[test]
-fn a_network_read_from_a_broker_writes_the_files_epochs_bit_for_bit() {
+/// A network read from the embedded broker: its port, G5's wide rows (experiment 2,
+/// bidirectional, seed 1), the one-process run of those rows from a file, and the
+/// configuration `example` reading topic `g5/{tag}` under client id `streamcert-{tag}`.
+struct NetworkCase {
+    port: u16,
+    csv: String,
+    want: std::path::PathBuf,
+    live_cfg: std::path::PathBuf,
+}
+
+fn network_case(tag: &str, example: &str) -> NetworkCase {
     let port = streamcert_live::broker::free_loopback().unwrap();
     streamcert_live::broker::serve(port).unwrap();
-    let port = port.port();
-    let example = common::network_example();
     let sim = bin()
         .args(["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"])
         .output()
         .unwrap();
     assert!(sim.status.success());
     let csv = common::text(&sim.stdout);
-    // The file's run.
-    let (file_cfg, data, want) =
-        (common::tmp("net-file.toml"), common::tmp("net.csv"), common::tmp("net-want.csv"));
-    std::fs::write(&file_cfg, &example).unwrap();
+    let (file_cfg, data, want) = (
+        common::tmp(&format!("{tag}-file.toml")),
+        common::tmp(&format!("{tag}.csv")),
+        common::tmp(&format!("{tag}-want.csv")),
+    );
+    std::fs::write(&file_cfg, example).unwrap();
     std::fs::write(&data, &csv).unwrap();
-    let path = |p: &std::path::Path| p.display().to_string();
     let status = bin()
         .args(["network", "--config", &path(&file_cfg), "--input", &path(&data)])
         .args(["--output", &path(&want)])
         .status()
         .unwrap();
     assert!(status.success());
-    // The same rows, one JSON object per message, through the broker.
-    let live_cfg = common::tmp("net-live.toml");
+    let live_cfg = common::tmp(&format!("{tag}-live.toml"));
     let source = format!(
-        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\n\
-         client_id = \"streamcert-net\"\ntopics = [\"g5/net\"]\nidle_timeout = 2.0\n"
+        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{}\"]\n\
+         client_id = \"streamcert-{tag}\"\ntopics = [\"g5/{tag}\"]\nidle_timeout = 2.0\n",
+        port.port()
     );
-    std::fs::write(&live_cfg, example + &source).unwrap();
+    std::fs::write(&live_cfg, example.to_string() + &source).unwrap();
+    NetworkCase { port: port.port(), csv, want, live_cfg }
+}
+
+impl NetworkCase {
+    /// Publish the rows, a JSON object per message, on `g5/{tag}`.
+    fn publish(&self, tag: &str) {
+        let mut lines = self.csv.lines();
+        let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+        let rows: Vec<Vec<f64>> =
+            lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
+        let opts = common::live::publisher(self.port, &format!("g5/{tag}"), &format!("pub-{tag}"));
+        streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    }
+
+    /// The live run's epoch rows (at `got`) equal the file's.
+    fn assert_same(&self, got: &std::path::Path) {
+        let got = std::fs::read_to_string(got).unwrap();
+        let want = std::fs::read_to_string(&self.want).unwrap();
+        assert!(want.lines().count() > 10, "{want}");
+        assert!(got == want, "the live network's epochs differ from the file's");
+    }
+}
+
+fn path(p: &std::path::Path) -> String {
+    p.display().to_string()
+}
+
+#[test]
+fn a_network_read_from_a_broker_writes_the_files_epochs_bit_for_bit() {
+    let case = network_case("net", &common::network_example());
     let got = common::tmp("net-got.csv");
-    let run =
-        Certify::start_args(&["network", "--config", &path(&live_cfg), "--output", &path(&got)]);
-    let mut lines = csv.lines();
-    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
-    let rows: Vec<Vec<f64>> =
-        lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-    let opts = common::live::publisher(port, "g5/net", "pub-net");
-    streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    let run = Certify::start_args(&[
+        "network",
+        "--config",
+        &path(&case.live_cfg),
+        "--output",
+        &path(&got),
+    ]);
+    case.publish("net");
     let (status, err) = run.finish();
     assert!(status.success(), "{err}");
     assert!(err.lines().any(|l| l.contains(" messages, ") && l.contains(" 0 bad")), "{err}");
-    let (got, want) =
-        (std::fs::read_to_string(&got).unwrap(), std::fs::read_to_string(&want).unwrap());
-    assert!(want.lines().count() > 10, "{want}");
-    assert!(got == want, "the live network's epochs differ from the file's");
+    case.assert_same(&got);
 }
 
 #[test]
 fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
-    let port = streamcert_live::broker::free_loopback().unwrap();
-    streamcert_live::broker::serve(port).unwrap();
-    let port = port.port();
     // A on process 0, B on process 1.
     let example = common::network_example()
         .replace("# process = 0           #", "process = 0           #")
         .replace("gain = [[-3.0]]\n", "gain = [[-3.0]]\nprocess = 1\n");
     assert!(example.contains("process = 1"), "{example}");
-    let sim = bin()
-        .args(["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"])
-        .output()
-        .unwrap();
-    assert!(sim.status.success());
-    let csv = common::text(&sim.stdout);
-    let path = |p: &std::path::Path| p.display().to_string();
-    // The one-process run of the file.
-    let (file_cfg, data, want) =
-        (common::tmp("sites-file.toml"), common::tmp("sites.csv"), common::tmp("sites-want.csv"));
-    std::fs::write(&file_cfg, &example).unwrap();
-    std::fs::write(&data, &csv).unwrap();
-    let status = bin()
-        .args(["network", "--config", &path(&file_cfg), "--input", &path(&data)])
-        .args(["--output", &path(&want)])
-        .status()
-        .unwrap();
-    assert!(status.success());
     // Two sites, each subscribed to the wide rows for its own subsystem's columns.
-    let live_cfg = common::tmp("sites-live.toml");
-    let source = format!(
-        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\n\
-         client_id = \"streamcert-sites\"\ntopics = [\"g5/sites\"]\nidle_timeout = 2.0\n"
-    );
-    std::fs::write(&live_cfg, example + &source).unwrap();
+    let case = network_case("sites", &example);
     let hosts = common::tmp("sites-live-hosts.txt");
     let ports: Vec<u16> = (0..2)
         .map(|_| std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port())
@@ -206,7 +215,7 @@ fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
     // Both start together (timely waits for every process), and say they are subscribed.
     let sites: Vec<_> = (0..2)
         .map(|i| {
-            let (cfg, hosts, got) = (path(&live_cfg), path(&hosts), path(&got));
+            let (cfg, hosts, got) = (path(&case.live_cfg), path(&hosts), path(&got));
             std::thread::spawn(move || {
                 let index = i.to_string();
                 let mut args = vec!["network", "--config", &cfg, "--processes", "2"];
@@ -219,20 +228,12 @@ fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
         })
         .collect();
     let sites: Vec<Certify> = sites.into_iter().map(|h| h.join().unwrap()).collect();
-    let mut lines = csv.lines();
-    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
-    let rows: Vec<Vec<f64>> =
-        lines.map(|l| l.split(',').map(|v| v.parse().unwrap()).collect()).collect();
-    let opts = common::live::publisher(port, "g5/sites", "pub-sites");
-    streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    case.publish("sites");
     for (i, site) in sites.into_iter().enumerate() {
         let (status, err) = site.finish();
         assert!(status.success(), "process {i}: {err}");
         // Each site's session is its own: the configured client id, suffixed.
         assert!(err.contains(&format!("client streamcert-sites-site{i}")), "{err}");
     }
-    let (got, want) =
-        (std::fs::read_to_string(&got).unwrap(), std::fs::read_to_string(&want).unwrap());
-    assert!(want.lines().count() > 10, "{want}");
-    assert!(got == want, "the sites' epochs differ from the file's");
+    case.assert_same(&got);
 }

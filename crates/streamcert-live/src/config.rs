@@ -64,8 +64,8 @@ pub struct MqttConfig {
     pub max_payload: usize,
     /// Topics that delivered nothing after this long are reported by name. Default 10 s.
     pub silent_after: Duration,
-    /// End the stream after this long without a message (`None`, the default: run until
-    /// stopped).
+    /// End the stream after this long without a message, counted from the subscription
+    /// (`None`, the default: run until stopped).
     pub idle_timeout: Option<Duration>,
     /// With a checkpoint, the most messages held unacknowledged before one is written.
     /// Default 16 (below Mosquitto's default of 20 in flight).

@@ -155,6 +155,10 @@ impl MqttSource {
     fn subscribed(&mut self) {
         self.subacks += 1;
         if self.subacks == self.topics.len() {
+            // The idle and silence clocks start once the source can receive (a site's source
+            // is opened before its peers are all up).
+            self.last_message = Instant::now();
+            self.silence.restart();
             let topics: Vec<&str> = self.topics.iter().map(|(t, _)| t.as_str()).collect();
             eprintln!("source: {}: subscribed to {}", self.report.name, topics.join(", "));
         }
@@ -337,7 +341,9 @@ impl Source for MqttSource {
                 }
             }
             self.silence.check(&self.topics, &mut self.report);
-            if self.cfg.idle_timeout.is_some_and(|d| self.last_message.elapsed() >= d) {
+            // Idle only once subscribed: a site's source waits for its peers first.
+            let ready = self.subacks >= self.topics.len();
+            if ready && self.cfg.idle_timeout.is_some_and(|d| self.last_message.elapsed() >= d) {
                 return None;
             }
             if let Err(e) = self.flush_acks() {

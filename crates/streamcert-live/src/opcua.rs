@@ -146,6 +146,9 @@ impl OpcUaSource {
             }
             Event::Subscribed => {
                 self.subscribed = true;
+                // The idle and silence clocks start once the source can receive.
+                self.last_value = Instant::now();
+                self.silence.restart();
                 eprintln!(
                     "source: {}: subscribed to {} nodes",
                     self.cfg.endpoint,
@@ -272,7 +275,9 @@ impl Source for OpcUaSource {
                 return Some(Ok(next));
             }
             self.silence.check(&self.nodes, &mut self.report);
-            if self.cfg.idle_timeout.is_some_and(|d| self.last_value.elapsed() >= d) {
+            // Idle only once subscribed: a site's source waits for its peers first.
+            let idle = self.cfg.idle_timeout.is_some_and(|d| self.last_value.elapsed() >= d);
+            if self.subscribed && idle {
                 return None;
             }
             match self.events.recv_timeout(POLL) {

@@ -96,6 +96,12 @@ impl Silence {
         Self { started: Instant::now(), after, reported: false }
     }
 
+    /// Count from now (the source has just subscribed: what came before was no silence of
+    /// a signal).
+    pub(crate) fn restart(&mut self) {
+        self.started = Instant::now();
+    }
+
     /// Once `after` has passed: the names in `names` whose flag is false, on stderr and in
     /// `report.silent`.
     pub(crate) fn check(&mut self, names: &[(String, bool)], report: &mut SourceReport) {

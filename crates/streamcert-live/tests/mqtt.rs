@@ -305,3 +305,27 @@ fn a_topic_that_delivers_nothing_is_named() {
     assert_eq!(report.silent, vec!["g5/dead".to_string()]);
     assert!(report.line().contains("silent: g5/dead"), "{}", report.line());
 }
+
+#[test]
+fn the_idle_timeout_counts_from_the_subscription_not_from_the_opening() {
+    let port = broker();
+    let (_, header, rows) = g5(100);
+    let cfg = config(&format!(
+        "kind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{port}\"]\nclient_id = \"late-start\"\n\
+         topics = [\"g5/late\"]\nidle_timeout = 0.5\n"
+    ));
+    let parsed = streamcert_live::parse(cfg.source.as_ref().unwrap(), &cfg.columns).unwrap();
+    let SourceConfig::Mqtt(mqtt) = parsed else { panic!("an MQTT source") };
+    let mut src = MqttSource::new(mqtt, 1, false).unwrap();
+    // Opened, then left longer than the idle timeout before it is read (a site's source
+    // waits for its peers): it still subscribes and takes what is published next.
+    std::thread::sleep(Duration::from_millis(1000));
+    let opts = publisher(port, "g5/late", "pub-late", Layout::Rows);
+    let sender = std::thread::spawn(move || {
+        std::thread::sleep(Duration::from_millis(300));
+        publish::publish(&opts, &header, 0, rows).unwrap()
+    });
+    let (_, summary) = live_run(&cfg, &mut src);
+    assert_eq!(sender.join().unwrap(), 101);
+    assert_eq!(summary.rows, 101);
+}

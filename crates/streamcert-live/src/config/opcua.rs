@@ -68,8 +68,8 @@ pub struct OpcUaConfig {
     pub queue_size: u32,
     /// Nodes that delivered nothing after this long are reported by name. Default 10 s.
     pub silent_after: Duration,
-    /// End the stream after this long without a value (`None`, the default: run until
-    /// stopped).
+    /// End the stream after this long without a value, counted from the subscription
+    /// (`None`, the default: run until stopped).
     pub idle_timeout: Option<Duration>,
     /// The first and the longest wait before reconnecting (doubling in between).
     /// Default 0.1 s and 10 s.

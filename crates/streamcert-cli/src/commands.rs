@@ -4,8 +4,10 @@
 use std::io::Write;
 use std::path::PathBuf;
 
+use streamcert_pipeline::watch::{NoWatch, Watch};
 use streamcert_pipeline::{CliError, certify, config, network};
 
+use super::ops::Ops;
 use super::{
     ClusterArgs, Outcome, Persist, Require, Stream, check_plot, open_input, open_output, verdict,
 };
@@ -18,6 +20,7 @@ pub(super) fn run_certify(
     summary: Option<PathBuf>,
     require: Require,
     plot: Option<PathBuf>,
+    ops: &Ops,
 ) -> Result<Outcome, CliError> {
     let Persist { checkpoint, checkpoint_every, resume } = persist;
     if io.print_config {
@@ -27,6 +30,11 @@ pub(super) fn run_certify(
     let (path, text) = io.config_text()?;
     let cfg = config::parse(&text, &path)?;
     check_plot(plot.as_ref())?;
+    let operator = ops.start(&path, cfg.verdict.as_ref())?;
+    let mut watch: Box<dyn Watch> = match operator.monitor {
+        Some(m) => Box::new(m.certify(&cfg.certifier, &cfg.columns.outputs, operator.sinks)),
+        None => Box::new(NoWatch),
+    };
     let opts = certify::Options {
         format: io.format,
         bad_rows: on_bad_row,
@@ -47,10 +55,21 @@ pub(super) fn run_certify(
                     }
                     other => other,
                 })?;
-            certify::run_source(&cfg, source.as_mut(), "live", &mut out, &opts)?
+            certify::run_source_watched(
+                &cfg,
+                source.as_mut(),
+                "live",
+                &mut out,
+                &opts,
+                &mut *watch,
+            )?
         }
-        None => certify::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?,
+        None => {
+            let input = open_input(&io.input)?;
+            certify::run_watched(&cfg, input, &io.input, &mut out, &opts, &mut *watch)?
+        }
     };
+    drop(watch);
     out.flush().map_err(|e| CliError::io("writing output", e))?;
     match summary {
         Some(file) => {
@@ -90,6 +109,7 @@ pub(super) fn run_network(
     cluster: ClusterArgs,
     require: Require,
     plot: Option<PathBuf>,
+    ops: &Ops,
 ) -> Result<Outcome, CliError> {
     let Persist { checkpoint, checkpoint_every, resume } = persist;
     if io.print_config {
@@ -119,10 +139,23 @@ pub(super) fn run_network(
                 .into(),
         });
     }
+    if cluster.is_set() && (ops.is_set() || cfg.verdict.is_some()) {
+        return Err(CliError::Config {
+            path: path.clone(),
+            message: "--serve, --metrics and [verdict] watch a one-process run (drop them, or \
+                      run without --processes/--workers)"
+                .into(),
+        });
+    }
+    let operator = ops.start(&path, cfg.verdict.as_ref())?;
+    let mut watch: Box<dyn Watch> = match operator.monitor {
+        Some(m) => Box::new(m.network(&cfg.network, operator.sinks)),
+        None => Box::new(NoWatch),
+    };
     let s = if let (Some(table), false) = (&cfg.source, cluster.is_set()) {
         one_input(&io.input, &path)?;
         let source = streamcert_live::open(table, &cfg.columns, opts.checkpoint.is_some())?;
-        network::run_source(&cfg, source, "live", &mut out, &opts)?
+        network::run_source_watched(&cfg, source, "live", &mut out, &opts, &mut *watch)?
     } else if cluster.is_set() {
         if cfg.source.is_some() {
             one_input(&io.input, &path)?;
@@ -132,8 +165,9 @@ pub(super) fn run_network(
         };
         s
     } else {
-        network::run(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts)?
+        network::run_watched(&cfg, open_input(&io.input)?, &io.input, &mut out, &opts, &mut *watch)?
     };
+    drop(watch);
     out.flush().map_err(|e| CliError::io("writing output", e))?;
     match summary {
         Some(file) => {

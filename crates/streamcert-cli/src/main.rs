@@ -10,6 +10,7 @@ use streamcert_experiments::Experiment;
 use streamcert_pipeline::{CliError, certify, compose, simulate};
 
 mod commands;
+mod ops;
 use commands::{run_certify, run_network};
 
 /// Decide from streaming sensor data whether a feedback controller may be deployed, and
@@ -71,6 +72,8 @@ enum Command {
         /// was closed.
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
+        #[command(flatten)]
+        ops: ops::Ops,
     },
     /// Compose local contraction rates and coupling bounds into a network certificate.
     #[command(after_help = EXIT_CODES)]
@@ -118,6 +121,8 @@ enum Command {
         /// rate, the local certificates, the network gate and the subsystems not certified.
         #[arg(long, value_name = "FILE")]
         plot: Option<PathBuf>,
+        #[command(flatten)]
+        ops: ops::Ops,
     },
     /// Simulate a benchmark and write it in the CSV layout certify reads.
     Simulate {
@@ -338,11 +343,11 @@ enum Outcome {
 
 fn run(cli: Cli) -> Result<Outcome, CliError> {
     match cli.command {
-        Command::Certify { io, on_bad_row, persist, summary, require, plot } => {
-            run_certify(io, on_bad_row, persist, summary, require, plot)
+        Command::Certify { io, on_bad_row, persist, summary, require, plot, ops } => {
+            run_certify(io, on_bad_row, persist, summary, require, plot, &ops)
         }
-        Command::Network { io, persist, summary, cluster, require, plot } => {
-            run_network(io, persist, summary, cluster, require, plot)
+        Command::Network { io, persist, summary, cluster, require, plot, ops } => {
+            run_network(io, persist, summary, cluster, require, plot, &ops)
         }
         Command::Compose { rates, gains, gains_format, method, json } => {
             let text = compose::run(

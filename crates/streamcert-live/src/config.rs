@@ -289,7 +289,7 @@ fn parse_mqtt(table: &toml::Table, columns: &Columns) -> Result<MqttConfig, Stri
 
 /// `tcp://host:port` (or `mqtt://`, `ssl://`, `tls://`, `mqtts://`; a user name and password
 /// in the address are refused: they belong in the environment).
-fn server(url: &str) -> Result<Server, String> {
+pub(crate) fn server(url: &str) -> Result<Server, String> {
     let bad = |why: &str| format!("source.servers: `{url}`: {why}");
     let (scheme, rest) = url.split_once("://").ok_or_else(|| bad("expected scheme://host:port"))?;
     let tls = match scheme {
@@ -357,7 +357,16 @@ pub(crate) fn user_password(
 }
 
 fn tls(raw: &Raw) -> Result<Option<Tls>, String> {
-    match (&raw.tls_ca, &raw.tls_cert, &raw.tls_key) {
+    tls_files(raw.tls_ca.as_ref(), raw.tls_cert.as_ref(), raw.tls_key.as_ref())
+}
+
+/// The TLS files: the CA alone, or with the client's certificate and key.
+pub(crate) fn tls_files(
+    ca: Option<&String>,
+    cert: Option<&String>,
+    key: Option<&String>,
+) -> Result<Option<Tls>, String> {
+    match (ca, cert, key) {
         (None, None, None) => Ok(None),
         (Some(ca), None, None) => Ok(Some(Tls { ca: ca.into(), client: None })),
         (Some(ca), Some(c), Some(k)) => {

@@ -17,6 +17,9 @@
 //! - [`publish`] (feature `mqtt`): a simulated plant published to a broker, for trying a
 //!   live run and for tests.
 //!
+//! - [`verdict`] (feature `mqtt`): the `[verdict]` section and the publisher of verdict
+//!   messages on a retained topic, for interlocks.
+//!
 //! The certifier is untouched by any of this: a source yields rows, gaps and bad payloads,
 //! and the pipeline's run loop does the rest. A downstream user who reads files only links
 //! no MQTT client (this crate is the command line's, not the pipeline's).
@@ -33,6 +36,8 @@ pub mod payload;
 #[cfg(feature = "mqtt")]
 pub mod publish;
 mod rows;
+#[cfg(feature = "mqtt")]
+pub mod verdict;
 
 pub use align::{AlignRule, Aligned, Aligner};
 pub use config::{SourceConfig, parse};

@@ -33,7 +33,7 @@ use crate::config::{Layout, MqttConfig, Server};
 use crate::payload::{PayloadError, parse_row, parse_signal};
 use crate::rows::{SignalRows, Silence};
 
-mod connection;
+pub(crate) mod connection;
 use connection::{Events, connect};
 
 /// How long one wait for the broker lasts before the source checks its clocks (silence,

@@ -10,8 +10,9 @@ use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::{Flush, Format, Header};
 use crate::source::{Next, Source};
+use crate::watch::{NoWatch, Watch};
 pub use summary::Summary;
-pub(crate) use summary::{reason_phrase, reason_words};
+pub use summary::{reason_phrase, reason_words};
 
 mod batched;
 mod checkpoint;
@@ -73,17 +74,41 @@ pub fn run<R: Read + Send, W: Write>(
     out: &mut W,
     opts: &Options,
 ) -> Result<Summary, CliError> {
+    run_watched(cfg, input, input_name, out, opts, &mut NoWatch)
+}
+
+/// [`run`], with `watch` told of every row as it is certified, and of the end
+/// ([`crate::watch`]).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_watched<R: Read + Send, W: Write>(
+    cfg: &Config,
+    input: R,
+    input_name: &str,
+    out: &mut W,
+    opts: &Options,
+    watch: &mut dyn Watch,
+) -> Result<Summary, CliError> {
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
     if opts.flush == Flush::EachRow {
-        return run_source(cfg, &mut reader, input_name, out, opts);
+        return run_source_watched(cfg, &mut reader, input_name, out, opts, watch);
     }
     let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
     let mut writer = evidence_writer(out, opts, &channels)?;
     let replay = summary.last_time;
-    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
-    batched::run(step, &mut reader, &mut writer)?;
-    conclude(cfg, opts, &mut writer, &cert, &mut summary)?;
+    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay, watch };
+    let outcome = batched::run(step, &mut reader, &mut writer)
+        .and_then(|()| conclude(cfg, opts, &mut writer, &cert, &mut summary));
+    ended(watch, &summary, outcome.as_ref().err());
+    outcome?;
     Ok(summary)
+}
+
+/// Tell `watch` the run ended with `summary`, and the error that stopped it if one did.
+fn ended(watch: &mut dyn Watch, summary: &Summary, error: Option<&CliError>) {
+    watch.summary(summary);
+    watch.end(error.map(ToString::to_string).as_deref());
 }
 
 /// Certify what a [`Source`] yields, row by row on the calling thread, every row flushed as
@@ -104,6 +129,22 @@ pub fn run_source<W: Write>(
     out: &mut W,
     opts: &Options,
 ) -> Result<Summary, CliError> {
+    run_source_watched(cfg, source, input_name, out, opts, &mut NoWatch)
+}
+
+/// [`run_source`], with `watch` told of every item as it is certified, of the source's
+/// counts when it asks, and of the end ([`crate::watch`]).
+///
+/// # Errors
+/// As [`run_source`].
+pub fn run_source_watched<W: Write>(
+    cfg: &Config,
+    source: &mut dyn Source,
+    input_name: &str,
+    out: &mut W,
+    opts: &Options,
+    watch: &mut dyn Watch,
+) -> Result<Summary, CliError> {
     let live = Options { flush: Flush::EachRow, ..opts.clone() };
     let opts = &live;
     let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
@@ -112,11 +153,13 @@ pub fn run_source<W: Write>(
     }
     let mut writer = evidence_writer(out, opts, &channels)?;
     let replay = summary.last_time;
-    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay };
+    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay, watch };
     let outcome = run_live(step, source, &mut writer, channels.len());
     summary.source = source.report();
+    watch.source(summary.source.as_ref());
+    let outcome = outcome.and_then(|()| conclude(cfg, opts, &mut writer, &cert, &mut summary));
+    ended(watch, &summary, outcome.as_ref().err());
     outcome?;
-    conclude(cfg, opts, &mut writer, &cert, &mut summary)?;
     if opts.checkpoint.is_some() {
         source.committed()?;
     }
@@ -217,6 +260,7 @@ fn run_live<W: Write>(
             Ok(Next::Gap(why)) => {
                 eprintln!("gap: {why}; the windows restart at the next row");
                 step.cert.gap();
+                step.watch.gap(&why);
                 None
             }
             Ok(Next::Bad(e)) => {
@@ -227,6 +271,9 @@ fn run_live<W: Write>(
             }
             Err(e) => step.row(Err(e), &s, &mut region)?,
         };
+        if step.watch.wants_source() {
+            step.watch.source(source.report().as_ref());
+        }
         let wrote = row.is_some();
         if let Some(ev) = row {
             writer.write_with_region(&ev, &region).map_err(io)?;
@@ -252,6 +299,8 @@ struct Step<'a> {
     input_name: &'a str,
     /// While resuming, the checkpoint's last time: rows up to it are passed over.
     replay: Option<f64>,
+    /// Told of every row certified or skipped.
+    watch: &'a mut dyn Watch,
 }
 
 impl Step<'_> {
@@ -293,12 +342,14 @@ impl Step<'_> {
                     summary.skipped += 1;
                     self.cert.skip(s.t);
                     summary.count_skip();
+                    self.watch.skipped(summary);
                     return Ok(None);
                 }
                 return Err(CliError::Row(err));
             }
         };
         record(self.cert, summary, s.t, &s.y, &ev, region);
+        self.watch.sample(self.cert, summary, &ev);
         Ok(Some(ev))
     }
 
@@ -309,6 +360,7 @@ impl Step<'_> {
         self.summary.skipped += 1;
         self.cert.skip(f64::NAN);
         self.summary.count_skip();
+        self.watch.skipped(self.summary);
     }
 
     /// The sealed checkpoint due after the row just certified (every `checkpoint_every`

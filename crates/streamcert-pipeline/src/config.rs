@@ -35,6 +35,8 @@ struct File {
     nonlinear: NonlinearSection,
     #[serde(default)]
     source: Option<toml::Table>,
+    #[serde(default)]
+    verdict: Option<toml::Table>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -284,6 +286,9 @@ pub struct Config {
     /// stdin). It never enters the certifier's configuration, so a checkpoint resumes under
     /// another source.
     pub source: Option<toml::Table>,
+    /// The `[verdict]` section as written (an MQTT topic for the verdict messages, read by
+    /// the `streamcert-live` crate, which validates it); `None`: no verdict topic.
+    pub verdict: Option<toml::Table>,
 }
 
 /// How a TOML error names where it is.
@@ -377,7 +382,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.
     Certifier::new(certifier.clone()).map_err(|e| bad(e.to_string()))?;
-    Ok(Config { columns: f.columns, certifier, source: f.source })
+    Ok(Config { columns: f.columns, certifier, source: f.source, verdict: f.verdict })
 }
 
 /// The columns named once each, at least one output and one input, and a gain of `m × p`:

@@ -20,6 +20,7 @@ pub mod picture;
 mod resume;
 pub mod simulate;
 pub mod source;
+pub mod watch;
 
 use std::fmt;
 

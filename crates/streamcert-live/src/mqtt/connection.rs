@@ -66,9 +66,17 @@ pub(super) fn connect(
 
 /// The TLS configuration from the PEM files (rustls with the ring provider).
 fn tls(cfg: &MqttConfig) -> Result<rumqttc::TlsConfiguration, CliError> {
-    let files = cfg.tls.as_ref().ok_or_else(|| CliError::Config {
-        path: "[source]".into(),
-        message: "source.tls_ca: a TLS broker needs the CA certificate".into(),
+    tls_from(cfg.tls.as_ref(), "source")
+}
+
+/// The TLS configuration from the PEM files of the `section` (`source`, `verdict`).
+pub(crate) fn tls_from(
+    files: Option<&crate::config::Tls>,
+    section: &str,
+) -> Result<rumqttc::TlsConfiguration, CliError> {
+    let files = files.ok_or_else(|| CliError::Config {
+        path: format!("[{section}]"),
+        message: format!("{section}.tls_ca: a TLS broker needs the CA certificate"),
     })?;
     let read = |p: &std::path::Path| {
         std::fs::read(p).map_err(|e| CliError::io(format!("reading {}", p.display()), e))

@@ -332,13 +332,14 @@ impl Summary {
     }
 }
 
-/// A reason's kind in words, with the kind (the certify summary's and the network verdict's).
-pub(crate) fn reason_words(kind: &str) -> String {
+/// A reason's kind in words, with the kind: `"<phrase> [<kind>]"` (the certify summary's, the
+/// network verdict's, the status page's and the verdict messages').
+pub fn reason_words(kind: &str) -> String {
     format!("{} [{kind}]", reason_phrase(kind))
 }
 
 /// A reason's kind in words a person reads (the kind itself where it has none).
-pub(crate) fn reason_phrase(kind: &str) -> &str {
+pub fn reason_phrase(kind: &str) -> &str {
     match kind {
         "warming_up" => "warming up (too few columns yet)",
         "insufficient_excitation" | "weak_instruments" => {

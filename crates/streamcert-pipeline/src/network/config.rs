@@ -169,6 +169,9 @@ pub struct NetConfig {
     /// The `[source]` section as written (a live source of wide rows, read by the
     /// `streamcert-live` crate); `None`: the input is a file or stdin.
     pub source: Option<toml::Table>,
+    /// The `[verdict]` section as written (an MQTT topic for the network's verdict messages,
+    /// read by the `streamcert-live` crate); `None`: no verdict topic.
+    pub verdict: Option<toml::Table>,
 }
 
 /// The key paths of `value` (under `at`) set to [`REQUIRED_VALUE`], anywhere in it.
@@ -227,11 +230,13 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     let bad = |message: String| CliError::Config { path: path.to_string(), message };
     let mut table: toml::Table = toml::from_str(text).map_err(|e| bad(e.to_string()))?;
     check_required(&table).map_err(bad)?;
-    let source = match table.remove("source") {
-        Some(toml::Value::Table(t)) => Some(t),
-        Some(_) => return Err(bad("[source] must be a table".into())),
-        None => None,
+    let mut section_table = |name: &str| match table.remove(name) {
+        Some(toml::Value::Table(t)) => Ok(Some(t)),
+        Some(_) => Err(bad(format!("[{name}] must be a table"))),
+        None => Ok(None),
     };
+    let source = section_table("source")?;
+    let verdict = section_table("verdict")?;
     let (section, subsystems, couplings) = sections(&mut table).map_err(bad)?;
     let estimated = estimated_pairs(&couplings, &subsystems).map_err(bad)?;
     let calibrated = section.certificate == CertificateKind::Calibrated;
@@ -271,7 +276,7 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
     // Build once: every check of the network and of each certifier.
     NetworkCertifier::new(network.clone()).map_err(|e| bad(e.to_string()))?;
     let process_of = subsystems.iter().map(|s| s.process).collect();
-    Ok(NetConfig { columns, dims, network, layout: section.input, process_of, source })
+    Ok(NetConfig { columns, dims, network, layout: section.input, process_of, source, verdict })
 }
 
 /// Every key the user must set is set (none is left at the template's placeholder).

@@ -24,10 +24,13 @@ pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse, template};
 pub use distributed::{Cluster, OpenLive, Reopen, SiteInput, SiteReport, run_timely};
 use input::{Item, Rows};
 use output::EpochWriter;
-pub use verdict::{summary_json, summary_text, verdict_line};
+pub use verdict::{
+    epoch_reasons, local_kind, reason_words, summary_json, summary_text, verdict_line,
+};
 
 use crate::CliError;
 use crate::output::{Flush, Format, Header};
+use crate::watch::{NoWatch, Watch};
 
 /// Counts over a run (continued across checkpoint and resume).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
@@ -147,7 +150,23 @@ pub fn run<R: Read, W: Write>(
     out: W,
     opts: &NetOptions,
 ) -> Result<NetSummary, CliError> {
-    run_rows(cfg, Rows::new(cfg, input, input_name)?, input_name, out, opts)
+    run_watched(cfg, input, input_name, out, opts, &mut NoWatch)
+}
+
+/// [`run`], with `watch` told of every epoch as it is composed, and of the end
+/// ([`crate::watch`]).
+///
+/// # Errors
+/// As [`run`].
+pub fn run_watched<R: Read, W: Write>(
+    cfg: &NetConfig,
+    input: R,
+    input_name: &str,
+    out: W,
+    opts: &NetOptions,
+    watch: &mut dyn Watch,
+) -> Result<NetSummary, CliError> {
+    run_rows(cfg, Rows::new(cfg, input, input_name)?, input_name, out, opts, watch)
 }
 
 /// Run the network over wide rows from a live source (`streamcert-live`: every subsystem's
@@ -165,6 +184,22 @@ pub fn run_source<W: Write>(
     out: W,
     opts: &NetOptions,
 ) -> Result<NetSummary, CliError> {
+    run_source_watched(cfg, source, input_name, out, opts, &mut NoWatch)
+}
+
+/// [`run_source`], with `watch` told of every epoch, gap and bad payload, of the source's
+/// counts when it asks, and of the end ([`crate::watch`]).
+///
+/// # Errors
+/// As [`run_source`].
+pub fn run_source_watched<W: Write>(
+    cfg: &NetConfig,
+    source: Box<dyn crate::source::Source>,
+    input_name: &str,
+    out: W,
+    opts: &NetOptions,
+    watch: &mut dyn Watch,
+) -> Result<NetSummary, CliError> {
     if cfg.layout != InputLayout::Wide {
         return Err(CliError::Config {
             path: input_name.into(),
@@ -174,7 +209,7 @@ pub fn run_source<W: Write>(
         });
     }
     let opts = NetOptions { flush: Flush::EachRow, ..opts.clone() };
-    run_rows(cfg, Rows::<std::io::Empty>::live(cfg, source), input_name, out, &opts)
+    run_rows(cfg, Rows::<std::io::Empty>::live(cfg, source), input_name, out, &opts, watch)
 }
 
 /// The run over `rows`: the network built (or resumed), every row certified, the epochs
@@ -185,6 +220,7 @@ fn run_rows<R: Read, W: Write>(
     input_name: &str,
     out: W,
     opts: &NetOptions,
+    watch: &mut dyn Watch,
 ) -> Result<NetSummary, CliError> {
     let (mut net, mut summary) = match &opts.resume {
         Some(path) => load(path, cfg)?,
@@ -211,9 +247,12 @@ fn run_rows<R: Read, W: Write>(
         Header::when_fresh(opts.resume.as_ref()),
         estimated,
     );
-    let mut run = NetRun { net: &mut net, summary: &mut summary, names: &names, input_name };
+    let mut run = NetRun { net: &mut net, summary: &mut summary, names: &names, input_name, watch };
     let outcome = run.rows(&mut rows, &mut writer, opts);
     summary.source = rows.source().and_then(|s| s.report());
+    watch.source(summary.source.as_ref());
+    watch.net_summary(&summary);
+    watch.end(outcome.as_ref().err().map(ToString::to_string).as_deref());
     outcome?;
     writer.flush().map_err(|e| CliError::io("writing output", e))?;
     if let Some(path) = &opts.checkpoint {
@@ -234,6 +273,8 @@ struct NetRun<'a> {
     summary: &'a mut NetSummary,
     names: &'a [String],
     input_name: &'a str,
+    /// Told of every epoch, gap and bad payload.
+    watch: &'a mut dyn Watch,
 }
 
 impl NetRun<'_> {
@@ -255,14 +296,19 @@ impl NetRun<'_> {
                 Item::Gap(why) => {
                     eprintln!("gap: {why}; every subsystem's windows restart at the next row");
                     (0..self.names.len()).for_each(|i| self.net.gap(i));
+                    self.watch.gap(&why);
                     false
                 }
                 Item::Bad(e) => {
                     eprintln!("skipped: {e}");
                     self.summary.skipped += 1;
+                    self.watch.net_skipped(self.summary);
                     false
                 }
             };
+            if self.watch.wants_source() {
+                self.watch.source(rows.source().and_then(|s| s.report()).as_ref());
+            }
             let every =
                 matches!(opts.checkpoint_every, Some(n) if n > 0 && self.summary.rows % n == 0);
             let asked = rows.source().is_some_and(|s| s.commit_due());
@@ -307,12 +353,13 @@ impl NetRun<'_> {
         let mut failed: Option<CliError> = None;
         for &(i, start, p, m) in items {
             let (y, u) = (&values[start..start + p], &values[start + p..start + p + m]);
-            let (names, summary) = (self.names, &mut *self.summary);
+            let (names, summary, watch) = (self.names, &mut *self.summary, &mut *self.watch);
             let pushed = self.net.push(i, t, y, u, |r| {
                 if failed.is_none() {
                     if let Err(e) = writer.write(r, names, summary) {
                         failed = Some(CliError::io("writing output", e));
                     }
+                    watch.epoch(r, names, summary);
                 }
             });
             if let Err(e) = pushed {

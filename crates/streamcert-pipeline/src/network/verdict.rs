@@ -7,13 +7,14 @@ use streamcert_certificate::Sig;
 use streamcert_network::{EpochReport, NetworkConfig, NotCertifiedLocal};
 
 use super::NetSummary;
-use crate::certify::reason_words;
 
 /// Subsystems named in the reason at the end, at most.
 const NAMED: usize = 3;
 
-/// A not-certified subsystem's reason kind.
-fn local_kind(why: &NotCertifiedLocal) -> &'static str {
+/// A not-certified subsystem's reason kind: `no_sample`, `stale`, `coupling_unbounded` or the
+/// local gate's reason kind ([`NotCertified::kind`](streamcert_certificate::NotCertified::kind)).
+#[must_use]
+pub fn local_kind(why: &NotCertifiedLocal) -> &'static str {
     match why {
         NotCertifiedLocal::NoSample => "no_sample",
         NotCertifiedLocal::Stale { .. } => "stale",
@@ -24,6 +25,7 @@ fn local_kind(why: &NotCertifiedLocal) -> &'static str {
 
 /// A network reason's kind in words, with the kind.
 fn words(kind: &str) -> String {
+    use crate::certify::reason_words;
     match kind {
         "no_sample" => "a subsystem has no sample yet [no_sample]".into(),
         "stale" => "a subsystem's samples stopped (stale) [stale]".into(),
@@ -50,13 +52,7 @@ pub(super) fn count(summary: &mut NetSummary, r: &EpochReport, names: &[String])
         summary.last_reason = None;
         return;
     }
-    let mut kinds: Vec<&str> = r.not_certified.iter().map(|(_, why)| local_kind(why)).collect();
-    if kinds.is_empty() {
-        kinds.push(if r.certified { "accumulating_epochs" } else { "network_below_margin" });
-    }
-    kinds.sort_unstable();
-    kinds.dedup();
-    for kind in kinds {
+    for kind in epoch_reasons(r) {
         match summary.reasons.iter_mut().find(|(k, _)| k == kind) {
             Some((_, n)) => *n += 1,
             None => summary.reasons.push((kind.to_string(), 1)),
@@ -79,6 +75,30 @@ pub(super) fn count(summary: &mut NetSummary, r: &EpochReport, names: &[String])
     } else {
         named.join("; ")
     });
+}
+
+/// Why the network gate is closed at epoch `r`, by kind, sorted, each once (empty when it is
+/// open): the not-certified subsystems' kinds ([`local_kind`]), or `network_below_margin`,
+/// or `accumulating_epochs`.
+#[must_use]
+pub fn epoch_reasons(r: &EpochReport) -> Vec<&'static str> {
+    if r.open {
+        return Vec::new();
+    }
+    let mut kinds: Vec<&str> = r.not_certified.iter().map(|(_, why)| local_kind(why)).collect();
+    if kinds.is_empty() {
+        kinds.push(if r.certified { "accumulating_epochs" } else { "network_below_margin" });
+    }
+    kinds.sort_unstable();
+    kinds.dedup();
+    kinds
+}
+
+/// A network reason's kind in words, with the kind (the summary's, the status page's and the
+/// verdict messages').
+#[must_use]
+pub fn reason_words(kind: &str) -> String {
+    words(kind)
 }
 
 /// The verdict line: certified from when to the end, at which run-level risk, over how many

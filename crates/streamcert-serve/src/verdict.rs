@@ -1,0 +1,122 @@
+//! The verdict as a message: one JSON object per change of the gate, for an interlock (a PLC,
+//! a SCADA tag) to subscribe to. Schema `streamcert.verdict/1` (docs/operations.md):
+//!
+//! ```json
+//! {"schema": "streamcert.verdict/1", "sequence": 3, "name": "loop7", "kind": "loop",
+//!  "certificate": "calibrated", "candidate": {"gain": [[0.5]], "margin": 0.001},
+//!  "open": true, "since": 12.5, "t": 12.5, "value": 0.0021, "reason": null,
+//!  "risk": {"delta": 0.05}, "ended": false}
+//! ```
+//!
+//! `open` is the gate that decides deployment: the calibrated certificate's when it is
+//! configured (the default), else the paper's Gaussian one, whose `risk` is `null` (no stated
+//! risk); a network's gate for `network`. `since` is the sample time from which the gate has
+//! been in this state, `t` the sample time of the message. `reason` is `null` exactly when
+//! the gate is open; otherwise its `kind` (one of the evidence rows' reason kinds), the kind
+//! in `words` and the row's own `detail`. `sequence` counts the messages of one run from 0,
+//! so a subscriber drops a repeat (a message published again after a reconnection). The last
+//! message of a run has `ended: true` and the gate closed: a certifier that stopped vouches
+//! for nothing after its last sample.
+
+use serde::Serialize;
+
+/// The schema's name and version, the first field of every message.
+pub const VERDICT_SCHEMA: &str = "streamcert.verdict/1";
+
+/// One verdict message (module docs).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct VerdictMessage {
+    /// [`VERDICT_SCHEMA`].
+    pub schema: &'static str,
+    /// The message's place in the run, from 0.
+    pub sequence: u64,
+    /// The loop's or network's name.
+    pub name: String,
+    /// `"loop"` (certify) or `"network"`.
+    pub kind: &'static str,
+    /// The certificate whose gate this is: `"calibrated"`, `"gaussian"` or `"network"`.
+    pub certificate: &'static str,
+    /// The candidate judged.
+    pub candidate: Candidate,
+    /// Whether the gate is open: the candidate may be deployed.
+    pub open: bool,
+    /// The sample time from which the gate has been in this state (`None` before a sample).
+    pub since: Option<f64>,
+    /// The sample time of the message (`None` before a sample).
+    pub t: Option<f64>,
+    /// The certificate at `t` (1/s; the network rate for a network).
+    pub value: Option<f64>,
+    /// Why the gate is closed (`None` exactly when it is open).
+    pub reason: Option<Reason>,
+    /// The risk stated for the run (`None`: the paper's certificates, no stated risk).
+    pub risk: Option<Risk>,
+    /// The run ended: the last message, the gate closed.
+    pub ended: bool,
+}
+
+/// A candidate: its gain (rows of `K`, one per input; empty for a network) and the margin the
+/// certificate must clear (1/s).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Candidate {
+    /// `K`, one row per input.
+    pub gain: Vec<Vec<f64>>,
+    /// The margin (1/s).
+    pub margin: f64,
+}
+
+/// Why a gate is closed.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Reason {
+    /// The reason's kind (`below_margin`, `warming_up`, `plant_changed`, ..., `stopped`).
+    pub kind: String,
+    /// The kind in words, with the kind: `"<phrase> [<kind>]"`.
+    pub words: String,
+    /// The row's own words (the window, the bound, the numbers).
+    pub detail: String,
+}
+
+/// The risk a verdict is stated at.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Risk {
+    /// The chance of a false deployment over the run, at most.
+    pub delta: f64,
+}
+
+impl VerdictMessage {
+    /// The message's offline form: the gate closed, `ended`, the reason `offline`: what a
+    /// publisher leaves with the broker as its last will, published if the certifier's
+    /// connection is lost without a word.
+    #[must_use]
+    pub fn offline(&self) -> Self {
+        Self {
+            open: false,
+            ended: true,
+            reason: Some(Reason {
+                kind: "offline".into(),
+                words: "the certifier is offline: it vouches for nothing [offline]".into(),
+                detail: "its connection to the broker was lost".into(),
+            }),
+            ..self.clone()
+        }
+    }
+
+    /// The message as one line of JSON.
+    #[must_use]
+    pub fn to_json(&self) -> Vec<u8> {
+        // Every field is a plain number, string, bool or a vector of them: it serialises.
+        serde_json::to_vec(self).unwrap_or_default()
+    }
+}
+
+/// Where verdict messages go: an MQTT topic (`streamcert-live`'s publisher), a test's
+/// channel. Called on the certifying thread; it must not block for long.
+pub trait VerdictSink: Send {
+    /// Publish `message`.
+    fn publish(&mut self, message: &VerdictMessage);
+}
+
+impl<F: FnMut(&VerdictMessage) + Send> VerdictSink for F {
+    fn publish(&mut self, message: &VerdictMessage) {
+        self(message);
+    }
+}

@@ -1,0 +1,363 @@
+//! The watchers a run is given ([`streamcert_pipeline::watch::Watch`]): each sample's
+//! evidence into the metrics (atomic stores), the gate's changes into verdict messages at
+//! once, and the status page's document refreshed at most every [`REFRESH`] of wall time
+//! (and at every change), so that serving never slows the certifier down.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+
+use streamcert_certificate::{CertificateKind, Certifier, CertifierConfig, Evidence, NotCertified};
+use streamcert_pipeline::certify::{Summary, reason_words};
+use streamcert_pipeline::source::SourceReport;
+use streamcert_pipeline::watch::Watch;
+
+use crate::Shared;
+use crate::metrics::{self, Certificate, RunSeries};
+use crate::status::{Chart, Counters};
+use crate::verdict::{Candidate, Reason, Risk, VerdictMessage, VerdictSink};
+
+pub(crate) mod network;
+
+/// The status page's document is refreshed at most this often (and at every change).
+pub const REFRESH: Duration = Duration::from_millis(100);
+
+/// How often a live source's counts are asked for.
+const SOURCE_EVERY: Duration = Duration::from_secs(1);
+
+/// Sample times between these are taken as Unix seconds (2001 to 5138), for the evidence
+/// lag; others are a clock of their own and have no lag.
+const UNIX_SECONDS: std::ops::RangeInclusive<f64> = 1e9..=1e11;
+
+/// The deciding gate's state and the verdict messages it sends (shared by both watchers).
+pub(crate) struct Gate {
+    pub(crate) message: VerdictMessage,
+    sinks: Vec<Box<dyn VerdictSink>>,
+}
+
+impl Gate {
+    /// A closed gate before any sample; the first message (sequence 0) sent to every sink.
+    pub(crate) fn new(message: VerdictMessage, mut sinks: Vec<Box<dyn VerdictSink>>) -> Self {
+        sinks.iter_mut().for_each(|s| s.publish(&message));
+        Self { message, sinks }
+    }
+
+    /// The gate at sample time `t`, closed for `why` (its kind, and its detail made only when
+    /// needed): `(changed, rebuilt)`, whether the gate changed (a message was sent) and
+    /// whether the reason was written anew (the gate changed, `rebuild` asked, or the kind
+    /// changed). A sample that changes neither allocates nothing.
+    pub(crate) fn set<D: FnOnce() -> String>(
+        &mut self,
+        t: f64,
+        open: bool,
+        value: Option<f64>,
+        why: Option<(&'static str, D)>,
+        words: fn(&str) -> String,
+        rebuild: bool,
+    ) -> (bool, bool) {
+        let m = &mut self.message;
+        let changed = open != m.open;
+        m.t = Some(t);
+        m.value = value;
+        if changed || m.since.is_none() {
+            m.since = Some(t);
+        }
+        let kind = why.as_ref().map(|(k, _)| *k);
+        let rebuilt = changed || rebuild || kind != m.reason.as_ref().map(|r| r.kind.as_str());
+        if rebuilt {
+            m.reason =
+                why.map(|(k, detail)| Reason { kind: k.into(), words: words(k), detail: detail() });
+        }
+        if changed {
+            m.open = open;
+            self.send();
+        }
+        (changed, rebuilt)
+    }
+
+    /// The gate closed at once by `kind` (a skipped row, a gap) until the next sample says
+    /// more; `true` when it was open.
+    pub(crate) fn close(&mut self, kind: &str, detail: &str) -> bool {
+        let was_open = self.message.open;
+        self.message.reason = Some(reason(kind, detail));
+        if was_open {
+            self.message.open = false;
+            self.message.since = self.message.t;
+            self.send();
+        }
+        was_open
+    }
+
+    /// The run ended: the last message, the gate closed.
+    pub(crate) fn end(&mut self, detail: String) {
+        let m = &mut self.message;
+        if m.open {
+            m.since = m.t;
+        }
+        m.open = false;
+        m.ended = true;
+        m.reason = Some(Reason {
+            kind: "stopped".into(),
+            words: "the certifier stopped: it vouches for nothing after its last sample \
+                    [stopped]"
+                .into(),
+            detail,
+        });
+        self.send();
+    }
+
+    fn send(&mut self) {
+        self.message.sequence += 1;
+        let m = &self.message;
+        self.sinks.iter_mut().for_each(|s| s.publish(m));
+    }
+}
+
+/// A reason of `kind` with the row's `detail`.
+pub(crate) fn reason(kind: &str, detail: &str) -> Reason {
+    Reason { kind: kind.into(), words: reason_words(kind), detail: detail.into() }
+}
+
+/// The wall clock in Unix seconds.
+pub(crate) fn unix_now() -> f64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
+}
+
+/// The lag of a sample at time `t`, when `t` reads as Unix seconds.
+pub(crate) fn lag(t: f64) -> f64 {
+    if UNIX_SECONDS.contains(&t) { unix_now() - t } else { f64::NAN }
+}
+
+/// Watches a `certify` run ([`crate::Monitor::certify`]).
+pub struct CertifyWatch {
+    shared: Arc<Shared>,
+    cfg: CertifierConfig,
+    outputs: Vec<String>,
+    deciding: CertificateKind,
+    certificates: Vec<(CertificateKind, Certificate, &'static str)>,
+    run: RunSeries,
+    gate: Gate,
+    chart: Chart,
+    pending: Vec<(f64, Option<f64>, bool)>,
+    counters: Counters,
+    verdict: String,
+    refreshed: Option<Instant>,
+    arrived: Option<Instant>,
+    source_asked: Instant,
+    source_line: Option<String>,
+}
+
+impl CertifyWatch {
+    pub(crate) fn new(
+        shared: Arc<Shared>,
+        cfg: &CertifierConfig,
+        outputs: &[String],
+        sinks: Vec<Box<dyn VerdictSink>>,
+    ) -> Self {
+        let name = shared.name.clone();
+        let deciding = if cfg.calibration.is_some() {
+            CertificateKind::Calibrated
+        } else {
+            CertificateKind::Gaussian
+        };
+        let mut kinds = vec![CertificateKind::Gaussian, CertificateKind::Wasserstein];
+        kinds.extend(cfg.calibration.is_some().then_some(CertificateKind::Calibrated));
+        kinds.extend(cfg.nonlinear.is_some().then_some(CertificateKind::Nonlinear));
+        let reasons = streamcert_certificate::NotCertified::KINDS;
+        let certificates = kinds
+            .into_iter()
+            .map(|k| (k, shared.metrics.certificate(&name, kind_name(k), &reasons), "none"))
+            .collect();
+        let message = VerdictMessage {
+            schema: crate::verdict::VERDICT_SCHEMA,
+            sequence: 0,
+            name,
+            kind: "loop",
+            certificate: kind_name(deciding),
+            candidate: Candidate {
+                gain: cfg.gain.chunks(cfg.regression.outputs.max(1)).map(<[f64]>::to_vec).collect(),
+                margin: cfg.margin,
+            },
+            open: false,
+            since: None,
+            t: None,
+            value: None,
+            reason: Some(reason("starting", "no sample yet")),
+            risk: cfg.calibration.as_ref().map(|c| Risk { delta: c.delta }),
+            ended: false,
+        };
+        {
+            let mut st = shared.status();
+            st.margin = cfg.margin;
+            st.risk = message.risk.map(|r| r.delta);
+            st.certificate = message.certificate;
+            st.reason.clone_from(&message.reason);
+        }
+        Self {
+            run: shared.metrics.run(&shared.name, cfg.margin),
+            chart: Chart::new(shared.chart_seconds),
+            shared,
+            cfg: cfg.clone(),
+            outputs: outputs.to_vec(),
+            deciding,
+            certificates,
+            gate: Gate::new(message, sinks),
+            pending: Vec::with_capacity(64),
+            counters: Counters::default(),
+            verdict: String::new(),
+            refreshed: None,
+            arrived: None,
+            source_asked: Instant::now(),
+            source_line: None,
+        }
+    }
+
+    /// The status page's document brought up to date: the scalars and the sample's reason
+    /// always (copies, no allocation), the verdict line with `summary`; `sample_reason`
+    /// `None` puts the gate's own reason instead (a skipped row, a gap, the end).
+    fn refresh(
+        &mut self,
+        now: Instant,
+        sample_reason: Option<Option<NotCertified>>,
+        summary: Option<&Summary>,
+        ended: Option<String>,
+    ) {
+        if let Some(s) = summary {
+            self.verdict = s.verdict_line(&self.cfg, &self.outputs);
+            self.refreshed = Some(now);
+        }
+        let m = &self.gate.message;
+        let mut st = self.shared.status();
+        (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
+        st.counters.clone_from(&self.counters);
+        st.arrived = self.arrived;
+        st.sample_reason = sample_reason;
+        if sample_reason.is_none() {
+            st.reason.clone_from(&m.reason);
+        }
+        if summary.is_some() {
+            st.verdict.clone_from(&self.verdict);
+            st.source.clone_from(&self.source_line);
+        }
+        if ended.is_some() {
+            st.ended = ended;
+        }
+        if !self.pending.is_empty() {
+            self.chart.append(&mut st.chart, &mut self.pending);
+        }
+    }
+
+    /// The metrics of one sample's evidence.
+    fn measure(&mut self, summary: &Summary, ev: &Evidence) {
+        for (kind, series, last_reason) in &mut self.certificates {
+            let v = ev.verdict(*kind);
+            series.value.set(v.value.unwrap_or(f64::NAN));
+            series.radius.set(v.radius.unwrap_or(f64::NAN));
+            series.estimate.set(match (v.value, v.radius) {
+                (Some(c), Some(r)) => c + r,
+                _ => f64::NAN,
+            });
+            series.gate.set(if v.open { 1.0 } else { 0.0 });
+            let now = v.reason.map_or("none", |r| r.kind());
+            if now != *last_reason {
+                metrics::set_state(&series.reasons, now);
+                *last_reason = now;
+            }
+        }
+        let c = &mut self.counters;
+        (c.samples, c.gaps, c.skipped) = (summary.rows, summary.gaps, summary.skipped);
+        metrics::advance(&self.run.samples, summary.rows);
+        metrics::advance(&self.run.gaps, summary.gaps);
+        metrics::advance(&self.run.skipped, summary.skipped);
+        self.run.last_time.set(ev.t);
+        self.run.lag.set(lag(ev.t));
+    }
+}
+
+/// A certificate's name in the metrics and messages.
+fn kind_name(kind: CertificateKind) -> &'static str {
+    match kind {
+        CertificateKind::Gaussian => "gaussian",
+        CertificateKind::Wasserstein => "wasserstein",
+        CertificateKind::Calibrated => "calibrated",
+        CertificateKind::Nonlinear => "nonlinear",
+    }
+}
+
+impl Watch for CertifyWatch {
+    fn sample(&mut self, _cert: &Certifier, summary: &Summary, ev: &Evidence) {
+        let now = Instant::now();
+        self.arrived = Some(now);
+        self.measure(summary, ev);
+        let d = ev.verdict(self.deciding);
+        let due = self.refreshed.is_none_or(|r| now.duration_since(r) >= REFRESH);
+        let why = d.reason.map(|r| (r.kind(), move || r.to_string()));
+        let (changed, _) = self.gate.set(ev.t, d.open, d.value, why, reason_words, false);
+        if self.chart.due(ev.t, d.open) {
+            self.pending.push((ev.t, d.value, d.open));
+        }
+        self.refresh(now, Some(d.reason), (changed || due).then_some(summary), None);
+    }
+
+    fn summary(&mut self, summary: &Summary) {
+        let reason = self.shared.status().sample_reason;
+        self.refresh(Instant::now(), reason, Some(summary), None);
+    }
+
+    fn skipped(&mut self, summary: &Summary) {
+        self.counters.skipped = summary.skipped;
+        metrics::advance(&self.run.skipped, summary.skipped);
+        let closed =
+            self.gate.close("skipped_sample", "a bad row was passed over: every gate closes");
+        self.refresh(Instant::now(), None, closed.then_some(summary), None);
+    }
+
+    fn gap(&mut self, why: &str) {
+        self.gate.close("gap", why);
+        self.refresh(Instant::now(), None, None, None);
+    }
+
+    fn wants_source(&mut self) -> bool {
+        source_due(&mut self.source_asked)
+    }
+
+    fn source(&mut self, report: Option<&SourceReport>) {
+        source_counts(&mut self.counters, &self.run, &mut self.source_line, report);
+    }
+
+    fn end(&mut self, error: Option<&str>) {
+        let how = ended(error);
+        self.gate.end(how.clone());
+        self.refresh(Instant::now(), None, None, Some(how));
+    }
+}
+
+/// Whether a source's counts are due (every [`SOURCE_EVERY`]), `asked` moved on if so.
+pub(crate) fn source_due(asked: &mut Instant) -> bool {
+    let now = Instant::now();
+    let due = now.duration_since(*asked) >= SOURCE_EVERY;
+    if due {
+        *asked = now;
+    }
+    due
+}
+
+/// How a run ended, in words.
+pub(crate) fn ended(error: Option<&str>) -> String {
+    error.map_or_else(|| "the input ended".to_string(), |e| format!("stopped: {e}"))
+}
+
+/// A live source's counts into the counters, the metrics and the source's line.
+pub(crate) fn source_counts(
+    counters: &mut Counters,
+    run: &RunSeries,
+    line: &mut Option<String>,
+    report: Option<&SourceReport>,
+) {
+    let Some(r) = report else { return };
+    counters.bad = r.bad_total();
+    counters.reconnects = r.reconnects;
+    counters.late = r.late;
+    metrics::advance(&run.bad, counters.bad);
+    metrics::advance(&run.reconnects, r.reconnects);
+    *line = Some(r.line());
+}

@@ -1,0 +1,209 @@
+//! The watcher of a `network` run: each epoch into the metrics, the network gate's changes
+//! into verdict messages, the subsystems onto the status page.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use streamcert_network::{EpochReport, NetworkConfig};
+use streamcert_pipeline::network::{NetSummary, epoch_reasons, reason_words, verdict_line};
+use streamcert_pipeline::source::SourceReport;
+use streamcert_pipeline::watch::Watch;
+
+use super::{Gate, REFRESH, ended, lag, source_counts, source_due};
+use crate::Shared;
+use crate::metrics::{self, NetworkSeries, RunSeries};
+use crate::status::{Chart, Counters, Subsystem};
+use crate::verdict::{Candidate, Risk, VerdictMessage, VerdictSink};
+
+/// Every reason kind a network gate reports (the network's own and the local gates').
+fn reason_kinds() -> Vec<&'static str> {
+    let mut kinds = vec![
+        "no_sample",
+        "stale",
+        "coupling_unbounded",
+        "network_below_margin",
+        "accumulating_epochs",
+    ];
+    kinds.extend(streamcert_certificate::NotCertified::KINDS);
+    kinds
+}
+
+/// Watches a `network` run ([`crate::Monitor::network`]).
+pub struct NetworkWatch {
+    shared: Arc<Shared>,
+    cfg: NetworkConfig,
+    series: NetworkSeries,
+    run: RunSeries,
+    last_reason: &'static str,
+    gate: Gate,
+    chart: Chart,
+    pending: Vec<(f64, Option<f64>, bool)>,
+    counters: Counters,
+    verdict: String,
+    subsystems: Vec<Subsystem>,
+    refreshed: Option<Instant>,
+    arrived: Option<Instant>,
+    source_asked: Instant,
+    source_line: Option<String>,
+}
+
+impl NetworkWatch {
+    pub(crate) fn new(
+        shared: Arc<Shared>,
+        cfg: &NetworkConfig,
+        sinks: Vec<Box<dyn VerdictSink>>,
+    ) -> Self {
+        let name = shared.name.clone();
+        let names: Vec<String> = cfg.subsystems.iter().map(|s| s.name.clone()).collect();
+        let message = VerdictMessage {
+            schema: crate::verdict::VERDICT_SCHEMA,
+            sequence: 0,
+            name: name.clone(),
+            kind: "network",
+            certificate: "network",
+            candidate: Candidate { gain: Vec::new(), margin: cfg.margin },
+            open: false,
+            since: None,
+            t: None,
+            value: None,
+            reason: Some(super::reason("starting", "no epoch yet")),
+            risk: cfg.total_risk().map(|delta| Risk { delta }),
+            ended: false,
+        };
+        {
+            let mut st = shared.status();
+            st.kind = "network";
+            st.certificate = "network";
+            st.margin = cfg.margin;
+            st.risk = message.risk.map(|r| r.delta);
+            st.reason.clone_from(&message.reason);
+        }
+        let subsystems = names
+            .iter()
+            .map(|n| Subsystem { name: n.clone(), certificate: None, open: false, reason: None })
+            .collect();
+        Self {
+            series: shared.metrics.network(&name, &names, &reason_kinds()),
+            run: shared.metrics.run(&name, cfg.margin),
+            chart: Chart::new(shared.chart_seconds),
+            shared,
+            cfg: cfg.clone(),
+            last_reason: "none",
+            gate: Gate::new(message, sinks),
+            pending: Vec::with_capacity(64),
+            counters: Counters::default(),
+            verdict: String::new(),
+            subsystems,
+            refreshed: None,
+            arrived: None,
+            source_asked: Instant::now(),
+            source_line: None,
+        }
+    }
+
+    /// The status page's document brought up to date (as the certify watcher's).
+    fn refresh(
+        &mut self,
+        now: Instant,
+        rebuilt: bool,
+        summary: Option<&NetSummary>,
+        ended: Option<String>,
+    ) {
+        if let Some(s) = summary {
+            self.verdict = verdict_line(&self.cfg, s);
+            self.refreshed = Some(now);
+        }
+        let m = &self.gate.message;
+        let mut st = self.shared.status();
+        (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
+        st.counters.clone_from(&self.counters);
+        st.arrived = self.arrived;
+        if rebuilt {
+            st.reason.clone_from(&m.reason);
+        }
+        if summary.is_some() {
+            st.verdict.clone_from(&self.verdict);
+            st.source.clone_from(&self.source_line);
+            st.subsystems.clone_from(&self.subsystems);
+        }
+        if ended.is_some() {
+            st.ended = ended;
+        }
+        if !self.pending.is_empty() {
+            self.chart.append(&mut st.chart, &mut self.pending);
+        }
+    }
+
+    /// The metrics and subsystems of epoch `r`.
+    fn measure(&mut self, r: &EpochReport, summary: &NetSummary) {
+        self.series.rate.set(r.rate.unwrap_or(f64::NAN));
+        self.series.gate.set(if r.open { 1.0 } else { 0.0 });
+        for (i, sub) in self.subsystems.iter_mut().enumerate() {
+            let why = r.not_certified.iter().find(|(j, _)| *j == i).map(|(_, w)| w);
+            sub.certificate = r.local.get(i).copied().flatten();
+            sub.open = why.is_none();
+            sub.reason = why.map(ToString::to_string);
+            self.series.sub_certificate[i].set(sub.certificate.unwrap_or(f64::NAN));
+            self.series.sub_gate[i].set(if sub.open { 1.0 } else { 0.0 });
+        }
+        let c = &mut self.counters;
+        (c.samples, c.epochs, c.skipped) = (summary.rows, summary.epochs, summary.skipped);
+        metrics::advance(&self.run.samples, summary.rows);
+        metrics::advance(&self.run.epochs, summary.epochs);
+        metrics::advance(&self.run.skipped, summary.skipped);
+        self.run.last_time.set(r.t);
+        self.run.lag.set(lag(r.t));
+    }
+}
+
+impl Watch for NetworkWatch {
+    fn epoch(&mut self, r: &EpochReport, _names: &[String], summary: &NetSummary) {
+        let now = Instant::now();
+        self.arrived = Some(now);
+        self.measure(r, summary);
+        let kinds = epoch_reasons(r);
+        let kind = kinds.first().copied().unwrap_or("none");
+        if kind != self.last_reason {
+            metrics::set_state(&self.series.reasons, kind);
+            self.last_reason = kind;
+        }
+        let due = self.refreshed.is_none_or(|t| now.duration_since(t) >= REFRESH);
+        let detail = || summary.last_reason.clone().unwrap_or_default();
+        let why = kinds.first().map(|k| (*k, detail));
+        let (changed, rebuilt) = self.gate.set(r.t, r.open, r.rate, why, reason_words, due);
+        if self.chart.due(r.t, r.open) {
+            self.pending.push((r.t, r.rate, r.open));
+        }
+        self.refresh(now, rebuilt, (changed || due).then_some(summary), None);
+    }
+
+    fn net_summary(&mut self, summary: &NetSummary) {
+        self.refresh(Instant::now(), false, Some(summary), None);
+    }
+
+    fn net_skipped(&mut self, summary: &NetSummary) {
+        self.counters.skipped = summary.skipped;
+        metrics::advance(&self.run.skipped, summary.skipped);
+    }
+
+    fn gap(&mut self, why: &str) {
+        self.counters.gaps += 1;
+        metrics::advance(&self.run.gaps, self.counters.gaps);
+        let closed = self.gate.close("gap", why);
+        self.refresh(Instant::now(), closed, None, None);
+    }
+
+    fn wants_source(&mut self) -> bool {
+        source_due(&mut self.source_asked)
+    }
+
+    fn source(&mut self, report: Option<&SourceReport>) {
+        source_counts(&mut self.counters, &self.run, &mut self.source_line, report);
+    }
+
+    fn end(&mut self, error: Option<&str>) {
+        let how = ended(error);
+        self.gate.end(how.clone());
+        self.refresh(Instant::now(), true, None, Some(how));
+    }
+}

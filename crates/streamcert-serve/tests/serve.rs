@@ -1,0 +1,294 @@
+//! The server during a run: the metrics and the status document scraped between two rows
+//! equal the evidence rows written so far; the verdict messages are the evidence's gate
+//! changes; bad requests get their status codes and the run goes on; a hundred clients are
+//! served while it runs.
+
+mod support;
+
+use std::collections::HashMap;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+
+use streamcert_serve::{Monitor, MonitorOptions, Routes, Server, VerdictMessage};
+/// A scrape's values by metric name and sorted labels.
+type Scraped = HashMap<(String, Vec<(String, String)>), f64>;
+
+use support::{evidence, g5_rows, get, node_b, raw, request, run_paused};
+
+fn loopback() -> SocketAddr {
+    "127.0.0.1:0".parse().unwrap()
+}
+
+fn started(name: &str) -> (Monitor, Server) {
+    let monitor = Monitor::new(MonitorOptions::named(name));
+    let server = monitor.serve(loopback(), Routes::All).unwrap();
+    (monitor, server)
+}
+
+/// The series docs/operations.md documents for runs of `kind` (`certify` or `network`).
+fn documented(kind: &str) -> Vec<String> {
+    let doc = std::fs::read_to_string(support::example("../../docs/operations.md")).unwrap();
+    let rows: Vec<String> = doc
+        .lines()
+        .filter(|l| l.starts_with("| `streamcert_"))
+        .filter(|l| l.split('|').nth(4).is_some_and(|r| r.contains(kind) || r.contains("both")))
+        .map(|l| l.split('`').nth(1).unwrap().to_string())
+        .collect();
+    assert!(rows.len() >= 10, "the metrics table of docs/operations.md: {rows:?}");
+    rows
+}
+
+/// A scrape, parsed by `prometheus-parse`: value by (name, sorted labels).
+fn parse(text: &str) -> Scraped {
+    let lines = text.lines().map(|l| Ok(l.to_string()));
+    let scrape = prometheus_parse::Scrape::parse(lines).unwrap();
+    scrape
+        .samples
+        .into_iter()
+        .map(|s| {
+            let v = match s.value {
+                prometheus_parse::Value::Counter(v)
+                | prometheus_parse::Value::Gauge(v)
+                | prometheus_parse::Value::Untyped(v) => v,
+                other => panic!("{} is not a number: {other:?}", s.metric),
+            };
+            let mut labels: Vec<(String, String)> =
+                s.labels.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+            labels.sort();
+            ((s.metric, labels), v)
+        })
+        .collect()
+}
+
+fn value(m: &Scraped, name: &str, labels: &[(&str, &str)]) -> f64 {
+    let mut l: Vec<(String, String)> =
+        labels.iter().map(|(k, v)| ((*k).to_string(), (*v).to_string())).collect();
+    l.sort();
+    *m.get(&(name.to_string(), l.clone())).unwrap_or_else(|| panic!("no {name} {l:?}"))
+}
+
+fn field(row: &HashMap<String, String>, c: &str) -> f64 {
+    row[c].parse().unwrap_or(f64::NAN)
+}
+
+#[test]
+fn metrics_scraped_between_rows_equal_the_evidence_rows_so_far() {
+    let cfg = node_b();
+    let (monitor, server) = started("node_b");
+    let addr = server.addr();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    let mut scrapes = Vec::new();
+    let out = run_paused(&cfg, &g5_rows(None), &mut watch, |k| {
+        if k > 0 && k % 37 == 0 {
+            scrapes.push((k, get(addr, "/metrics")));
+        }
+    });
+    let ev = evidence(&out);
+    let names = documented("certify");
+    let mut opened = 0;
+    for (k, r) in &scrapes {
+        assert_eq!(r.status, 200);
+        assert!(r.headers.contains("content-type: application/openmetrics-text"));
+        let seen: Vec<&str> = r.body.lines().filter(|l| !l.starts_with('#')).collect();
+        for name in &names {
+            assert!(seen.iter().any(|l| l.starts_with(name.as_str())), "no {name} in\n{}", r.body);
+        }
+        let m = parse(&r.body);
+        let row = &ev[*k as usize - 1];
+        let lp = [("loop", "node_b")];
+        assert_eq!(value(&m, "streamcert_samples_total", &lp), *k as f64);
+        for (kind, gate, cert) in [
+            ("calibrated", "calibrated_open", "cert_calibrated"),
+            ("gaussian", "gauss_open", "cert_gauss"),
+            ("wasserstein", "wass_open", "cert_wass"),
+        ] {
+            let l = [("loop", "node_b"), ("certificate", kind)];
+            assert_eq!(value(&m, "streamcert_gate_open", &l), field(row, gate), "row {k} {kind}");
+            let (got, want) =
+                (value(&m, "streamcert_certificate_per_second", &l), field(row, cert));
+            assert!(got == want || (got.is_nan() && want.is_nan()), "row {k} {kind}: {got} {want}");
+            // The state set: exactly one reason at 1, `none` exactly when the gate is open.
+            let states: Vec<(String, f64)> = m
+                .iter()
+                .filter(|((n, ls), _)| {
+                    n == "streamcert_gate_reason"
+                        && ls.contains(&("certificate".into(), kind.into()))
+                })
+                .map(|((_, ls), v)| (ls.iter().find(|(k, _)| k == "reason").unwrap().1.clone(), *v))
+                .collect();
+            assert!(states.len() > 10);
+            let on: Vec<&String> =
+                states.iter().filter(|(_, v)| *v == 1.0).map(|(r, _)| r).collect();
+            assert_eq!(on.len(), 1, "{states:?}");
+            assert_eq!(on[0] == "none", field(row, gate) == 1.0);
+        }
+        assert_eq!(value(&m, "streamcert_last_sample_time_seconds", &lp), field(row, "t"));
+        assert_eq!(value(&m, "streamcert_margin_per_second", &lp), cfg.certifier.margin);
+        opened += usize::from(field(row, "calibrated_open") == 1.0);
+    }
+    assert!(scrapes.len() > 15 && opened > 3, "{} scrapes, {opened} open", scrapes.len());
+}
+
+#[test]
+fn the_status_document_between_rows_is_the_evidence_so_far() {
+    let cfg = node_b();
+    let (monitor, server) = started("node_b");
+    let addr = server.addr();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    let mut docs = Vec::new();
+    let out = run_paused(&cfg, &g5_rows(Some((10.0, 11.0))), &mut watch, |k| {
+        if k > 0 && k % 23 == 0 {
+            docs.push((k, get(addr, "/api/status")));
+        }
+    });
+    let ev = evidence(&out);
+    for (k, r) in &docs {
+        assert_eq!(r.status, 200);
+        let doc: serde_json::Value = serde_json::from_str(&r.body).unwrap();
+        let row = &ev[*k as usize - 1];
+        let open = field(row, "calibrated_open") == 1.0;
+        assert_eq!(doc["schema"], "streamcert.status/1");
+        assert_eq!(doc["open"], open, "row {k}");
+        assert_eq!(doc["t"].as_f64().unwrap(), field(row, "t"));
+        assert_eq!(doc["counters"]["samples"], *k);
+        // Since when: the first row of the current stretch of equal gates.
+        let i = *k as usize - 1;
+        let start = (0..=i)
+            .rev()
+            .take_while(|&j| (field(&ev[j], "calibrated_open") == 1.0) == open)
+            .last()
+            .unwrap();
+        assert_eq!(doc["since"].as_f64().unwrap(), field(&ev[start], "t"), "row {k}");
+        match open {
+            true => assert!(doc["reason"].is_null()),
+            false => assert_eq!(doc["reason"]["detail"], row["reason_calibrated"].as_str()),
+        }
+    }
+    let end = monitor.status();
+    assert_eq!(end.ended.as_deref(), Some("the input ended"));
+    assert!(!end.open && end.verdict.starts_with("verdict: "));
+}
+
+#[test]
+fn verdict_messages_are_the_evidence_rows_gate_changes() {
+    let cfg = node_b();
+    let monitor = Monitor::new(MonitorOptions::named("node_b"));
+    let (tx, rx) = std::sync::mpsc::channel::<VerdictMessage>();
+    let sink = move |m: &VerdictMessage| tx.send(m.clone()).unwrap();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, vec![Box::new(sink)]);
+    let out = run_paused(&cfg, &g5_rows(Some((10.0, 11.0))), &mut watch, |_| {});
+    drop(watch);
+    let messages: Vec<VerdictMessage> = rx.try_iter().collect();
+    let ev = evidence(&out);
+    let mut changes = Vec::new();
+    let mut was = false;
+    for row in &ev {
+        let open = field(row, "calibrated_open") == 1.0;
+        if open != was {
+            changes.push((field(row, "t"), open));
+        }
+        was = open;
+    }
+    assert!(changes.len() >= 2, "the gap closes the gate that opened: {changes:?}");
+    let (first, last) = (&messages[0], &messages[messages.len() - 1]);
+    assert_eq!((first.sequence, first.open), (0, false));
+    assert_eq!(first.reason.as_ref().unwrap().kind, "starting");
+    assert!(last.ended && !last.open);
+    let middle: Vec<(f64, bool)> =
+        messages[1..messages.len() - 1].iter().map(|m| (m.t.unwrap(), m.open)).collect();
+    assert_eq!(middle, changes);
+    for (i, m) in messages.iter().enumerate() {
+        assert_eq!(m.sequence, i as u64);
+        assert_eq!(m.open, m.reason.is_none());
+        assert_eq!(m.risk.unwrap().delta, cfg.certifier.calibration.as_ref().unwrap().delta);
+        assert_eq!(m.candidate.margin, cfg.certifier.margin);
+    }
+    let closed = messages.iter().find(|m| m.sequence > 1 && !m.open && !m.ended).unwrap();
+    assert_eq!(closed.reason.as_ref().unwrap().kind, "gap");
+}
+
+#[test]
+fn bad_requests_get_their_status_codes_and_the_run_goes_on() {
+    let cfg = node_b();
+    let (monitor, server) = started("node_b");
+    let addr = server.addr();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    let mut answers = Vec::new();
+    let rows = g5_rows(None);
+    let out = run_paused(&cfg, &rows, &mut watch, |k| {
+        if k != 300 {
+            return;
+        }
+        answers.push(("unknown path", get(addr, "/etc/passwd").status, 404));
+        answers.push(("POST", request(addr, "POST", "/metrics").status, 405));
+        answers.push(("PUT", request(addr, "PUT", "/api/status").status, 405));
+        answers.push(("DELETE", request(addr, "DELETE", "/").status, 405));
+        let big = format!(
+            "GET / HTTP/1.1\r\nHost: localhost\r\nX-Big: {}\r\nConnection: close\r\n\r\n",
+            "a".repeat(1 << 20)
+        );
+        answers.push(("1 MB header", raw(addr, big.as_bytes()).status, 431));
+        answers.push(("garbage", raw(addr, b"\x00\x01 nonsense\r\n\r\n").status, 400));
+        answers.push(("metrics after", get(addr, "/metrics").status, 200));
+        answers.push(("page after", get(addr, "/").status, 200));
+    });
+    for (what, got, want) in &answers {
+        assert_eq!(got, want, "{what}");
+    }
+    assert_eq!(answers.len(), 8);
+    // Every row was certified and written.
+    assert_eq!(evidence(&out).len(), rows.lines().count() - 1);
+    assert_eq!(monitor.status().counters.samples, rows.lines().count() as u64 - 1);
+}
+
+#[test]
+fn the_page_its_assets_and_no_credential_are_served() {
+    let (_monitor, server) = started("node_b");
+    let addr = server.addr();
+    let page = get(addr, "/");
+    assert_eq!(page.status, 200);
+    assert!(page.headers.contains("content-type: text/html"));
+    assert!(page.headers.contains("content-security-policy: default-src 'self'"));
+    // Embedded: nothing is loaded from another host.
+    for asset in ["/", "/app.js", "/style.css"] {
+        let body = get(addr, asset).body;
+        assert!(!body.contains("http://") && !body.contains("https://"), "{asset}");
+    }
+    assert!(page.body.contains("src=\"/app.js\""));
+    assert_eq!(get(addr, "/healthz").body, "ok");
+}
+
+#[test]
+fn a_hundred_clients_polling_are_served_while_the_run_goes_on() {
+    let cfg = node_b();
+    let (monitor, server) = started("node_b");
+    let addr = server.addr();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut clients = Vec::new();
+    let rows = g5_rows(None);
+    let out = run_paused(&cfg, &rows, &mut watch, |k| match k {
+        100 => {
+            for i in 0..100 {
+                let stop = Arc::clone(&stop);
+                clients.push(std::thread::spawn(move || {
+                    let mut codes = Vec::new();
+                    while !stop.load(Ordering::Relaxed) || codes.len() < 2 {
+                        let path = if i % 2 == 0 { "/api/status" } else { "/metrics" };
+                        codes.push(get(addr, path).status);
+                        std::thread::sleep(std::time::Duration::from_millis(20));
+                    }
+                    codes
+                }));
+            }
+        }
+        101..=600 => std::thread::sleep(std::time::Duration::from_millis(2)),
+        601 => stop.store(true, Ordering::Relaxed),
+        _ => {}
+    });
+    let codes: Vec<u16> = clients.into_iter().flat_map(|c| c.join().unwrap()).collect();
+    assert!(codes.len() >= 200, "{} answers", codes.len());
+    assert!(codes.iter().all(|&c| c == 200), "{:?}", codes.iter().filter(|&&c| c != 200).count());
+    assert_eq!(evidence(&out).len(), rows.lines().count() - 1);
+}

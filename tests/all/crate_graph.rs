@@ -45,8 +45,9 @@ fn no_crate_depends_on_the_command_line_crate() {
     assert!(pipeline_users >= 4, "{pipeline_users} crates use streamcert-pipeline");
 }
 
-/// Only the command line (and the root's benchmarks) link the live sources' MQTT client: the
-/// pipeline and the Python package read files, so a downstream user of either links none.
+/// Only the command line (and the root's benchmarks) link the live sources' MQTT client and
+/// the operators' web server: the pipeline and the Python package read files, so a
+/// downstream user of either links neither.
 #[test]
 fn only_the_command_line_links_the_live_sources() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
@@ -55,7 +56,14 @@ fn only_the_command_line_links_the_live_sources() {
             .expect("manifest");
         let manifest: toml::Table = toml::from_str(&text).expect("a TOML manifest");
         let deps = manifest.get("dependencies").and_then(toml::Value::as_table).expect("deps");
-        for client in ["streamcert-live", "rumqttc", "rumqttd"] {
+        for client in [
+            "streamcert-live",
+            "rumqttc",
+            "rumqttd",
+            "streamcert-serve",
+            "axum",
+            "prometheus-client",
+        ] {
             assert!(!deps.contains_key(client), "{krate} links {client}");
         }
     }

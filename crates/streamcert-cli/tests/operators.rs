@@ -182,3 +182,39 @@ fn a_certifier_killed_leaves_its_offline_will_retained() {
     assert!(flag);
     assert_eq!(retained["reason"]["kind"], "offline");
 }
+
+#[test]
+fn servers_bind_localhost_unless_told_and_a_cluster_refuses_them() {
+    let data = bin().args(["simulate", "g5", "--experiment", "2", "--seed", "1"]).output().unwrap();
+    let input = tmp("operators-g5.csv");
+    std::fs::write(&input, &data.stdout).unwrap();
+    let config = tmp("operators-node-b.toml");
+    std::fs::write(&config, streamcert_pipeline::config::g5_node_b()).unwrap();
+    let out = bin()
+        .args(["certify", "--config", config.to_str().unwrap(), "--input", input.to_str().unwrap()])
+        .args(["--output", "/dev/null", "--serve", "0", "--metrics", "0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("status page: http://127.0.0.1:")), "{err}");
+    assert!(err.lines().any(|l| l.starts_with("metrics: http://127.0.0.1:")), "{err}");
+    let bad = bin()
+        .args(["certify", "--config", config.to_str().unwrap(), "--input", input.to_str().unwrap()])
+        .args(["--serve", "not-an-address"])
+        .output()
+        .unwrap();
+    assert_eq!(bad.status.code(), Some(2), "{}", String::from_utf8_lossy(&bad.stderr));
+    let net = tmp("operators-net.toml");
+    let example = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../examples/data/g5_network.toml");
+    std::fs::copy(example, &net).unwrap();
+    let cluster = bin()
+        .args(["network", "--config", net.to_str().unwrap(), "--input", input.to_str().unwrap()])
+        .args(["--processes", "2", "--process", "0", "--serve", "0"])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&cluster.stderr);
+    assert_eq!(cluster.status.code(), Some(2), "{err}");
+    assert!(err.contains("watch a one-process run"), "{err}");
+}

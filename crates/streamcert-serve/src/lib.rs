@@ -17,8 +17,9 @@
 //! [`Monitor::network`] give the watcher the run is handed
 //! (`streamcert_pipeline::certify::run_watched`); [`Monitor::serve`] starts a read-only
 //! server on an address (the command line binds localhost unless told otherwise). A sample
-//! costs the run a few atomic stores; the page's document is refreshed at most every
-//! [`REFRESH`] and at every change of the gate.
+//! costs the run a copy of its evidence and counts under a lock no reader holds for long;
+//! the metrics are set from them when scraped, the page's verdict line is refreshed at most
+//! every [`REFRESH`] and at every change of the gate.
 //!
 //! The pipeline does not depend on this crate: the Python package and a downstream user of
 //! the pipeline link no web server.
@@ -104,6 +105,8 @@ pub(crate) struct Shared {
     chart_seconds: f64,
     metrics: metrics::Metrics,
     status: Mutex<Status>,
+    /// A certify run's series (`None` for a network, whose watcher sets its own).
+    loop_series: Mutex<Option<watch::LoopSeries>>,
 }
 
 impl Shared {
@@ -112,11 +115,20 @@ impl Shared {
         self.status.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
     }
 
-    /// The metrics at `now`, the age of the last sample brought up to date first.
+    /// The metrics at `now`: a certify run's series set from its last evidence, the age of
+    /// the last sample brought up to date.
     fn metrics_text(&self, now: Instant) -> String {
-        let age = self.status().at(now).age_seconds;
-        let name = self.name.as_str();
-        self.metrics.run_age(name, age.unwrap_or(f64::NAN));
+        let (evidence, counters, age) = {
+            let st = self.status();
+            let age = st.arrived.map(|a| now.saturating_duration_since(a).as_secs_f64());
+            (st.evidence, st.counters.clone(), age.unwrap_or(f64::NAN))
+        };
+        let series = self.loop_series.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        match series.as_ref() {
+            Some(s) => s.publish(evidence.as_ref(), &counters, age, watch::unix_now()),
+            None => self.metrics.run_age(&self.name, age),
+        }
+        drop(series);
         self.metrics.text()
     }
 }
@@ -141,6 +153,7 @@ impl Monitor {
                 chart_seconds: opts.chart_seconds,
                 metrics: metrics::Metrics::new(),
                 status: Mutex::new(status),
+                loop_series: Mutex::new(None),
             }),
         }
     }

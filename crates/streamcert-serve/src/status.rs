@@ -70,6 +70,9 @@ pub struct Status {
     /// `reason` stands as written).
     #[serde(skip)]
     pub(crate) sample_reason: Option<Option<NotCertified>>,
+    /// A certify run's last evidence (its metrics are set from it when scraped).
+    #[serde(skip)]
+    pub(crate) evidence: Option<streamcert_certificate::Evidence>,
 }
 
 /// Counts of a run.
@@ -131,6 +134,7 @@ impl Status {
             subsystems: Vec::new(),
             arrived: None,
             sample_reason: None,
+            evidence: None,
         }
     }
 

@@ -13,6 +13,41 @@ use streamcert_pipeline::watch::Watch;
 
 use crate::Shared;
 use crate::metrics::{self, Certificate, RunSeries};
+
+/// A certify run's series, set from its last evidence when scraped.
+pub(crate) struct LoopSeries {
+    certificates: Vec<(CertificateKind, Certificate)>,
+    run: RunSeries,
+}
+
+impl LoopSeries {
+    /// Every series from the last sample's evidence `ev`, the run's counts, the age of the
+    /// last sample (wall seconds) and the wall clock now (Unix seconds).
+    pub(crate) fn publish(&self, ev: Option<&Evidence>, counters: &Counters, age: f64, unix: f64) {
+        let r = &self.run;
+        metrics::advance(&r.samples, counters.samples);
+        metrics::advance(&r.gaps, counters.gaps);
+        metrics::advance(&r.skipped, counters.skipped);
+        metrics::advance(&r.bad, counters.bad);
+        metrics::advance(&r.reconnects, counters.reconnects);
+        r.age.set(age);
+        let Some(ev) = ev else { return };
+        r.last_time.set(ev.t);
+        // The evidence was computed when the sample arrived, `age` ago.
+        r.lag.set(if UNIX_SECONDS.contains(&ev.t) { unix - age - ev.t } else { f64::NAN });
+        for (kind, series) in &self.certificates {
+            let v = ev.verdict(*kind);
+            series.value.set(v.value.unwrap_or(f64::NAN));
+            series.radius.set(v.radius.unwrap_or(f64::NAN));
+            series.estimate.set(match (v.value, v.radius) {
+                (Some(c), Some(r)) => c + r,
+                _ => f64::NAN,
+            });
+            series.gate.set(if v.open { 1.0 } else { 0.0 });
+            metrics::set_state(&series.reasons, v.reason.map_or("none", |r| r.kind()));
+        }
+    }
+}
 use crate::status::{Chart, Counters};
 use crate::verdict::{Candidate, Reason, Risk, VerdictMessage, VerdictSink};
 
@@ -133,9 +168,9 @@ pub struct CertifyWatch {
     cfg: CertifierConfig,
     outputs: Vec<String>,
     deciding: CertificateKind,
-    certificates: Vec<(CertificateKind, Certificate, &'static str)>,
-    run: RunSeries,
     gate: Gate,
+    /// The last sample's evidence.
+    last: Option<Evidence>,
     chart: Chart,
     pending: Vec<(f64, Option<f64>, bool)>,
     counters: Counters,
@@ -165,8 +200,11 @@ impl CertifyWatch {
         let reasons = streamcert_certificate::NotCertified::KINDS;
         let certificates = kinds
             .into_iter()
-            .map(|k| (k, shared.metrics.certificate(&name, kind_name(k), &reasons), "none"))
+            .map(|k| (k, shared.metrics.certificate(&name, kind_name(k), &reasons)))
             .collect();
+        let series = LoopSeries { certificates, run: shared.metrics.run(&name, cfg.margin) };
+        *shared.loop_series.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
+            Some(series);
         let message = VerdictMessage {
             schema: crate::verdict::VERDICT_SCHEMA,
             sequence: 0,
@@ -193,13 +231,12 @@ impl CertifyWatch {
             st.reason.clone_from(&message.reason);
         }
         Self {
-            run: shared.metrics.run(&shared.name, cfg.margin),
             chart: Chart::new(shared.chart_seconds),
             shared,
             cfg: cfg.clone(),
             outputs: outputs.to_vec(),
             deciding,
-            certificates,
+            last: None,
             gate: Gate::new(message, sinks),
             pending: Vec::with_capacity(64),
             counters: Counters::default(),
@@ -230,6 +267,7 @@ impl CertifyWatch {
         (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
         st.counters.clone_from(&self.counters);
         st.arrived = self.arrived;
+        st.evidence = self.last;
         st.sample_reason = sample_reason;
         if sample_reason.is_none() {
             st.reason.clone_from(&m.reason);
@@ -244,32 +282,6 @@ impl CertifyWatch {
         if !self.pending.is_empty() {
             self.chart.append(&mut st.chart, &mut self.pending);
         }
-    }
-
-    /// The metrics of one sample's evidence.
-    fn measure(&mut self, summary: &Summary, ev: &Evidence) {
-        for (kind, series, last_reason) in &mut self.certificates {
-            let v = ev.verdict(*kind);
-            series.value.set(v.value.unwrap_or(f64::NAN));
-            series.radius.set(v.radius.unwrap_or(f64::NAN));
-            series.estimate.set(match (v.value, v.radius) {
-                (Some(c), Some(r)) => c + r,
-                _ => f64::NAN,
-            });
-            series.gate.set(if v.open { 1.0 } else { 0.0 });
-            let now = v.reason.map_or("none", |r| r.kind());
-            if now != *last_reason {
-                metrics::set_state(&series.reasons, now);
-                *last_reason = now;
-            }
-        }
-        let c = &mut self.counters;
-        (c.samples, c.gaps, c.skipped) = (summary.rows, summary.gaps, summary.skipped);
-        metrics::advance(&self.run.samples, summary.rows);
-        metrics::advance(&self.run.gaps, summary.gaps);
-        metrics::advance(&self.run.skipped, summary.skipped);
-        self.run.last_time.set(ev.t);
-        self.run.lag.set(lag(ev.t));
     }
 }
 
@@ -287,7 +299,8 @@ impl Watch for CertifyWatch {
     fn sample(&mut self, _cert: &Certifier, summary: &Summary, ev: &Evidence) {
         let now = Instant::now();
         self.arrived = Some(now);
-        self.measure(summary, ev);
+        let c = &mut self.counters;
+        (c.samples, c.gaps, c.skipped) = (summary.rows, summary.gaps, summary.skipped);
         let d = ev.verdict(self.deciding);
         let due = self.refreshed.is_none_or(|r| now.duration_since(r) >= REFRESH);
         let why = d.reason.map(|r| (r.kind(), move || r.to_string()));
@@ -295,6 +308,7 @@ impl Watch for CertifyWatch {
         if self.chart.due(ev.t, d.open) {
             self.pending.push((ev.t, d.value, d.open));
         }
+        self.last = Some(*ev);
         self.refresh(now, Some(d.reason), (changed || due).then_some(summary), None);
     }
 
@@ -305,7 +319,6 @@ impl Watch for CertifyWatch {
 
     fn skipped(&mut self, summary: &Summary) {
         self.counters.skipped = summary.skipped;
-        metrics::advance(&self.run.skipped, summary.skipped);
         let closed =
             self.gate.close("skipped_sample", "a bad row was passed over: every gate closes");
         self.refresh(Instant::now(), None, closed.then_some(summary), None);
@@ -321,7 +334,7 @@ impl Watch for CertifyWatch {
     }
 
     fn source(&mut self, report: Option<&SourceReport>) {
-        source_counts(&mut self.counters, &self.run, &mut self.source_line, report);
+        source_counts(&mut self.counters, None, &mut self.source_line, report);
     }
 
     fn end(&mut self, error: Option<&str>) {
@@ -349,7 +362,7 @@ pub(crate) fn ended(error: Option<&str>) -> String {
 /// A live source's counts into the counters, the metrics and the source's line.
 pub(crate) fn source_counts(
     counters: &mut Counters,
-    run: &RunSeries,
+    run: Option<&RunSeries>,
     line: &mut Option<String>,
     report: Option<&SourceReport>,
 ) {
@@ -357,7 +370,9 @@ pub(crate) fn source_counts(
     counters.bad = r.bad_total();
     counters.reconnects = r.reconnects;
     counters.late = r.late;
-    metrics::advance(&run.bad, counters.bad);
-    metrics::advance(&run.reconnects, r.reconnects);
+    if let Some(run) = run {
+        metrics::advance(&run.bad, counters.bad);
+        metrics::advance(&run.reconnects, r.reconnects);
+    }
     *line = Some(r.line());
 }

@@ -292,3 +292,140 @@ fn a_hundred_clients_polling_are_served_while_the_run_goes_on() {
     assert!(codes.iter().all(|&c| c == 200), "{:?}", codes.iter().filter(|&&c| c != 200).count());
     assert_eq!(evidence(&out).len(), rows.lines().count() - 1);
 }
+
+#[test]
+fn a_network_run_s_metrics_and_messages_are_its_epoch_rows() {
+    let text = std::fs::read_to_string(support::example("g5_network.toml")).unwrap();
+    let cfg = streamcert_pipeline::network::parse(&text, "g5_network.toml").unwrap();
+    let mut data = Vec::new();
+    streamcert_pipeline::simulate::run(
+        streamcert_experiments::Experiment::Two,
+        streamcert_dynamics::Coupling::Bidirectional,
+        0,
+        None,
+        None,
+        &mut data,
+    )
+    .unwrap();
+    let monitor = Monitor::new(MonitorOptions::named("g5"));
+    let (tx, rx) = std::sync::mpsc::channel::<VerdictMessage>();
+    let sink = move |m: &VerdictMessage| tx.send(m.clone()).unwrap();
+    let mut watch = monitor.network(&cfg.network, vec![Box::new(sink)]);
+    let opts = streamcert_pipeline::network::NetOptions {
+        format: streamcert_pipeline::output::Format::Csv,
+        flush: streamcert_pipeline::output::Flush::Buffered,
+        checkpoint: None,
+        checkpoint_every: None,
+        resume: None,
+        plot: None,
+    };
+    let mut out = Vec::new();
+    let s = streamcert_pipeline::network::run_watched(
+        &cfg,
+        &data[..],
+        "g5",
+        &mut out,
+        &opts,
+        &mut watch,
+    )
+    .unwrap();
+    drop(watch);
+    let epochs = evidence(&String::from_utf8(out).unwrap());
+    let mut changes = Vec::new();
+    let mut was = false;
+    for e in &epochs {
+        let open = field(e, "open") == 1.0;
+        if open != was {
+            changes.push((field(e, "t"), open));
+        }
+        was = open;
+    }
+    assert!(!changes.is_empty(), "the network gate opens on these data");
+    let messages: Vec<VerdictMessage> = rx.try_iter().collect();
+    let n = messages.len();
+    let middle: Vec<(f64, bool)> =
+        messages[1..n - 1].iter().map(|m| (m.t.unwrap(), m.open)).collect();
+    assert_eq!(middle, changes);
+    assert!(messages.iter().all(|m| m.kind == "network" && m.certificate == "network"));
+    assert_eq!(messages[0].risk.map(|r| r.delta), cfg.network.total_risk());
+    let m = parse(&monitor.metrics_text());
+    let last = epochs.last().unwrap();
+    let lp = [("loop", "g5")];
+    assert_eq!(value(&m, "streamcert_network_gate_open", &lp), field(last, "open"));
+    assert_eq!(value(&m, "streamcert_network_rate_per_second", &lp), field(last, "rate"));
+    assert_eq!(value(&m, "streamcert_epochs_total", &lp), epochs.len() as f64);
+    assert_eq!(value(&m, "streamcert_samples_total", &lp), s.rows as f64);
+    for sub in &cfg.network.subsystems {
+        let l = [("loop", "g5"), ("subsystem", sub.name.as_str())];
+        let cert = field(last, &format!("cert_{}", sub.name));
+        let got = value(&m, "streamcert_subsystem_certificate_per_second", &l);
+        assert!(got == cert || (got.is_nan() && cert.is_nan()), "{}: {got} {cert}", sub.name);
+    }
+    for name in documented("network") {
+        assert!(monitor.metrics_text().contains(&format!("\n{name}{{")), "no {name}");
+    }
+    let status = monitor.status();
+    assert_eq!(status.subsystems.len(), cfg.network.subsystems.len());
+    assert_eq!(status.counters.epochs, epochs.len() as u64);
+}
+
+#[test]
+fn the_grafana_dashboard_queries_only_documented_series() {
+    let dash = std::fs::read_to_string(support::example("../grafana/streamcert.json")).unwrap();
+    let v: serde_json::Value = serde_json::from_str(&dash).unwrap();
+    let mut names = documented("certify");
+    names.extend(documented("network"));
+    let mut queried = 0;
+    for panel in v["panels"].as_array().unwrap() {
+        for target in panel["targets"].as_array().unwrap() {
+            let expr = target["expr"].as_str().unwrap();
+            for (i, _) in expr.match_indices("streamcert_") {
+                let name: String = expr[i..]
+                    .chars()
+                    .take_while(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                assert!(names.contains(&name), "{name} in `{expr}` is not documented");
+                queried += 1;
+            }
+        }
+    }
+    assert!(queried >= 12);
+}
+
+#[test]
+fn the_lag_and_the_age_of_the_last_sample_are_measured_on_the_wall_clock() {
+    let cfg = node_b();
+    let monitor = Monitor::new(MonitorOptions::named("node_b"));
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    // The same rows with Unix times ending now (a live source's source timestamps).
+    let rows = g5_rows(None);
+    let now = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap();
+    let shift = now.as_secs_f64() - 16.0;
+    let shifted: String = rows
+        .lines()
+        .enumerate()
+        .map(|(i, l)| match (i, l.split_once(',')) {
+            (0, _) | (_, None) => format!("{l}\n"),
+            (_, Some((t, rest))) => format!("{},{rest}\n", t.parse::<f64>().unwrap() + shift),
+        })
+        .collect();
+    let mut lags = Vec::new();
+    run_paused(&cfg, &shifted, &mut watch, |k| {
+        if k == 500 {
+            let m = parse(&monitor.metrics_text());
+            lags.push(value(&m, "streamcert_evidence_lag_seconds", &[("loop", "node_b")]));
+        }
+    });
+    // Row 499 is at t = 4.98 s of 16: its sample time is about 11 s before now.
+    assert!((lags[0] - 11.0).abs() < 5.0, "lag {}", lags[0]);
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let m = parse(&monitor.metrics_text());
+    let age = value(&m, "streamcert_last_sample_age_seconds", &[("loop", "node_b")]);
+    assert!((0.3..30.0).contains(&age), "age {age}");
+    // A file's own clock has no lag.
+    let (monitor, _server) = started("file");
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    run_paused(&cfg, &rows, &mut watch, |_| {});
+    let m = parse(&monitor.metrics_text());
+    assert!(value(&m, "streamcert_evidence_lag_seconds", &[("loop", "file")]).is_nan());
+}

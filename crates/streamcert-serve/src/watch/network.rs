@@ -198,7 +198,7 @@ impl Watch for NetworkWatch {
     }
 
     fn source(&mut self, report: Option<&SourceReport>) {
-        source_counts(&mut self.counters, &self.run, &mut self.source_line, report);
+        source_counts(&mut self.counters, Some(&self.run), &mut self.source_line, report);
     }
 
     fn end(&mut self, error: Option<&str>) {

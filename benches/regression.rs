@@ -301,7 +301,7 @@ fn computation_only(c: &mut Criterion) {
 /// the intercept's `τ`), the hidden-dynamics guard's larger fit's four (those and the past
 /// increment) and the nonlinearity guard's five (those and the square and the cube). The
 /// guards' pushes are a floor under their cost per sample, before any test: BENCHMARKS.md
-/// compares them with what the cost target leaves the guards.
+/// compares them with what the step's cost target leaves the guards.
 fn windows_push(c: &mut Criterion) {
     let mut group = c.benchmark_group("windows_push");
     let len = 4096usize;

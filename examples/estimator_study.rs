@@ -1,4 +1,4 @@
-//! Measured figures behind the regression and certificate claims (issue notes and
+//! Measured figures behind the regression and certificate claims (notes and
 //! ARCHITECTURE.md quote this output):
 //!
 //! 1. the noise bias of the ordinary estimate and its removal by the instrumented one;

@@ -100,7 +100,7 @@ proptest! {
 }
 
 /// At `y₀ = 10⁶` with `σ = 0.1` the certificate equals the one of the centred record (the
-/// issue's digits test), here at every step of a run whose gate opens.
+/// digits test), here at every step of a run whose gate opens.
 #[test]
 fn the_certificate_at_a_million_equals_the_centred_one() {
     let traj = run_scenario(&loop_about_zero(), 3);
@@ -118,7 +118,7 @@ fn the_certificate_at_a_million_equals_the_centred_one() {
     assert!(worst < 1e-7, "largest relative difference {worst:e}");
 }
 
-/// The operating-point loop: `ẏ = −0.02 (y − 50) + (u − 10) + w`, `σ = 0.1`,
+/// An operating-point loop: `ẏ = −0.02 (y − 50) + (u − 10) + w`, `σ = 0.1`,
 /// `u = 10 + PRBS(±1, held 0.2 s)`, 40 s at `dt = 0.01`, candidate `K = 0`: true rate 0.02,
 /// below the margin 0.05, so every opening is a false deployment. Through the origin the
 /// operating point enters `Θ̂` as dynamics and the gate opens in most runs; the affine model

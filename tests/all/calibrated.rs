@@ -33,7 +33,7 @@ pub(crate) fn calibrated(
     }
 }
 
-/// The short-window case: `ẏ = 0.5 y + u + w`, σ = 0.1, `u = −y + PRBS(±1, 0.2 s)`,
+/// The short-window case: `ẏ = 0.5 y + u + w`, σ = 0.1, `u = −y + PRBS(±1, 0.2 s)`,
 /// 40 s at dt = 0.01.
 pub(crate) fn short_window_plant() -> LinearScenario {
     LinearScenario {
@@ -257,7 +257,7 @@ fn contracting_candidates_are_certified_and_a_plant_change_closes_the_gate() {
                         ev.calibrated.reason,
                         Some(
                             NotCertified::PlantChanged { .. }
-                                | NotCertified::RateDropped { .. }
+                                | NotCertified::RateBelowMargin { .. }
                                 | NotCertified::BelowMargin { .. }
                                 | NotCertified::HiddenDynamics { .. }
                                 | NotCertified::VaryingDynamics { .. }

@@ -87,7 +87,7 @@ fn the_older_part_of_a_window_equals_a_window_without_the_newest_columns() {
     assert!(compared > 500, "{compared}");
 }
 
-/// The plant change: `ẏ = a y + u + w`, `K = −1.5`, rate 3 until 20 s, then `to`
+/// A plant change: `ẏ = a y + u + w`, `K = −1.5`, rate 3 until 20 s, then `to`
 /// (`dt = 0.02`, `M = 150`, `h = 5`, `n_s = 10`, 40 s; one shortest-window span is
 /// `(M + h − 1) dt = 3.08 s`). Per run: whether the gate was open at the change, the delay to
 /// its first closed sample, whether it was open later than 1.5 spans after the change, and the
@@ -134,7 +134,7 @@ fn change_runs(to: f64, cal: Calibration, runs: u64) -> (usize, Vec<f64>, usize,
 }
 
 /// A drop from rate 3 to 0 (below the margin): with the change guard the gate is open later
-/// than 1.5 shortest-window spans after the change in at most 2 of 40 runs (the target
+/// than 1.5 shortest-window spans after the change in at most 2 of 40 runs (the target
 /// is 5 %), and every run closes within one span; without it the longer windows keep the old
 /// plant's certificate for longer.
 #[test]
@@ -281,7 +281,7 @@ fn the_library_entry_point_is_the_guarded_calibrated_certificate() {
     assert_eq!(CertifierConfig::new(reg, vec![-1.0], 0.1, 0.05, 10).calibration, None);
 }
 
-/// The case at the smallest accepted window and a one-sample gate: `K = −0.54` has true
+/// The case at the smallest accepted window and a one-sample gate: `K = −0.54` has true
 /// rate 0.04, just below the margin 0.05, so every opening is a false deployment. The test
 /// fails when 300 seeded runs give evidence that the false-opening rate exceeds δ = 0.01: the
 /// lower end of the 95 % Clopper–Pearson interval above δ (8 or more openings; at a rate of

@@ -11,7 +11,7 @@ use crate::support::scalar;
 /// An input held over the whole run is a multiple of the intercept's span in every window:
 /// the data do not identify the input's gain. Before the calibrated fits' ridge was made
 /// relative, the absolute ridge estimated that gain as zero and the gate opened on the drift
-/// alone (the identification-and-units issue: a candidate of true rate −0.5 deployed in most
+/// alone (the identification-and-units study: a candidate of true rate −0.5 deployed in most
 /// runs); now every look is refused, the reason says the input has not moved, and a step
 /// test with a few moves over 60 s certifies no unsafe candidate (40 runs each; the family is
 /// `cargo xtask validity`'s held-input table at 2000 runs per cell).

@@ -29,7 +29,7 @@ pub(crate) fn config(k: f64, margin: f64, window: usize, degree: usize) -> Certi
     }
 }
 
-/// The loop: `ẋ = −x tanh x + u + w`, `u = −1.1 x + PRBS(±1.5, held 1 s)`, σ = 0.1,
+/// The band loop: `ẋ = −x tanh x + u + w`, `u = −1.1 x + PRBS(±1.5, held 1 s)`, σ = 0.1,
 /// 40 s at dt = 0.01.
 fn tanh_loop() -> ScalarScenario {
     ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1)
@@ -141,7 +141,7 @@ fn a_named_library_that_holds_the_drift_certifies_the_tanh_loop_and_stays_below_
         nonlinear: Some(NonlinearConfig::with_features(library)),
         ..config(k, 0.05, 50, 3)
     };
-    // The loop (a non-contracting band) and a contracting one (K = −2, rate >= 0.8).
+    // The non-contracting band loop and a contracting one (K = −2, rate >= 0.8).
     // The promise is per run: a value above the smallest true rate over its region in at most
     // δ = 0.01 of runs, so two such runs of these twelve would happen with probability below
     // 0.7 % if it holds (with the default split one seed of the band loop has one, 0.009

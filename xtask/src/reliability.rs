@@ -49,10 +49,10 @@ fn run(bin: &Path, args: &[&str], stdin: &[u8]) -> Result<(i32, String, String)>
         .unwrap_or("")
         .to_string();
     // A run that goes on after a message (a skipped row) ends with its verdict: append it.
-    if let Some(v) = stderr.lines().find(|l| l.starts_with("verdict")) {
-        if !first.starts_with("verdict") {
-            first = format!("{first} / {v}");
-        }
+    if let Some(v) = stderr.lines().find(|l| l.starts_with("verdict"))
+        && !first.starts_with("verdict")
+    {
+        first = format!("{first} / {v}");
     }
     // A TOML error says what is wrong below its excerpt of the file: append those lines.
     if first.contains("TOML parse error") {

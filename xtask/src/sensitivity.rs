@@ -304,10 +304,10 @@ fn closest<'a>(
     let mut best: Option<(f64, &Variant, Measure, bool, f64, f64)> = None;
     for v in faithful {
         for &measure in &cell.measures {
-            if let Some((ok, distance, m, s)) = judge(cell, v, measure) {
-                if best.is_none_or(|b| distance < b.0) {
-                    best = Some((distance, v, measure, ok, m, s));
-                }
+            if let Some((ok, distance, m, s)) = judge(cell, v, measure)
+                && best.is_none_or(|b| distance < b.0)
+            {
+                best = Some((distance, v, measure, ok, m, s));
             }
         }
     }

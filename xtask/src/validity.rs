@@ -100,21 +100,21 @@ fn run_cell(cell: &Cell, seed: u64) -> Result<RunResult> {
             }
         }
         // The anchored window's looks too (a new look or a new epoch).
-        if let (Some(l), epoch) = cal.anchored_look() {
-            if (epoch, l.look) != anchored_seen {
-                anchored_seen = (epoch, l.look);
-                out.max_ratio = out.max_ratio.max((l.beta_hat - truth) / l.radius);
-                out.anchored_max = out.anchored_max.max((l.beta_hat - truth) / l.radius);
-                if (epoch, l.look) == (1, 7) && l.sd > 0.0 {
-                    out.seventh = Some(((l.beta_hat - MARGIN) / l.sd, l.radius / l.sd));
-                }
+        if let (Some(l), epoch) = cal.anchored_look()
+            && (epoch, l.look) != anchored_seen
+        {
+            anchored_seen = (epoch, l.look);
+            out.max_ratio = out.max_ratio.max((l.beta_hat - truth) / l.radius);
+            out.anchored_max = out.anchored_max.max((l.beta_hat - truth) / l.radius);
+            if (epoch, l.look) == (1, 7) && l.sd > 0.0 {
+                out.seventh = Some(((l.beta_hat - MARGIN) / l.sd, l.radius / l.sd));
             }
         }
         for (k, p) in papers.iter_mut().enumerate() {
-            if let Ok(p) = p {
-                if !out.paper_open[k] {
-                    out.paper_open[k] = p.push(t, y, u)?.gaussian.open;
-                }
+            if let Ok(p) = p
+                && !out.paper_open[k]
+            {
+                out.paper_open[k] = p.push(t, y, u)?.gaussian.open;
             }
         }
     }
@@ -316,7 +316,7 @@ fn power_table(power: &[Cell], power_runs: usize, bar: &indicatif::ProgressBar) 
         )
     );
     s.push_str(
-        "`before`: the same runs with the calibrated certificate's settings as they were when the safe-by-default and plant-data issues were filed (the model through the origin, no guards, no automatic batches, at least four windows with the risk split by length; the fits as today: the relative ridge, the delete-one-block variance); the difference is what the default settings cost on each cell.\n\nThe rows \"model through the origin\" run the 5× cell's and the sensor-noise cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between such a row and the one above it is the price of the intercept on such a loop. The rows \"four windows split by length\" run the same runs with every default but the windows, as they were at filing (four, the longer windows the larger share of δ): the default's fifth window makes up for the level the intercept cannot use, and its equal split keeps the shortest window's share for the fast loops.\n\n",
+        "`before`: the same runs with the calibrated certificate's earlier settings, before the safe defaults (the model through the origin, no guards, no automatic batches, at least four windows with the risk split by length; the fits as today: the relative ridge, the delete-one-block variance); the difference is what the default settings cost on each cell.\n\nThe rows \"model through the origin\" run the 5× cell's and the sensor-noise cell's runs with the paper's model (no intercept), every guard on: a loop known to run about zero gives its level to that model as information (how hard the loop pulls back), which a certificate whose verdict does not depend on the operating point cannot use. The difference between such a row and the one above it is the price of the intercept on such a loop. The rows \"four windows split by length\" run the same runs with every default but the windows, as they were before (four, the longer windows the larger share of δ): the default's fifth window makes up for the level the intercept cannot use, and its equal split keeps the shortest window's share for the fast loops.\n\n",
     );
     Ok(s)
 }
@@ -444,7 +444,7 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     bar.finish_and_clear();
     let _ = writeln!(
         s,
-        "## Reading the tables\n\n- `95 % CP upper` is the upper end of the two-sided 95 % Clopper–Pearson interval on the false-opening rate; the guarantee passes the cell when it is at most 2δ = {}.\n- `q99 of run max (β̂−β*)/ρ`: over runs, the 99th percentile of the largest ratio over every look of every window and of the anchored window; the union bound needs it at most 1 in about a fraction 1 − δ of runs.\n- `anchored look above β*`: the runs in which some look of the anchored window had `β̂ − ρ > β*` (an overstated rate, whether or not a guard let it stand); the anchored window spends `0.9 δ` of the risk, so the union bound allows about `0.9 δ` of the runs.\n- `ρ / (z·sd)`: the longest window's radius at the end of the run over the radius of an oracle with one look that knows the spread of that window's estimate over the runs, z = z(1 − δ).\n- Its two factors (medians over the runs; their product is close to the ratio): `spending t / z`, the Student-t quantile at the risk the window's last look spent (`δ_{{w,k}}`, at `ν` degrees of freedom) over the one-look `z`, the price of a bound valid at every look of every window; and `spread sd used / sd(β̂)`, the spread the radius used (`√λ_max(Ω̂)`, for p = 2 the rank-one bound) over the spread of the estimate across the runs. A spread factor near 1 says the variance is estimated as the oracle knows it; above 1 it is the worst direction of `sym ΔJ` (p ≥ 2) or the batch-means count of sensor noise that telescopes across blocks.\n- `7th anchored look`: the first epoch's anchored look at `8 M` columns (12 s at `M = 150`), medians over the runs of the data's standardised excess `(β̂ − β_margin)/sd` and of the quantile `t = ρ/sd` its spent risk gave. A run certifies at that look when its excess exceeds its `t`, so half of the runs can open by then only where the quantile is below the median excess, whatever rule spends the risk: this column is the floor of the power issue's median first opening of 12.2 s on the 5× loop.\n- The paper's certificate has no stated risk; its columns give the share of runs whose gate opened.",
+        "## Reading the tables\n\n- `95 % CP upper` is the upper end of the two-sided 95 % Clopper–Pearson interval on the false-opening rate; the guarantee passes the cell when it is at most 2δ = {}.\n- `q99 of run max (β̂−β*)/ρ`: over runs, the 99th percentile of the largest ratio over every look of every window and of the anchored window; the union bound needs it at most 1 in about a fraction 1 − δ of runs.\n- `anchored look above β*`: the runs in which some look of the anchored window had `β̂ − ρ > β*` (an overstated rate, whether or not a guard let it stand); the anchored window spends `0.9 δ` of the risk, so the union bound allows about `0.9 δ` of the runs.\n- `ρ / (z·sd)`: the longest window's radius at the end of the run over the radius of an oracle with one look that knows the spread of that window's estimate over the runs, z = z(1 − δ).\n- Its two factors (medians over the runs; their product is close to the ratio): `spending t / z`, the Student-t quantile at the risk the window's last look spent (`δ_{{w,k}}`, at `ν` degrees of freedom) over the one-look `z`, the price of a bound valid at every look of every window; and `spread sd used / sd(β̂)`, the spread the radius used (`√λ_max(Ω̂)`, for p = 2 the rank-one bound) over the spread of the estimate across the runs. A spread factor near 1 says the variance is estimated as the oracle knows it; above 1 it is the worst direction of `sym ΔJ` (p ≥ 2) or the batch-means count of sensor noise that telescopes across blocks.\n- `7th anchored look`: the first epoch's anchored look at `8 M` columns (12 s at `M = 150`), medians over the runs of the data's standardised excess `(β̂ − β_margin)/sd` and of the quantile `t = ρ/sd` its spent risk gave. A run certifies at that look when its excess exceeds its `t`, so half of the runs can open by then only where the quantile is below the median excess, whatever rule spends the risk: this column is a floor under the 5× loop's median first opening (the power table's 12.2 s target sits above it).\n- The paper's certificate has no stated risk; its columns give the share of runs whose gate opened.",
         2.0 * DELTA
     );
     write(&out.join("VALIDITY.md"), &s)?;

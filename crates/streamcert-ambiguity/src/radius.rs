@@ -169,13 +169,13 @@ impl AmbiguityRadius {
             if let Some(e) = evicted {
                 self.spikes -= usize::from(e.abs() > threshold);
             }
-        } else if let Some(cal) = &mut self.calibration {
-            if let Some(sigma0) = cal.push(x) {
-                // Frozen now: count the spikes already in the window.
-                self.sigma0 = Some(sigma0);
-                let threshold = 3.0 * sigma0;
-                self.spikes = self.moments.values().filter(|v| v.abs() > threshold).count();
-            }
+        } else if let Some(cal) = &mut self.calibration
+            && let Some(sigma0) = cal.push(x)
+        {
+            // Frozen now: count the spikes already in the window.
+            self.sigma0 = Some(sigma0);
+            let threshold = 3.0 * sigma0;
+            self.spikes = self.moments.values().filter(|v| v.abs() > threshold).count();
         }
         Ok(())
     }

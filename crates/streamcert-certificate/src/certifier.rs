@@ -5,8 +5,11 @@
 
 mod access;
 mod calibrated_step;
+#[cfg(feature = "checkpoint")]
 pub(crate) mod checkpoint;
+#[cfg(feature = "checkpoint")]
 mod pack;
+mod verify;
 
 use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;
@@ -32,7 +35,10 @@ pub struct Certifier {
     wass: Gate,
     calibrated_gate: Gate,
     /// In a binary checkpoint, with its block rings packed (`pack.rs`).
-    #[serde(serialize_with = "pack::serialize", deserialize_with = "pack::deserialize")]
+    #[cfg_attr(
+        feature = "checkpoint",
+        serde(serialize_with = "pack::serialize", deserialize_with = "pack::deserialize")
+    )]
     calibrated: Option<CalibratedState>,
     nonlinear_gate: Gate,
     // The window length of the standing calibrated look (for its region).

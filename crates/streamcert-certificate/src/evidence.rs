@@ -50,9 +50,12 @@ pub enum NotCertified {
         reference: f64,
     },
     /// Calibrated certificate: a window whose latest look is at least as recent as every
-    /// standing certificate bounds the rate from above below the margin (the loop stopped
-    /// contracting enough, for example after a plant change).
-    RateDropped {
+    /// standing certificate bounds the rate from above below the margin: the newest data
+    /// show that the candidate does not contract enough (a loop that never did, or one that
+    /// stopped, for example after a plant change). Read as `rate_dropped` too (its name
+    /// before 0.1.0's release).
+    #[serde(alias = "rate_dropped")]
+    RateBelowMargin {
         /// The window length that gives the bound.
         window: usize,
         /// Its upper bound `β̂_w + ρ_w`.
@@ -171,7 +174,7 @@ impl NotCertified {
         match *self {
             N::BelowMargin { certificate, margin } => [certificate.to_bits(), margin.to_bits(), 0],
             N::Gap { dt, reference } => [dt.to_bits(), reference.to_bits(), 0],
-            N::RateDropped { upper, .. } => [upper.to_bits(), 0, 0],
+            N::RateBelowMargin { upper, .. } => [upper.to_bits(), 0, 0],
             N::PlantChanged { beta_hat, newest_upper, .. } => {
                 [beta_hat.to_bits(), newest_upper.to_bits(), 0]
             }
@@ -216,7 +219,7 @@ impl NotCertified {
         "no_ambiguity_model",
         "no_calibration",
         "gap",
-        "rate_dropped",
+        "rate_below_margin",
         "varying_dynamics",
         "hidden_dynamics",
         "order_untested",
@@ -243,7 +246,7 @@ impl NotCertified {
             Self::NoAmbiguityModel => 7,
             Self::NoCalibration => 8,
             Self::Gap { .. } => 9,
-            Self::RateDropped { .. } => 10,
+            Self::RateBelowMargin { .. } => 10,
             Self::VaryingDynamics { .. } => 11,
             Self::HiddenDynamics { .. } => 12,
             Self::OrderUntested { .. } => 13,

@@ -84,6 +84,7 @@ pub use calibrated::{
     t_quantile,
 };
 pub use certifier::Certifier;
+#[cfg(feature = "checkpoint")]
 pub use certifier::checkpoint::{
     CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION,
     Encoding, Sealed, config_fingerprint, decode, encode, fnv1a64, seal, seal_value, unseal,

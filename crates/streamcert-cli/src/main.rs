@@ -424,7 +424,8 @@ fn main() -> ExitCode {
                 eprintln!(
                     "streamcert: the run stopped at this row (--on-bad-row stop, the default); \
                      --on-bad-row skip counts and skips malformed rows instead (a skipped row \
-                     closes the gates until the windows refill)"
+                     is not certified: every gate closes there and reopens at the `consecutive`-th \
+                     sample above the margin after it; the windows keep their data)"
                 );
             }
             ExitCode::from(u8::try_from(e.exit_code()).unwrap_or(1))

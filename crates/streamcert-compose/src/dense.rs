@@ -159,10 +159,10 @@ pub fn network_rate_with(
     opts: &DenseOptions,
 ) -> Result<NetworkCertificate, ComposeError> {
     crate::finite("tolerance", opts.tolerance)?;
-    if !opts.exact {
-        if let Some(cert) = perron(net, opts)? {
-            return Ok(cert);
-        }
+    if !opts.exact
+        && let Some(cert) = perron(net, opts)?
+    {
+        return Ok(cert);
     }
     eigendecomposition(net)
 }

@@ -104,7 +104,7 @@ impl Dynamics for Plant<'_> {
 impl ScalarScenario {
     /// `drift` explored by `u = k_explore y + PRBS(±1.5, held 1 s)` with Gaussian process noise
     /// `σ = 0.1`, `b = 1`, 40 s at `dt = 0.01` from `x = 0`: the nonlinear study's loop (with
-    /// `f = −x tanh x` and `k_explore = −1.1`, the nonlinear issue's example).
+    /// `f = −x tanh x` and `k_explore = −1.1`, the nonlinear study's example).
     #[must_use]
     pub fn new(drift: ScalarDrift, k_explore: f64) -> Self {
         Self {
@@ -171,7 +171,7 @@ mod tests {
     }
 
     #[test]
-    fn the_tanh_loop_of_the_issue_has_a_non_contracting_band() {
+    fn the_tanh_loop_has_a_non_contracting_band() {
         let s = ScalarScenario::new(ScalarDrift::NegXTanhX, -1.1);
         assert!(s.local_rate(-1.2, -1.1) < 0.0);
         assert!(s.local_rate(0.0, -1.1) > 1.0);

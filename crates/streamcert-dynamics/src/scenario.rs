@@ -151,7 +151,7 @@ impl LinearScenario {
         crate::non_negative("sensor_noise", self.sensor_noise)?;
         let eye: Vec<f64> = (0..n * n).map(|k| if k / n == k % n { 1.0 } else { 0.0 }).collect();
         let e = self.noise_gain.clone().unwrap_or_else(|| eye.clone());
-        if e.is_empty() || e.len() % n != 0 {
+        if e.is_empty() || !e.len().is_multiple_of(n) {
             return Err(mismatch("noise_gain", n, e.len()));
         }
         let q = e.len() / n;

@@ -190,29 +190,29 @@ impl NetworkConfig {
             }
         }
         self.check_estimated()?;
-        if self.certificate == CertificateKind::Calibrated {
-            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none()) {
-                return bad(
-                    "certificate",
-                    format!(
-                        "the calibrated certificate composes, but subsystem `{}` has no \
+        if self.certificate == CertificateKind::Calibrated
+            && let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none())
+        {
+            return bad(
+                "certificate",
+                format!(
+                    "the calibrated certificate composes, but subsystem `{}` has no \
                          calibration (use split_risk, or the Gaussian certificate)",
-                        s.name
-                    ),
-                );
-            }
+                    s.name
+                ),
+            );
         }
-        if self.certificate == CertificateKind::Wasserstein {
-            if let Some(s) = self.subsystems.iter().find(|s| s.certifier.ambiguity.is_none()) {
-                return bad(
-                    "certificate",
-                    format!(
-                        "the Wasserstein certificate composes, but subsystem `{}` has no \
+        if self.certificate == CertificateKind::Wasserstein
+            && let Some(s) = self.subsystems.iter().find(|s| s.certifier.ambiguity.is_none())
+        {
+            return bad(
+                "certificate",
+                format!(
+                    "the Wasserstein certificate composes, but subsystem `{}` has no \
                          ambiguity model",
-                        s.name
-                    ),
-                );
-            }
+                    s.name
+                ),
+            );
         }
         Ok(())
     }

@@ -9,10 +9,10 @@ use crate::CliError;
 use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::{Flush, Format, Header};
+pub use crate::reasons::{reason_phrase, reason_words};
 use crate::source::{Next, Source};
 use crate::watch::{NoWatch, Watch};
 pub use summary::Summary;
-pub use summary::{reason_phrase, reason_words};
 
 mod batched;
 mod checkpoint;
@@ -376,7 +376,7 @@ impl Step<'_> {
 
     /// Whether `checkpoint_every` accepted rows have passed since the last checkpoint.
     fn checkpoint_every_due(&self) -> bool {
-        matches!(self.opts.checkpoint_every, Some(every) if every > 0 && self.summary.rows % every == 0)
+        matches!(self.opts.checkpoint_every, Some(every) if every > 0 && self.summary.rows.is_multiple_of(every))
     }
 }
 
@@ -399,6 +399,7 @@ pub fn record(
     for (r, &v) in summary.output_ranges.iter_mut().zip(y) {
         *r = (r.0.min(v), r.1.max(v));
     }
+    summary.count_step(t);
     summary.gaps += u64::from(matches!(ev.gaussian.reason, Some(NotCertified::Gap { .. })));
     let first = |open: bool, first: Option<f64>| first.or(open.then_some(t));
     summary.gauss_open += u64::from(ev.gaussian.open);

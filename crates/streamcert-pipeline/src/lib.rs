@@ -17,6 +17,7 @@ pub mod input;
 pub mod network;
 pub mod output;
 pub mod picture;
+mod reasons;
 mod resume;
 pub mod simulate;
 pub mod source;

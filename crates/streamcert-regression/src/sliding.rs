@@ -403,10 +403,10 @@ impl SlidingRegression {
                 }
             }
         }
-        if let Some(previous) = self.last_time() {
-            if t <= previous {
-                return Err(RegressionError::NonIncreasingTime { previous, got: t });
-            }
+        if let Some(previous) = self.last_time()
+            && t <= previous
+        {
+            return Err(RegressionError::NonIncreasingTime { previous, got: t });
         }
         Ok(())
     }

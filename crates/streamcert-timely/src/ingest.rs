@@ -294,12 +294,12 @@ where
                 return refused;
             }
             self.site.count(t);
-            if self.pending.len() >= FLUSH {
-                if let Some(f) = self.flush() {
-                    return Some(f);
-                }
+            if self.pending.len() >= FLUSH
+                && let Some(f) = self.flush()
+            {
+                return Some(f);
             }
-            if count % 1024 == 0 {
+            if count.is_multiple_of(1024) {
                 self.worker.step();
             }
         }

@@ -303,10 +303,10 @@ impl SiteState {
                     self.touched.push(pos);
                 }
             }
-            if let Some(f) = failed {
-                if first.as_ref().is_none_or(|g| f.seq < g.seq) {
-                    first = Some(f);
-                }
+            if let Some(f) = failed
+                && first.as_ref().is_none_or(|g| f.seq < g.seq)
+            {
+                first = Some(f);
             }
         }
         first.map_or(Ok(()), Err)

@@ -19,7 +19,7 @@ enum ReasonDef {
     NoAmbiguityModel,
     NoCalibration,
     Gap { dt: f64, reference: f64 },
-    RateDropped { window: usize, upper: f64 },
+    RateBelowMargin { window: usize, upper: f64 },
     VaryingDynamics { window: usize, statistic: f64, threshold: f64 },
     LinearityUntested { window: usize },
     HiddenDynamics { window: usize, statistic: f64, threshold: f64 },

@@ -91,7 +91,7 @@ fn g5_verdicts(sy: f64, su: f64) -> Vec<Row> {
 proptest::proptest! {
     #![proptest_config(proptest::prelude::ProptestConfig::with_cases(12))]
 
-    /// The calibrated fits are in no unit (the identification-and-units issue): any positive
+    /// The calibrated fits are in no unit (the identification-and-units study): any positive
     /// scaling of `y` and `u` from `10⁻⁶` to `10⁶`, the gain scaled with them, gives the same
     /// gate and the same reason at every row of a G5 run, and the same certificate to `10⁻⁹`
     /// relative. The base run opens its gate (the comparison covers open and closed rows).

@@ -181,7 +181,7 @@ fn forty_seconds() -> Vec<Cell> {
     let setting = Experiment::Two.setting();
     vec![
         Cell::validity(
-            "−x tanh x, K = −1.1 (the issue's loop; rate < 0 near x = −1.2)",
+            "−x tanh x, K = −1.1 (a band that does not contract; rate < 0 near x = −1.2)",
             base(),
             -1.1,
         ),

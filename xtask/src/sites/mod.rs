@@ -106,7 +106,7 @@ impl Iterator for Rows {
             return None;
         }
         let (k, dt) = (self.k, self.dt);
-        if self.step % 50 == 0 && self.rng.random::<bool>() {
+        if self.step.is_multiple_of(50) && self.rng.random::<bool>() {
             self.d[k] = -self.d[k];
         }
         let u = -2.0 * self.y[k] + self.d[k];

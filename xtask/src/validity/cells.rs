@@ -30,11 +30,11 @@ pub(super) struct Cell {
     /// The regression's model (the default: affine, an intercept in every regression).
     pub(super) model: Model,
     /// The calibrated certificate as it was before the defaults of the safe-by-default and
-    /// plant-data issues: the model through the origin, no guards, no automatic batches, at
+    /// plant-data work: the model through the origin, no guards, no automatic batches, at
     /// least four windows with the risk split by length (the power table's "before" columns,
     /// on the same runs).
     pub(super) before: bool,
-    /// The windows as they were when those issues were filed (at least four, the risk split
+    /// The earlier default windows (at least four, the risk split
     /// by length), every other default kept: what the fifth window and the equal split
     /// change.
     pub(super) filed_windows: bool,
@@ -89,7 +89,7 @@ impl Cell {
         );
         if c.is_none() {
             let cal = Calibration { batch_blocks: self.batch, ..Calibration::new(DELTA) };
-            // The windows when the issues were filed: at least four, the risk split by length.
+            // The earlier default windows: at least four, the risk split by length.
             let mut windows = 4;
             while windows < 16 && self.window << (windows - 1) < 200 * H {
                 windows += 1;
@@ -168,7 +168,7 @@ pub(super) fn near_margin_cells() -> Vec<Cell> {
     let cell = |family: String, scenario: LinearScenario, gain: Vec<f64>, window| {
         plain(family, scenario, gain, window, 1)
     };
-    // Window sweep, M/h = 2 … 30, the issue's short-window case (β* = 0.04); 25 is the
+    // Window sweep, M/h = 2 … 30, the short-window case (β* = 0.04); 25 is the
     // smallest window with the intercept (h (p + m + 3)).
     for window in [10, 15, 20, 25, 30, 50, 75, 150] {
         let s = scalar(Process::Gaussian { sigma: 0.1 });
@@ -213,7 +213,7 @@ pub(super) fn near_margin_cells() -> Vec<Cell> {
     let three = scenario(3, a3, -1.0, Process::Gaussian { sigma: 0.1 });
     let k = diagonal_candidate(&three, 0.04);
     cells.push(cell("p = 3".into(), three, k, 150));
-    // An operating point (the real-plant-data issue): `ẏ = −0.02 (y − y₀) + (u − 10) + w`,
+    // An operating point (as real plant data are): `ẏ = −0.02 (y − y₀) + (u − 10) + w`,
     // explored by `u = 10 + PRBS`, candidate K = 0 (β* = 0.02, below the margin).
     for y0 in [50.0, 1e6] {
         let s = scenario(1, vec![-0.02], 0.0, Process::Gaussian { sigma: 0.1 });
@@ -281,7 +281,7 @@ fn hidden_and_batched_cells() -> Vec<Cell> {
     cells
 }
 
-/// Contracting candidates at 2×, 5× and 20× the margin, plus the issue's two power targets.
+/// Contracting candidates at 2×, 5× and 20× the margin, plus the two power targets.
 pub(super) fn power_cells() -> Vec<Cell> {
     let mut cells = Vec::new();
     for multiple in [2.0, 5.0, 20.0] {
@@ -344,7 +344,7 @@ pub(super) fn power_cells() -> Vec<Cell> {
 pub(super) const HOLDS: [f64; 4] = [0.2, 2.0, 10.0, 30.0];
 
 /// `ẏ = −y + u + w` explored in open loop (`K_e = 0`) by a PRBS of ±1 held `hold` seconds,
-/// process noise `σ`, 60 s at `dt = 0.02`: the loop of the identification-and-units issue.
+/// process noise `σ`, 60 s at `dt = 0.02`: the loop of the identification-and-units study.
 pub(super) fn held_scenario(hold: f64, sigma: f64) -> LinearScenario {
     LinearScenario {
         dither_hold: hold,

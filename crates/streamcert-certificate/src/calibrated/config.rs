@@ -202,7 +202,7 @@ pub struct Calibration {
     /// | 0.9, 0.9, 16, 1.26 | 92.5 % / 19.29 | 3.99 | 6.24 | 3.99 | 3.99 | 4.39 |
     ///
     /// The default is no later than the sliding windows alone on the fast loops but the batched
-    /// sensor cell (`b = 4`) and gains most on the 5× loop. None reaches the power issue's target
+    /// sensor cell (`b = 4`) and gains most on the 5× loop. None reaches the power target
     /// (95 % at a median of at most 12.2 s), and the data say why: at the 12 s look (the 7th,
     /// `8 M` columns) the 5× loop's median standardised excess `(β̂ − β_margin)/sd` is 2.68
     /// against the quantile 3.38 its risk `6.6·10⁻⁴` gives (VALIDITY.md's `7th anchored look`

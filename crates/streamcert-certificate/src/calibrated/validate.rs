@@ -41,21 +41,21 @@ impl Calibration {
                 format!("must lie in [0, 1e-3], got {}", self.relative_ridge),
             );
         }
-        if let Some(r) = self.change_risk {
-            if !(r > 0.0 && r < 1.0) {
-                return CertifyError::refuse(
-                    "calibration.change_risk",
-                    format!("must lie in (0, 1), got {r}"),
-                );
-            }
+        if let Some(r) = self.change_risk
+            && !(r > 0.0 && r < 1.0)
+        {
+            return CertifyError::refuse(
+                "calibration.change_risk",
+                format!("must lie in (0, 1), got {r}"),
+            );
         }
-        if let Some(r) = self.guard_risk {
-            if !(r > 0.0 && r < 1.0) {
-                return CertifyError::refuse(
-                    "calibration.guard_risk",
-                    format!("must lie in (0, 1), got {r}"),
-                );
-            }
+        if let Some(r) = self.guard_risk
+            && !(r > 0.0 && r < 1.0)
+        {
+            return CertifyError::refuse(
+                "calibration.guard_risk",
+                format!("must lie in (0, 1), got {r}"),
+            );
         }
         if !(self.auto_batch_risk > 0.0 && self.auto_batch_risk < 1.0) {
             return CertifyError::refuse(
@@ -68,13 +68,13 @@ impl Calibration {
 
     /// The windows' count, the anchored window's rule, the looks' spacing and the batches.
     fn check_shape(&self) -> Result<(), CertifyError> {
-        if let Some(n) = self.windows {
-            if !(1..=16).contains(&n) {
-                return CertifyError::refuse(
-                    "calibration.windows",
-                    format!("must lie in 1..=16, got {n}"),
-                );
-            }
+        if let Some(n) = self.windows
+            && !(1..=16).contains(&n)
+        {
+            return CertifyError::refuse(
+                "calibration.windows",
+                format!("must lie in 1..=16, got {n}"),
+            );
         }
         if !(0.0..1.0).contains(&self.anchored_share) {
             return CertifyError::refuse(
@@ -181,13 +181,13 @@ impl Calibration {
                 ),
             );
         }
-        if let Some(cap) = self.max_window {
-            if cap < reg.window {
-                return CertifyError::refuse(
-                    "calibration.max_window",
-                    format!("must be at least the window M = {}, got {cap}", reg.window),
-                );
-            }
+        if let Some(cap) = self.max_window
+            && cap < reg.window
+        {
+            return CertifyError::refuse(
+                "calibration.max_window",
+                format!("must be at least the window M = {}, got {cap}", reg.window),
+            );
         }
         Ok(())
     }

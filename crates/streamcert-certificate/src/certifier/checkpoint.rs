@@ -206,12 +206,12 @@ pub fn unseal<'a, C: Serialize + ?Sized>(
     config: Option<&C>,
 ) -> Result<Sealed<'a>, CertifyError> {
     let (sealed, fingerprint) = open(bytes)?;
-    if let Some(config) = config {
-        if config_fingerprint(config)? != fingerprint {
-            return Err(CertifyError::Checkpoint(
-                "the checkpoint was written with a different configuration".into(),
-            ));
-        }
+    if let Some(config) = config
+        && config_fingerprint(config)? != fingerprint
+    {
+        return Err(CertifyError::Checkpoint(
+            "the checkpoint was written with a different configuration".into(),
+        ));
     }
     Ok(sealed)
 }
@@ -290,49 +290,6 @@ impl Certifier {
             ));
         }
         c.verify()
-    }
-
-    /// Check a deserialised state against its configuration and against itself (see the
-    /// module docs); returns it unchanged when it passes.
-    ///
-    /// # Errors
-    /// [`CertifyError::Checkpoint`] or the configuration's error, naming the first problem.
-    pub fn verify(self) -> Result<Self, CertifyError> {
-        let mut c = self;
-        c.cfg.validate()?;
-        c.regression.check_state().map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
-        c.regression.check_statistics(1e-9).map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
-        let p = c.cfg.regression.outputs;
-        if c.ambiguity.len() != if c.cfg.ambiguity.is_some() { p } else { 0 }
-            || c.ambiguity
-                .iter()
-                .any(|a| Some(*a.config()) != c.cfg.ambiguity || !a.is_consistent())
-        {
-            return Err(CertifyError::Checkpoint(
-                "ambiguity state does not match its configuration".into(),
-            ));
-        }
-        let gain = c.cfg.metric_gain();
-        let gain_norm =
-            streamcert_regression::linalg::spectral_norm(&gain, c.cfg.regression.inputs, p);
-        if c.regression.config() != &c.cfg.regression
-            || c.jcl.len() != p * p
-            || c.work.len() != p * p
-            || c.resid.len() != p
-            || c.eig_work.len() != streamcert_regression::linalg::eig_work_len(p)
-            || c.gain_norm.to_bits() != gain_norm.to_bits()
-            || c.gain != gain
-            || c.scaled.len() != if c.cfg.metric.is_some() { p } else { 0 }
-            || c.calibrated.is_some() != c.cfg.calibration.is_some()
-            || !c.gap.is_consistent(c.cfg.gap_factor)
-        {
-            return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
-        }
-        if let Some(state) = &mut c.calibrated {
-            state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
-            state.rebuild();
-        }
-        Ok(c)
     }
 }
 

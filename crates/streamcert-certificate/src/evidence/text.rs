@@ -29,7 +29,7 @@ impl std::fmt::Display for NotCertified {
                     Sig(*reference)
                 )
             }
-            Self::RateDropped { window, upper } => write!(
+            Self::RateBelowMargin { window, upper } => write!(
                 f,
                 "window {window}: the rate is at most {}, below the margin (the candidate does \
                  not contract enough on the newest data)",

@@ -196,7 +196,7 @@ impl ChangeGuard {
     /// the same pace, so that a split test finds the shorter window's estimate of the same
     /// block already taken.
     pub(crate) fn due(&self, v: usize, block: u64) -> bool {
-        block % self.spacing[v] as u64 == 0
+        block.is_multiple_of(self.spacing[v] as u64)
     }
 
     /// Replace window `v`'s fresh estimate (kept only when every number is finite), with its
@@ -234,10 +234,10 @@ impl ChangeGuard {
             // A test without a finite bound (too few degrees of freedom) is not run.
             upper.is_finite().then_some((old.beta_hat, upper, boundary))
         });
-        if let Some(s) = self.split[v].filter(|s| s.1 < s.0) {
-            if self.changed.is_none_or(|c| c.2 < s.2) {
-                self.changed = Some(s);
-            }
+        if let Some(s) = self.split[v].filter(|s| s.1 < s.0)
+            && self.changed.is_none_or(|c| c.2 < s.2)
+        {
+            self.changed = Some(s);
         }
     }
 

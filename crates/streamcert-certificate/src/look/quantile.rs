@@ -66,10 +66,11 @@ pub fn t_quantile(nu: f64, risk: f64) -> f64 {
     if !(nu >= 1.0 && risk > 0.0 && risk < 1.0) {
         return f64::INFINITY;
     }
-    if nu >= 5.0 && risk < 0.5 {
-        if let Some(t) = t_quantile_halley(nu, risk) {
-            return t;
-        }
+    if nu >= 5.0
+        && risk < 0.5
+        && let Some(t) = t_quantile_halley(nu, risk)
+    {
+        return t;
     }
     match StudentsT::new(0.0, 1.0, nu) {
         // The lower tail is computed without the cancellation of `1 − risk`.

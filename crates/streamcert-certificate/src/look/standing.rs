@@ -36,7 +36,7 @@ pub(crate) fn standing<L: Look>(
             .flatten()
             .find(|s| s.time() >= look.time() && s.upper().is_some_and(|u| u < margin));
         if let Some(s) = against {
-            contradicted.get_or_insert(NotCertified::RateDropped {
+            contradicted.get_or_insert(NotCertified::RateBelowMargin {
                 window: s.window(),
                 upper: s.upper().unwrap_or(f64::INFINITY),
             });

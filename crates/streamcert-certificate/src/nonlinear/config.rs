@@ -212,10 +212,10 @@ impl NonlinearConfig {
         if !(1..=4096).contains(&self.cells) {
             return bad("nonlinear.cells", format!("must lie in 1..=4096, got {}", self.cells));
         }
-        if let Some(a) = self.test_risk {
-            if !(a > 0.0 && a < 1.0) {
-                return bad("nonlinear.test_risk", format!("must lie in (0, 1), got {a}"));
-            }
+        if let Some(a) = self.test_risk
+            && !(a > 0.0 && a < 1.0)
+        {
+            return bad("nonlinear.test_risk", format!("must lie in (0, 1), got {a}"));
         }
         if !(0.0..0.25).contains(&self.region_trim) {
             return bad(

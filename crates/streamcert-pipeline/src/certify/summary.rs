@@ -4,6 +4,11 @@
 use serde::{Deserialize, Serialize};
 use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRange};
 
+use crate::reasons::reason_words;
+
+/// The time column's steps kept for [`Summary::time_unit_hint`].
+pub(crate) const STEPS_KEPT: usize = 63;
+
 /// Counts over a run (continued across checkpoint and resume).
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
@@ -55,6 +60,13 @@ pub struct Summary {
     /// The calibrated gate's reason at the last row, when closed.
     #[serde(default)]
     pub calibrated_last_reason: Option<NotCertified>,
+    /// The last row's reason of each kind of `calibrated_reasons`, in the same order (the
+    /// row's own words the verdict quotes; shorter after resuming an older checkpoint).
+    #[serde(default)]
+    pub calibrated_reason_examples: Vec<Option<NotCertified>>,
+    /// The time column's first 63 steps, for the time unit's hint ([`Summary::time_unit_hint`]).
+    #[serde(default)]
+    pub first_steps: Vec<f64>,
     /// While the Gaussian gate is open, the time it last opened.
     #[serde(default)]
     pub gauss_since: Option<f64>,
@@ -179,11 +191,70 @@ impl Summary {
     /// One row closed by `r`: counted by kind, and the latest reason.
     fn count_reason(&mut self, r: NotCertified) {
         let kind = r.kind();
-        match self.calibrated_reasons.iter_mut().find(|(k, _)| k == kind) {
-            Some((_, n)) => *n += 1,
-            None => self.calibrated_reasons.push((kind.to_string(), 1)),
+        let i = match self.calibrated_reasons.iter().position(|(k, _)| k == kind) {
+            Some(i) => i,
+            None => {
+                self.calibrated_reasons.push((kind.to_string(), 0));
+                self.calibrated_reasons.len() - 1
+            }
+        };
+        self.calibrated_reasons[i].1 += 1;
+        if self.calibrated_reason_examples.len() <= i {
+            self.calibrated_reason_examples.resize(i + 1, None);
         }
+        self.calibrated_reason_examples[i] = Some(r);
         self.calibrated_last_reason = Some(r);
+    }
+
+    /// Count the step to a row at `t` into the first steps kept.
+    pub(crate) fn count_step(&mut self, t: f64) {
+        if let Some(last) = self.last_time.filter(|_| self.first_steps.len() < STEPS_KEPT) {
+            self.first_steps.push(t - last);
+        }
+    }
+
+    /// A hint when the time column's median step (over its first steps) is 10 or more: a
+    /// control loop sampled that slowly is rare, a time column in milliseconds is not (its
+    /// rates would read 1000 times too small against a margin per second).
+    #[must_use]
+    pub fn time_unit_hint(&self) -> Option<String> {
+        let mut steps: Vec<f64> = self.first_steps.iter().copied().filter(|d| *d > 0.0).collect();
+        if steps.is_empty() {
+            return None;
+        }
+        steps.sort_by(f64::total_cmp);
+        let median = steps[steps.len() / 2];
+        (median >= 10.0).then(|| {
+            format!(
+                "the time column's median step is {} (read as seconds, as every rate and the \
+                 margin are per second): if the times are in milliseconds, divide them by 1000",
+                Sig(median)
+            )
+        })
+    }
+
+    /// Why the calibrated gate was closed, for the verdict line: the kind that held longest
+    /// in words, in how many rows, and the last such row's own words (the bound or the
+    /// certificate that decided it); the reason at the last row when it says more.
+    fn closed_because(&self) -> String {
+        let Some(i) =
+            self.calibrated_reasons.iter().enumerate().max_by_key(|(_, (_, n))| *n).map(|(i, _)| i)
+        else {
+            return "the input held no data row, so nothing was certified (a header only, or \
+                    every row passed over)"
+                .into();
+        };
+        let (kind, n) = &self.calibrated_reasons[i];
+        let example = self.calibrated_reason_examples.get(i).copied().flatten();
+        let mut text = format!("{} in {n} of {} rows", reason_words(kind), self.rows);
+        if let Some(r) = example {
+            text.push_str(&format!("; the last such row: {r}"));
+        }
+        match self.calibrated_last_reason {
+            Some(last) if Some(last) != example => text.push_str(&format!("; at the end: {last}")),
+            _ => {}
+        }
+        text
     }
 
     /// The kind of reason that held the calibrated gate closed for the most rows.
@@ -274,11 +345,9 @@ impl Summary {
             }
             None => format!(
                 "verdict: NOT CERTIFIED {candidate} at the end (calibrated certificate, risk \
-                 delta = {}); the reason that held longest: {}{}",
+                 delta = {}): {}",
                 Sig(cal.delta),
-                self.longest_reason().map_or_else(|| "none (no rows)".into(), reason_words),
-                self.calibrated_last_reason
-                    .map_or_else(String::new, |r| format!("; at the end: {r}"))
+                self.closed_because()
             ),
         }
     }
@@ -317,6 +386,9 @@ impl Summary {
         if let Some(report) = &self.source {
             lines.push(report.line());
         }
+        if let Some(hint) = self.time_unit_hint() {
+            lines.push(format!("hint: {hint}"));
+        }
         lines.join("\n")
     }
 
@@ -329,40 +401,6 @@ impl Summary {
         } else {
             self.gauss_since.is_some()
         }
-    }
-}
-
-/// A reason's kind in words, with the kind: `"<phrase> [<kind>]"` (the certify summary's, the
-/// network verdict's, the status page's and the verdict messages').
-pub fn reason_words(kind: &str) -> String {
-    format!("{} [{kind}]", reason_phrase(kind))
-}
-
-/// A reason's kind in words a person reads (the kind itself where it has none).
-pub fn reason_phrase(kind: &str) -> &str {
-    match kind {
-        "warming_up" => "warming up (too few columns yet)",
-        "insufficient_excitation" | "weak_instruments" => {
-            "too little excitation (weak instruments)"
-        }
-        "below_margin" => "the certificate is below the margin",
-        "accumulating" => "above the margin, not yet for n_s samples",
-        "gap" => "a gap in the time column reset the window",
-        "rate_dropped" => "a newer window bounds the rate below the margin",
-        "varying_dynamics" => "the dynamics vary over the explored region (nonlinearity guard)",
-        "hidden_dynamics" => {
-            "the output has dynamics the model does not hold (hidden-dynamics guard)"
-        }
-        "order_untested" | "linearity_untested" => "the guards have not tested the window yet",
-        "plant_changed" => "the plant changed (change guard)",
-        "skipped_sample" => "a bad sample was skipped",
-        "weakly_identified" => {
-            "the data barely identify the rate: the input moved too rarely in the windows"
-        }
-        "outside_region" => "the output is outside the region the nonlinear certificate speaks for",
-        "library_misfit" => "the feature library misses the drift (lack-of-fit check)",
-        "library_untested" => "the lack-of-fit check has not tested the window yet",
-        other => other,
     }
 }
 
@@ -405,6 +443,7 @@ impl Summary {
             "last_time": self.last_time,
             "output_scale_ratio": self.output_scale_ratio(),
             "warning": self.units_warning(cfg),
+            "hint": self.time_unit_hint(),
             "source": self.source,
         })
     }

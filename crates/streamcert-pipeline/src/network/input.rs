@@ -39,6 +39,7 @@ pub(super) enum Rows<R: Read> {
 }
 
 /// The columns, `(p, m)` and indices of the subsystems placed on `process` (wide layout).
+#[cfg(feature = "distributed")]
 pub(super) fn site(
     cfg: &NetConfig,
     process_of: &[usize],
@@ -70,6 +71,7 @@ impl<R: Read> Rows<R> {
     }
 
     /// Wide rows of one site's subsystems from a live source opened for their columns.
+    #[cfg(feature = "distributed")]
     pub(super) fn live_for_site(
         cfg: &NetConfig,
         process_of: &[usize],
@@ -103,6 +105,7 @@ impl<R: Read> Rows<R> {
     /// The rows of one site (`process`): in the wide layout only the columns of the
     /// subsystems placed on it; in the long layout every row names its subsystem (a row of
     /// another site's subsystem is refused by the run).
+    #[cfg(feature = "distributed")]
     pub(super) fn for_site(
         cfg: &NetConfig,
         process_of: &[usize],

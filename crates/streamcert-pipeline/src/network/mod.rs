@@ -9,6 +9,7 @@
 //! the two commands read the same keys the same way.
 
 mod config;
+#[cfg(feature = "distributed")]
 mod distributed;
 mod input;
 mod output;
@@ -21,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use streamcert_network::NetworkCertifier;
 
 pub use config::{EXAMPLE_CONFIG, InputLayout, NetConfig, parse, template};
+#[cfg(feature = "distributed")]
 pub use distributed::{Cluster, OpenLive, Reopen, SiteInput, SiteReport, run_timely};
 use input::{Item, Rows};
 use output::EpochWriter;
@@ -309,8 +311,7 @@ impl NetRun<'_> {
             if self.watch.wants_source() {
                 self.watch.source(rows.source().and_then(|s| s.report()).as_ref());
             }
-            let every =
-                matches!(opts.checkpoint_every, Some(n) if n > 0 && self.summary.rows % n == 0);
+            let every = matches!(opts.checkpoint_every, Some(n) if n > 0 && self.summary.rows.is_multiple_of(n));
             let asked = rows.source().is_some_and(|s| s.commit_due());
             if let Some(path) = opts.checkpoint.as_ref().filter(|_| (certified && every) || asked) {
                 writer.flush().map_err(io)?;

@@ -25,7 +25,7 @@ pub fn local_kind(why: &NotCertifiedLocal) -> &'static str {
 
 /// A network reason's kind in words, with the kind.
 fn words(kind: &str) -> String {
-    use crate::certify::reason_words;
+    use crate::reasons::reason_words;
     match kind {
         "no_sample" => "a subsystem has no sample yet [no_sample]".into(),
         "stale" => "a subsystem's samples stopped (stale) [stale]".into(),

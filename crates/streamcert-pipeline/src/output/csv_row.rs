@@ -110,11 +110,11 @@ impl CsvRows {
             cache.bits = x.to_bits();
             // zmij writes `1e+16` where ryu (and so the csv crate) writes `1e16`; it uses an
             // exponent from about 1e16 up (below 1e-5 the exponent is negative: no `+`).
-            if x.abs() >= 1e15 {
-                if let Some(at) = text.iter().position(|&b| b == b'+') {
-                    cache.bytes.copy_within(at + 1..n, at);
-                    cache.len -= 1;
-                }
+            if x.abs() >= 1e15
+                && let Some(at) = text.iter().position(|&b| b == b'+')
+            {
+                cache.bytes.copy_within(at + 1..n, at);
+                cache.len -= 1;
             }
         }
         // A fixed-size copy (inlined, no `memmove` call) cut back to the text's length.

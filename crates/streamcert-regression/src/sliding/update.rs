@@ -12,13 +12,12 @@ impl SlidingRegression {
     /// [`RegressionError::Overflow`] means finite samples overflowed a column or the window's
     /// sums; the window was cleared so no estimate is built on it.
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<(), RegressionError> {
-        if let (&[y], &[u]) = (y, u) {
-            if self.cfg.outputs == 1
-                && self.cfg.inputs == 1
-                && self.cfg.estimator == Estimator::Ordinary
-            {
-                return self.push_scalar(t, y, u);
-            }
+        if let (&[y], &[u]) = (y, u)
+            && self.cfg.outputs == 1
+            && self.cfg.inputs == 1
+            && self.cfg.estimator == Estimator::Ordinary
+        {
+            return self.push_scalar(t, y, u);
         }
         self.push_dims(t, y, u, self.cfg.outputs, self.cfg.inputs)
     }

@@ -47,7 +47,7 @@ impl AnchoredWindow {
     /// (so that a merged window keeps more records than regressors).
     pub fn new(source: &InstrumentedWindows, records: usize) -> Result<Self, RegressionError> {
         let d = source.p + source.m;
-        if records % 2 != 0 || records <= 2 * (d + 1) {
+        if !records.is_multiple_of(2) || records <= 2 * (d + 1) {
             return Err(RegressionError::InvalidConfig {
                 field: "records",
                 reason: format!(
@@ -222,7 +222,7 @@ impl InstrumentedWindows {
                     self.block_ranges[2 * i * c + a].hull(self.block_ranges[(2 * i + 1) * c + a]);
             }
         }
-        debug_assert!(len % 2 == 0, "the anchored window merges a full, even ring");
+        debug_assert!(len.is_multiple_of(2), "the anchored window merges a full, even ring");
         let kept = half;
         self.block_len = kept;
         self.block_head = kept % cap;

@@ -1,0 +1,51 @@
+//! [`Certifier::verify`]: a deserialised state checked against its configuration and against
+//! itself, whatever deserialised it (a checkpoint, or serde by other means).
+
+use super::Certifier;
+use crate::CertifyError;
+
+impl Certifier {
+    /// Check a deserialised state against its configuration and against itself (the
+    /// checkpoint's checks, also for a state deserialised by other means); returns it
+    /// unchanged when it passes.
+    ///
+    /// # Errors
+    /// [`CertifyError::Checkpoint`] or the configuration's error, naming the first problem.
+    pub fn verify(self) -> Result<Self, CertifyError> {
+        let mut c = self;
+        c.cfg.validate()?;
+        c.regression.check_state().map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
+        c.regression.check_statistics(1e-9).map_err(|e| CertifyError::Checkpoint(e.to_string()))?;
+        let p = c.cfg.regression.outputs;
+        if c.ambiguity.len() != if c.cfg.ambiguity.is_some() { p } else { 0 }
+            || c.ambiguity
+                .iter()
+                .any(|a| Some(*a.config()) != c.cfg.ambiguity || !a.is_consistent())
+        {
+            return Err(CertifyError::Checkpoint(
+                "ambiguity state does not match its configuration".into(),
+            ));
+        }
+        let gain = c.cfg.metric_gain();
+        let gain_norm =
+            streamcert_regression::linalg::spectral_norm(&gain, c.cfg.regression.inputs, p);
+        if c.regression.config() != &c.cfg.regression
+            || c.jcl.len() != p * p
+            || c.work.len() != p * p
+            || c.resid.len() != p
+            || c.eig_work.len() != streamcert_regression::linalg::eig_work_len(p)
+            || c.gain_norm.to_bits() != gain_norm.to_bits()
+            || c.gain != gain
+            || c.scaled.len() != if c.cfg.metric.is_some() { p } else { 0 }
+            || c.calibrated.is_some() != c.cfg.calibration.is_some()
+            || !c.gap.is_consistent(c.cfg.gap_factor)
+        {
+            return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
+        }
+        if let Some(state) = &mut c.calibrated {
+            state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
+            state.rebuild();
+        }
+        Ok(c)
+    }
+}

@@ -398,3 +398,20 @@ impl Evidence {
         self.ambiguity.map(|a| a.eps)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::NotCertified;
+
+    /// A reason written under its earlier name (`rate_dropped`, in a checkpoint's summary or
+    /// state) reads as `RateBelowMargin`, and is written back under the new name.
+    #[test]
+    fn the_earlier_name_of_rate_below_margin_still_reads() {
+        let old = r#"{"reason":"rate_dropped","window":150,"upper":-0.1787}"#;
+        let r: NotCertified = serde_json::from_str(old).expect("the earlier name reads");
+        assert_eq!(r, NotCertified::RateBelowMargin { window: 150, upper: -0.1787 });
+        assert_eq!(r.kind(), "rate_below_margin");
+        let again = serde_json::to_string(&r).expect("serialised");
+        assert!(again.contains(r#""reason":"rate_below_margin""#), "{again}");
+    }
+}

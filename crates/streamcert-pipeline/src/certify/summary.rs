@@ -6,6 +6,18 @@ use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRa
 
 use crate::reasons::reason_words;
 
+/// Reason kinds as counted, a kind under its earlier name (`rate_dropped`) read under its
+/// current one (`rate_below_margin`), so that a resumed run counts them together.
+fn current_kinds<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<(String, u64)>, D::Error> {
+    let mut kinds = Vec::<(String, u64)>::deserialize(d)?;
+    for (kind, _) in &mut kinds {
+        if kind == "rate_dropped" {
+            *kind = "rate_below_margin".into();
+        }
+    }
+    Ok(kinds)
+}
+
 /// The time column's steps kept for [`Summary::time_unit_hint`].
 pub(crate) const STEPS_KEPT: usize = 63;
 
@@ -54,8 +66,8 @@ pub struct Summary {
     #[serde(default)]
     pub calibrated_since: Option<f64>,
     /// Rows with the calibrated gate closed, by kind of reason ([`NotCertified::kind`]), in
-    /// the order first seen.
-    #[serde(default)]
+    /// the order first seen (a kind under its earlier name read under its current one).
+    #[serde(default, deserialize_with = "current_kinds")]
     pub calibrated_reasons: Vec<(String, u64)>,
     /// The calibrated gate's reason at the last row, when closed.
     #[serde(default)]

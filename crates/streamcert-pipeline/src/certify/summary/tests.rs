@@ -59,3 +59,15 @@ fn with_nonlinear_the_line_carries_both_verdicts() {
     assert!(line.starts_with("verdict: NOT CERTIFIED"), "{line}");
     assert!(line.contains("region-valid verdict: NOT CERTIFIED"), "{line}");
 }
+
+/// A summary written when the kind was named `rate_dropped` (a checkpoint's) reads it under
+/// its current name, so the verdict puts it in words and a resumed run counts both together.
+#[test]
+fn a_summary_with_the_earlier_kind_name_reads_it_under_the_current_one() {
+    let old = r#"{"rows": 10, "skipped": 0, "gauss_open": 0, "wass_open": 0,
+        "first_deploy_gauss": null, "first_deploy_wass": null, "last_time": 1.0,
+        "calibrated_reasons": [["warming_up", 4], ["rate_dropped", 6]]}"#;
+    let s: Summary = serde_json::from_str(old).expect("reads");
+    assert_eq!(s.calibrated_reasons[1], ("rate_below_margin".to_string(), 6));
+    assert_eq!(s.longest_reason(), Some("rate_below_margin"));
+}

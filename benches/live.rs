@@ -19,22 +19,15 @@ use streamcert_pipeline::config;
 use streamcert_pipeline::input::{Sample, SampleReader};
 use streamcert_pipeline::source::{Next, Source, SourceReport};
 
+#[path = "support/g5.rs"]
+mod support;
+
 const ROWS: usize = 20_000;
 
 /// G5's node b through experiment 1's schedule, `ROWS` steps: the CSV text, its header and
 /// rows.
 fn g5() -> (String, Vec<String>, Vec<Vec<f64>>) {
-    let mut out = Vec::new();
-    streamcert_pipeline::simulate::run(
-        streamcert::experiments::Experiment::One,
-        streamcert::dynamics::Coupling::Cascade,
-        0,
-        Some(ROWS - 1),
-        None,
-        &mut out,
-    )
-    .expect("simulate");
-    let text = String::from_utf8(out).expect("utf8");
+    let text = support::g5_csv(ROWS);
     let mut lines = text.lines();
     let header = lines.next().expect("header").split(',').map(String::from).collect();
     let rows = lines.map(|l| l.split(',').map(|v| v.parse().expect("number")).collect()).collect();

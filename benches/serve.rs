@@ -20,22 +20,10 @@ use streamcert_pipeline::config::{self, Config};
 use streamcert_pipeline::input::SampleReader;
 use streamcert_serve::{Monitor, MonitorOptions, Routes};
 
-const ROWS: usize = 20_000;
+#[path = "support/g5.rs"]
+mod support;
 
-/// G5's node b through experiment 1's schedule, `ROWS` steps, as CSV.
-fn g5() -> String {
-    let mut out = Vec::new();
-    streamcert_pipeline::simulate::run(
-        streamcert::experiments::Experiment::One,
-        streamcert::dynamics::Coupling::Cascade,
-        0,
-        Some(ROWS - 1),
-        None,
-        &mut out,
-    )
-    .expect("simulate");
-    String::from_utf8(out).expect("utf8")
-}
+const ROWS: usize = 20_000;
 
 /// One row-by-row run of `csv`, watched by `watch`.
 fn live_run(cfg: &Config, csv: &str, watch: &mut dyn streamcert_pipeline::watch::Watch) {
@@ -56,7 +44,7 @@ fn get(addr: SocketAddr, path: &str) -> bool {
 }
 
 fn serve(c: &mut Criterion) {
-    let csv = g5();
+    let csv = support::g5_csv(ROWS);
     let cfg = config::parse(&config::g5_node_b(), "g5 node b").expect("configuration");
     let mut group = c.benchmark_group("serve_rows");
     group.throughput(Throughput::Elements(ROWS as u64));

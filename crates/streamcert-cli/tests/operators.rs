@@ -39,6 +39,16 @@ fn subscriber(port: u16, topic: &str, id: &str) -> Receiver<(serde_json::Value, 
     rx
 }
 
+/// An embedded broker on a free port, and a subscriber `id` to `topic` on it.
+fn broker_with_subscriber(
+    topic: &str,
+    id: &str,
+) -> (std::net::SocketAddr, Receiver<(serde_json::Value, bool)>) {
+    let port = streamcert_live::broker::free_loopback().unwrap();
+    streamcert_live::broker::serve(port).unwrap();
+    (port, subscriber(port.port(), topic, id))
+}
+
 /// Messages from `rx` until one has `ended` (or `stop` says so), 30 s at most.
 fn until(
     rx: &Receiver<(serde_json::Value, bool)>,
@@ -91,10 +101,8 @@ const SECRET: &str = "s3cret-never-shown";
 
 #[test]
 fn the_verdict_topic_carries_each_gate_change_in_order_and_retains_the_last() {
-    let port = streamcert_live::broker::free_loopback().unwrap();
-    streamcert_live::broker::serve(port).unwrap();
     let topic = "plant/node_b/verdict";
-    let rx = subscriber(port.port(), topic, "interlock");
+    let (port, rx) = broker_with_subscriber(topic, "interlock");
     let (config, data, ev) = (
         verdict_config("changes", port.port(), topic),
         g5_with_gap("changes"),
@@ -156,10 +164,8 @@ fn the_verdict_topic_carries_each_gate_change_in_order_and_retains_the_last() {
 
 #[test]
 fn a_certifier_killed_leaves_its_offline_will_retained() {
-    let port = streamcert_live::broker::free_loopback().unwrap();
-    streamcert_live::broker::serve(port).unwrap();
     let topic = "plant/node_b/will";
-    let rx = subscriber(port.port(), topic, "interlock-will");
+    let (port, rx) = broker_with_subscriber(topic, "interlock-will");
     let config = verdict_config("will", port.port(), topic);
     let mut child = bin()
         .args(["certify", "--config", config.to_str().unwrap(), "--name", "node_b"])

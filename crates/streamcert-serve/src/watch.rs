@@ -48,10 +48,13 @@ impl LoopSeries {
         }
     }
 }
-use crate::status::{Chart, Counters};
+use crate::status::Counters;
 use crate::verdict::{Candidate, Reason, Risk, VerdictMessage, VerdictSink};
 
 pub(crate) mod network;
+mod shown;
+
+use shown::Shown;
 
 /// The status page's document is refreshed at most this often (and at every change).
 pub const REFRESH: Duration = Duration::from_millis(100);
@@ -168,17 +171,9 @@ pub struct CertifyWatch {
     cfg: CertifierConfig,
     outputs: Vec<String>,
     deciding: CertificateKind,
-    gate: Gate,
     /// The last sample's evidence.
     last: Option<Evidence>,
-    chart: Chart,
-    pending: Vec<(f64, Option<f64>, bool)>,
-    counters: Counters,
-    verdict: String,
-    refreshed: Option<Instant>,
-    arrived: Option<Instant>,
-    source_asked: Instant,
-    source_line: Option<String>,
+    shown: Shown,
 }
 
 impl CertifyWatch {
@@ -223,33 +218,18 @@ impl CertifyWatch {
             risk: cfg.calibration.as_ref().map(|c| Risk { delta: c.delta }),
             ended: false,
         };
-        {
-            let mut st = shared.status();
-            st.margin = cfg.margin;
-            st.risk = message.risk.map(|r| r.delta);
-            st.certificate = message.certificate;
-            st.reason.clone_from(&message.reason);
-        }
         Self {
-            chart: Chart::new(shared.chart_seconds),
+            shown: Shown::new(&shared, message, sinks),
             shared,
             cfg: cfg.clone(),
             outputs: outputs.to_vec(),
             deciding,
             last: None,
-            gate: Gate::new(message, sinks),
-            pending: Vec::with_capacity(64),
-            counters: Counters::default(),
-            verdict: String::new(),
-            refreshed: None,
-            arrived: None,
-            source_asked: Instant::now(),
-            source_line: None,
         }
     }
 
-    /// The status page's document brought up to date: the scalars and the sample's reason
-    /// always (copies, no allocation), the verdict line with `summary`; `sample_reason`
+    /// The status page's document brought up to date ([`Shown::write`]) with the last
+    /// evidence and the sample's reason (copies; put in words when served); `sample_reason`
     /// `None` puts the gate's own reason instead (a skipped row, a gap, the end).
     fn refresh(
         &mut self,
@@ -258,30 +238,11 @@ impl CertifyWatch {
         summary: Option<&Summary>,
         ended: Option<String>,
     ) {
-        if let Some(s) = summary {
-            self.verdict = s.verdict_line(&self.cfg, &self.outputs);
-            self.refreshed = Some(now);
-        }
-        let m = &self.gate.message;
+        let verdict = summary.map(|s| s.verdict_line(&self.cfg, &self.outputs));
         let mut st = self.shared.status();
-        (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
-        st.counters.clone_from(&self.counters);
-        st.arrived = self.arrived;
         st.evidence = self.last;
         st.sample_reason = sample_reason;
-        if sample_reason.is_none() {
-            st.reason.clone_from(&m.reason);
-        }
-        if summary.is_some() {
-            st.verdict.clone_from(&self.verdict);
-            st.source.clone_from(&self.source_line);
-        }
-        if ended.is_some() {
-            st.ended = ended;
-        }
-        if !self.pending.is_empty() {
-            self.chart.append(&mut st.chart, &mut self.pending);
-        }
+        self.shown.write(&mut st, now, verdict, sample_reason.is_none(), ended);
     }
 }
 
@@ -298,15 +259,16 @@ fn kind_name(kind: CertificateKind) -> &'static str {
 impl Watch for CertifyWatch {
     fn sample(&mut self, _cert: &Certifier, summary: &Summary, ev: &Evidence) {
         let now = Instant::now();
-        self.arrived = Some(now);
-        let c = &mut self.counters;
+        let shown = &mut self.shown;
+        shown.arrived = Some(now);
+        let c = &mut shown.counters;
         (c.samples, c.gaps, c.skipped) = (summary.rows, summary.gaps, summary.skipped);
         let d = ev.verdict(self.deciding);
-        let due = self.refreshed.is_none_or(|r| now.duration_since(r) >= REFRESH);
+        let due = shown.due(now);
         let why = d.reason.map(|r| (r.kind(), move || r.to_string()));
-        let (changed, _) = self.gate.set(ev.t, d.open, d.value, why, reason_words, false);
-        if self.chart.due(ev.t, d.open) {
-            self.pending.push((ev.t, d.value, d.open));
+        let (changed, _) = shown.gate.set(ev.t, d.open, d.value, why, reason_words, false);
+        if shown.chart.due(ev.t, d.open) {
+            shown.pending.push((ev.t, d.value, d.open));
         }
         self.last = Some(*ev);
         self.refresh(now, Some(d.reason), (changed || due).then_some(summary), None);
@@ -318,61 +280,27 @@ impl Watch for CertifyWatch {
     }
 
     fn skipped(&mut self, summary: &Summary) {
-        self.counters.skipped = summary.skipped;
-        let closed =
-            self.gate.close("skipped_sample", "a bad row was passed over: every gate closes");
+        self.shown.counters.skipped = summary.skipped;
+        let why = "a bad row was passed over: every gate closes";
+        let closed = self.shown.gate.close("skipped_sample", why);
         self.refresh(Instant::now(), None, closed.then_some(summary), None);
     }
 
     fn gap(&mut self, why: &str) {
-        self.gate.close("gap", why);
+        self.shown.gate.close("gap", why);
         self.refresh(Instant::now(), None, None, None);
     }
 
     fn wants_source(&mut self) -> bool {
-        source_due(&mut self.source_asked)
+        self.shown.source_due()
     }
 
     fn source(&mut self, report: Option<&SourceReport>) {
-        source_counts(&mut self.counters, None, &mut self.source_line, report);
+        self.shown.source(None, report);
     }
 
     fn end(&mut self, error: Option<&str>) {
-        let how = ended(error);
-        self.gate.end(how.clone());
+        let how = self.shown.end(error);
         self.refresh(Instant::now(), None, None, Some(how));
     }
-}
-
-/// Whether a source's counts are due (every [`SOURCE_EVERY`]), `asked` moved on if so.
-pub(crate) fn source_due(asked: &mut Instant) -> bool {
-    let now = Instant::now();
-    let due = now.duration_since(*asked) >= SOURCE_EVERY;
-    if due {
-        *asked = now;
-    }
-    due
-}
-
-/// How a run ended, in words.
-pub(crate) fn ended(error: Option<&str>) -> String {
-    error.map_or_else(|| "the input ended".to_string(), |e| format!("stopped: {e}"))
-}
-
-/// A live source's counts into the counters, the metrics and the source's line.
-pub(crate) fn source_counts(
-    counters: &mut Counters,
-    run: Option<&RunSeries>,
-    line: &mut Option<String>,
-    report: Option<&SourceReport>,
-) {
-    let Some(r) = report else { return };
-    counters.bad = r.bad_total();
-    counters.reconnects = r.reconnects;
-    counters.late = r.late;
-    if let Some(run) = run {
-        metrics::advance(&run.bad, counters.bad);
-        metrics::advance(&run.reconnects, r.reconnects);
-    }
-    *line = Some(r.line());
 }

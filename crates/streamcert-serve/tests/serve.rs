@@ -26,6 +26,17 @@ fn started(name: &str) -> (Monitor, Server) {
     (monitor, server)
 }
 
+/// G5 node b's configuration, a monitor named `name` serving on a free port, and its
+/// certify watcher (no verdict sink).
+fn served(
+    name: &str,
+) -> (streamcert_pipeline::config::Config, Monitor, Server, streamcert_serve::CertifyWatch) {
+    let cfg = node_b();
+    let (monitor, server) = started(name);
+    let watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
+    (cfg, monitor, server, watch)
+}
+
 /// The series docs/operations.md documents for runs of `kind` (`certify` or `network`).
 fn documented(kind: &str) -> Vec<String> {
     let doc = std::fs::read_to_string(support::example("../../docs/operations.md")).unwrap();
@@ -72,12 +83,24 @@ fn field(row: &HashMap<String, String>, c: &str) -> f64 {
     row[c].parse().unwrap_or(f64::NAN)
 }
 
+/// Where the gate `column` of `rows` changed: `(t, open)`, from a closed start.
+fn gate_changes(rows: &[HashMap<String, String>], column: &str) -> Vec<(f64, bool)> {
+    let mut was = false;
+    let mut changes = Vec::new();
+    for row in rows {
+        let open = field(row, column) == 1.0;
+        if open != was {
+            changes.push((field(row, "t"), open));
+        }
+        was = open;
+    }
+    changes
+}
+
 #[test]
 fn metrics_scraped_between_rows_equal_the_evidence_rows_so_far() {
-    let cfg = node_b();
-    let (monitor, server) = started("node_b");
+    let (cfg, _monitor, server, mut watch) = served("node_b");
     let addr = server.addr();
-    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
     let mut scrapes = Vec::new();
     let out = run_paused(&cfg, &g5_rows(None), &mut watch, |k| {
         if k > 0 && k % 37 == 0 {
@@ -132,10 +155,8 @@ fn metrics_scraped_between_rows_equal_the_evidence_rows_so_far() {
 
 #[test]
 fn the_status_document_between_rows_is_the_evidence_so_far() {
-    let cfg = node_b();
-    let (monitor, server) = started("node_b");
+    let (cfg, monitor, server, mut watch) = served("node_b");
     let addr = server.addr();
-    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
     let mut docs = Vec::new();
     let out = run_paused(&cfg, &g5_rows(Some((10.0, 11.0))), &mut watch, |k| {
         if k > 0 && k % 23 == 0 {
@@ -180,16 +201,7 @@ fn verdict_messages_are_the_evidence_rows_gate_changes() {
     let out = run_paused(&cfg, &g5_rows(Some((10.0, 11.0))), &mut watch, |_| {});
     drop(watch);
     let messages: Vec<VerdictMessage> = rx.try_iter().collect();
-    let ev = evidence(&out);
-    let mut changes = Vec::new();
-    let mut was = false;
-    for row in &ev {
-        let open = field(row, "calibrated_open") == 1.0;
-        if open != was {
-            changes.push((field(row, "t"), open));
-        }
-        was = open;
-    }
+    let changes = gate_changes(&evidence(&out), "calibrated_open");
     assert!(changes.len() >= 2, "the gap closes the gate that opened: {changes:?}");
     let (first, last) = (&messages[0], &messages[messages.len() - 1]);
     assert_eq!((first.sequence, first.open), (0, false));
@@ -210,10 +222,8 @@ fn verdict_messages_are_the_evidence_rows_gate_changes() {
 
 #[test]
 fn bad_requests_get_their_status_codes_and_the_run_goes_on() {
-    let cfg = node_b();
-    let (monitor, server) = started("node_b");
+    let (cfg, monitor, server, mut watch) = served("node_b");
     let addr = server.addr();
-    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
     let mut answers = Vec::new();
     let rows = g5_rows(None);
     let out = run_paused(&cfg, &rows, &mut watch, |k| {
@@ -261,10 +271,8 @@ fn the_page_its_assets_and_no_credential_are_served() {
 
 #[test]
 fn a_hundred_clients_polling_are_served_while_the_run_goes_on() {
-    let cfg = node_b();
-    let (monitor, server) = started("node_b");
+    let (cfg, _monitor, server, mut watch) = served("node_b");
     let addr = server.addr();
-    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, Vec::new());
     let stop = Arc::new(AtomicBool::new(false));
     let mut clients = Vec::new();
     let rows = g5_rows(None);
@@ -331,15 +339,7 @@ fn a_network_run_s_metrics_and_messages_are_its_epoch_rows() {
     .unwrap();
     drop(watch);
     let epochs = evidence(&String::from_utf8(out).unwrap());
-    let mut changes = Vec::new();
-    let mut was = false;
-    for e in &epochs {
-        let open = field(e, "open") == 1.0;
-        if open != was {
-            changes.push((field(e, "t"), open));
-        }
-        was = open;
-    }
+    let changes = gate_changes(&epochs, "open");
     assert!(!changes.is_empty(), "the network gate opens on these data");
     let messages: Vec<VerdictMessage> = rx.try_iter().collect();
     let n = messages.len();

@@ -9,10 +9,10 @@ use streamcert_pipeline::network::{NetSummary, epoch_reasons, reason_words, verd
 use streamcert_pipeline::source::SourceReport;
 use streamcert_pipeline::watch::Watch;
 
-use super::{Gate, REFRESH, ended, lag, source_counts, source_due};
+use super::{Shown, lag};
 use crate::Shared;
 use crate::metrics::{self, NetworkSeries, RunSeries};
-use crate::status::{Chart, Counters, Subsystem};
+use crate::status::Subsystem;
 use crate::verdict::{Candidate, Risk, VerdictMessage, VerdictSink};
 
 /// Every reason kind a network gate reports (the network's own and the local gates').
@@ -35,16 +35,8 @@ pub struct NetworkWatch {
     series: NetworkSeries,
     run: RunSeries,
     last_reason: &'static str,
-    gate: Gate,
-    chart: Chart,
-    pending: Vec<(f64, Option<f64>, bool)>,
-    counters: Counters,
-    verdict: String,
     subsystems: Vec<Subsystem>,
-    refreshed: Option<Instant>,
-    arrived: Option<Instant>,
-    source_asked: Instant,
-    source_line: Option<String>,
+    shown: Shown,
 }
 
 impl NetworkWatch {
@@ -70,14 +62,6 @@ impl NetworkWatch {
             risk: cfg.total_risk().map(|delta| Risk { delta }),
             ended: false,
         };
-        {
-            let mut st = shared.status();
-            st.kind = "network";
-            st.certificate = "network";
-            st.margin = cfg.margin;
-            st.risk = message.risk.map(|r| r.delta);
-            st.reason.clone_from(&message.reason);
-        }
         let subsystems = names
             .iter()
             .map(|n| Subsystem { name: n.clone(), certificate: None, open: false, reason: None })
@@ -85,23 +69,16 @@ impl NetworkWatch {
         Self {
             series: shared.metrics.network(&name, &names, &reason_kinds()),
             run: shared.metrics.run(&name, cfg.margin),
-            chart: Chart::new(shared.chart_seconds),
+            shown: Shown::new(&shared, message, sinks),
             shared,
             cfg: cfg.clone(),
             last_reason: "none",
-            gate: Gate::new(message, sinks),
-            pending: Vec::with_capacity(64),
-            counters: Counters::default(),
-            verdict: String::new(),
             subsystems,
-            refreshed: None,
-            arrived: None,
-            source_asked: Instant::now(),
-            source_line: None,
         }
     }
 
-    /// The status page's document brought up to date (as the certify watcher's).
+    /// The status page's document brought up to date ([`Shown::write`]), the subsystems with
+    /// the verdict line.
     fn refresh(
         &mut self,
         now: Instant,
@@ -109,29 +86,12 @@ impl NetworkWatch {
         summary: Option<&NetSummary>,
         ended: Option<String>,
     ) {
-        if let Some(s) = summary {
-            self.verdict = verdict_line(&self.cfg, s);
-            self.refreshed = Some(now);
-        }
-        let m = &self.gate.message;
+        let verdict = summary.map(|s| verdict_line(&self.cfg, s));
         let mut st = self.shared.status();
-        (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
-        st.counters.clone_from(&self.counters);
-        st.arrived = self.arrived;
-        if rebuilt {
-            st.reason.clone_from(&m.reason);
-        }
-        if summary.is_some() {
-            st.verdict.clone_from(&self.verdict);
-            st.source.clone_from(&self.source_line);
+        if verdict.is_some() {
             st.subsystems.clone_from(&self.subsystems);
         }
-        if ended.is_some() {
-            st.ended = ended;
-        }
-        if !self.pending.is_empty() {
-            self.chart.append(&mut st.chart, &mut self.pending);
-        }
+        self.shown.write(&mut st, now, verdict, rebuilt, ended);
     }
 
     /// The metrics and subsystems of epoch `r`.
@@ -146,7 +106,7 @@ impl NetworkWatch {
             self.series.sub_certificate[i].set(sub.certificate.unwrap_or(f64::NAN));
             self.series.sub_gate[i].set(if sub.open { 1.0 } else { 0.0 });
         }
-        let c = &mut self.counters;
+        let c = &mut self.shown.counters;
         (c.samples, c.epochs, c.skipped) = (summary.rows, summary.epochs, summary.skipped);
         metrics::advance(&self.run.samples, summary.rows);
         metrics::advance(&self.run.epochs, summary.epochs);
@@ -159,7 +119,7 @@ impl NetworkWatch {
 impl Watch for NetworkWatch {
     fn epoch(&mut self, r: &EpochReport, _names: &[String], summary: &NetSummary) {
         let now = Instant::now();
-        self.arrived = Some(now);
+        self.shown.arrived = Some(now);
         self.measure(r, summary);
         let kinds = epoch_reasons(r);
         let kind = kinds.first().copied().unwrap_or("none");
@@ -167,12 +127,12 @@ impl Watch for NetworkWatch {
             metrics::set_state(&self.series.reasons, kind);
             self.last_reason = kind;
         }
-        let due = self.refreshed.is_none_or(|t| now.duration_since(t) >= REFRESH);
+        let due = self.shown.due(now);
         let detail = || summary.last_reason.clone().unwrap_or_default();
         let why = kinds.first().map(|k| (*k, detail));
-        let (changed, rebuilt) = self.gate.set(r.t, r.open, r.rate, why, reason_words, due);
-        if self.chart.due(r.t, r.open) {
-            self.pending.push((r.t, r.rate, r.open));
+        let (changed, rebuilt) = self.shown.gate.set(r.t, r.open, r.rate, why, reason_words, due);
+        if self.shown.chart.due(r.t, r.open) {
+            self.shown.pending.push((r.t, r.rate, r.open));
         }
         self.refresh(now, rebuilt, (changed || due).then_some(summary), None);
     }
@@ -182,28 +142,27 @@ impl Watch for NetworkWatch {
     }
 
     fn net_skipped(&mut self, summary: &NetSummary) {
-        self.counters.skipped = summary.skipped;
+        self.shown.counters.skipped = summary.skipped;
         metrics::advance(&self.run.skipped, summary.skipped);
     }
 
     fn gap(&mut self, why: &str) {
-        self.counters.gaps += 1;
-        metrics::advance(&self.run.gaps, self.counters.gaps);
-        let closed = self.gate.close("gap", why);
+        self.shown.counters.gaps += 1;
+        metrics::advance(&self.run.gaps, self.shown.counters.gaps);
+        let closed = self.shown.gate.close("gap", why);
         self.refresh(Instant::now(), closed, None, None);
     }
 
     fn wants_source(&mut self) -> bool {
-        source_due(&mut self.source_asked)
+        self.shown.source_due()
     }
 
     fn source(&mut self, report: Option<&SourceReport>) {
-        source_counts(&mut self.counters, Some(&self.run), &mut self.source_line, report);
+        self.shown.source(Some(&self.run), report);
     }
 
     fn end(&mut self, error: Option<&str>) {
-        let how = ended(error);
-        self.gate.end(how.clone());
+        let how = self.shown.end(error);
         self.refresh(Instant::now(), true, None, Some(how));
     }
 }

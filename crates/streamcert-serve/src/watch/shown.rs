@@ -1,0 +1,124 @@
+//! What both watchers keep for the status page and the verdict messages, and how they write
+//! it into the status document.
+
+use std::time::Instant;
+
+use streamcert_pipeline::source::SourceReport;
+
+use super::{Gate, REFRESH, SOURCE_EVERY};
+use crate::Shared;
+use crate::metrics::{self, RunSeries};
+use crate::status::{Chart, Counters, Status};
+use crate::verdict::{VerdictMessage, VerdictSink};
+
+/// The deciding gate and its messages, the chart's points not yet in the document, the
+/// counts, the verdict line, when it was last refreshed, when the last sample arrived, and
+/// the live source's counts.
+pub(crate) struct Shown {
+    pub(crate) gate: Gate,
+    pub(crate) chart: Chart,
+    pub(crate) pending: Vec<(f64, Option<f64>, bool)>,
+    pub(crate) counters: Counters,
+    verdict: String,
+    refreshed: Option<Instant>,
+    pub(crate) arrived: Option<Instant>,
+    source_asked: Instant,
+    source_line: Option<String>,
+}
+
+impl Shown {
+    /// The gate before any sample (its first message sent to `sinks`), written into the
+    /// document with the run's kind, margin and risk.
+    pub(crate) fn new(
+        shared: &Shared,
+        message: VerdictMessage,
+        sinks: Vec<Box<dyn VerdictSink>>,
+    ) -> Self {
+        {
+            let mut st = shared.status();
+            st.kind = message.kind;
+            st.certificate = message.certificate;
+            st.margin = message.candidate.margin;
+            st.risk = message.risk.map(|r| r.delta);
+            st.reason.clone_from(&message.reason);
+        }
+        Self {
+            gate: Gate::new(message, sinks),
+            chart: Chart::new(shared.chart_seconds),
+            pending: Vec::with_capacity(64),
+            counters: Counters::default(),
+            verdict: String::new(),
+            refreshed: None,
+            arrived: None,
+            source_asked: Instant::now(),
+            source_line: None,
+        }
+    }
+
+    /// Whether the verdict line is due again ([`REFRESH`] since the last).
+    pub(crate) fn due(&self, now: Instant) -> bool {
+        self.refreshed.is_none_or(|r| now.duration_since(r) >= REFRESH)
+    }
+
+    /// Write into `st` the gate's scalars and the counts (copies, no allocation), the gate's
+    /// own reason when `gate_reason`, the `verdict` line (and the source's counts) when
+    /// given, how the run `ended`, and the chart's pending points.
+    pub(crate) fn write(
+        &mut self,
+        st: &mut Status,
+        now: Instant,
+        verdict: Option<String>,
+        gate_reason: bool,
+        ended: Option<String>,
+    ) {
+        let m = &self.gate.message;
+        (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
+        st.counters.clone_from(&self.counters);
+        st.arrived = self.arrived;
+        if gate_reason {
+            st.reason.clone_from(&m.reason);
+        }
+        if let Some(v) = verdict {
+            self.verdict = v;
+            self.refreshed = Some(now);
+            st.verdict.clone_from(&self.verdict);
+            st.source.clone_from(&self.source_line);
+        }
+        if ended.is_some() {
+            st.ended = ended;
+        }
+        if !self.pending.is_empty() {
+            self.chart.append(&mut st.chart, &mut self.pending);
+        }
+    }
+
+    /// Whether a source's counts are due (every [`SOURCE_EVERY`]).
+    pub(crate) fn source_due(&mut self) -> bool {
+        let now = Instant::now();
+        let due = now.duration_since(self.source_asked) >= SOURCE_EVERY;
+        if due {
+            self.source_asked = now;
+        }
+        due
+    }
+
+    /// A live source's counts into the counts, the metrics (`run`, when the watcher sets
+    /// them itself) and the source's line.
+    pub(crate) fn source(&mut self, run: Option<&RunSeries>, report: Option<&SourceReport>) {
+        let Some(r) = report else { return };
+        let c = &mut self.counters;
+        (c.bad, c.reconnects, c.late) = (r.bad_total(), r.reconnects, r.late);
+        if let Some(run) = run {
+            metrics::advance(&run.bad, c.bad);
+            metrics::advance(&run.reconnects, r.reconnects);
+        }
+        self.source_line = Some(r.line());
+    }
+
+    /// The run ended (`error`: what stopped it): the last message sent; how, in words.
+    pub(crate) fn end(&mut self, error: Option<&str>) -> String {
+        let how = error.map_or_else(|| "the input ended".to_string(), |e| format!("stopped: {e}"));
+        self.gate.end(how.clone());
+        how
+    }
+}

@@ -18,8 +18,8 @@ use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, l
 use crate::calibrated::CalibratedState;
 use crate::gap::{Gap, GapDetector};
 use crate::{
-    AmbiguityLevel, BadSamplePolicy, CertificateKind, CertifierConfig, CertifyError, Evidence, Fit,
-    Gate, GateState, NotCertified, Verdict, certificate_value,
+    AmbiguityLevel, BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Fit, Gate, GateState,
+    NotCertified, Verdict, certificate_value,
 };
 
 /// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
@@ -116,30 +116,6 @@ impl Certifier {
             gain,
             cfg,
         })
-    }
-
-    /// The configuration.
-    #[must_use]
-    pub fn config(&self) -> &CertifierConfig {
-        &self.cfg
-    }
-
-    /// `‖K‖₂`.
-    #[must_use]
-    pub fn gain_norm(&self) -> f64 {
-        self.gain_norm
-    }
-
-    /// Samples absorbed so far.
-    #[must_use]
-    pub fn samples(&self) -> u64 {
-        self.samples
-    }
-
-    /// Bad samples skipped so far (policy [`BadSamplePolicy::Skip`]).
-    #[must_use]
-    pub fn skipped(&self) -> u64 {
-        self.skipped
     }
 
     /// Absorb one sample and return the evidence. No allocation.
@@ -323,30 +299,6 @@ impl Certifier {
             nonlinear_window: None,
             nonlinear_region: None,
         }
-    }
-
-    /// The full state of one certificate's gate (streak, current and first opening).
-    #[must_use]
-    pub fn gate(&self, kind: CertificateKind) -> GateState {
-        match kind {
-            CertificateKind::Gaussian => self.gauss.state(),
-            CertificateKind::Wasserstein => self.wass.state(),
-            CertificateKind::Calibrated => self.calibrated_gate.state(),
-            CertificateKind::Nonlinear => self.nonlinear_gate.state(),
-        }
-    }
-
-    /// Gaps detected so far (see [`NotCertified::Gap`]).
-    #[must_use]
-    pub fn gaps(&self) -> u64 {
-        self.gap.gaps()
-    }
-
-    /// The reference sampling step: the median of the last 32 accepted steps (NaN before
-    /// the second sample).
-    #[must_use]
-    pub fn reference_step(&self) -> f64 {
-        self.gap.reference()
     }
 
     /// `(ε, κ_e, ŝ)`, each the largest over outputs; `None` without an ambiguity model.

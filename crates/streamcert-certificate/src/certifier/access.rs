@@ -1,13 +1,63 @@
-//! What a certifier shows besides its evidence: the calibrated and nonlinear looks, the
+//! What a certifier shows besides its evidence: its configuration, counts and gates, the calibrated and nonlinear looks, the
 //! guards' latest tests, the regions its certificates speak for, the coupling bounds and the
 //! regression.
 
 use streamcert_regression::{Interval, SlidingRegression};
 
 use super::Certifier;
-use crate::{CouplingBound, NonlinearLook, WindowLook};
+use crate::{
+    CertificateKind, CertifierConfig, CouplingBound, GateState, NonlinearLook, WindowLook,
+};
 
 impl Certifier {
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &CertifierConfig {
+        &self.cfg
+    }
+
+    /// `‖K‖₂`.
+    #[must_use]
+    pub fn gain_norm(&self) -> f64 {
+        self.gain_norm
+    }
+
+    /// Samples absorbed so far.
+    #[must_use]
+    pub fn samples(&self) -> u64 {
+        self.samples
+    }
+
+    /// Bad samples skipped so far (policy [`BadSamplePolicy::Skip`](crate::BadSamplePolicy::Skip)).
+    #[must_use]
+    pub fn skipped(&self) -> u64 {
+        self.skipped
+    }
+
+    /// The full state of one certificate's gate (streak, current and first opening).
+    #[must_use]
+    pub fn gate(&self, kind: CertificateKind) -> GateState {
+        match kind {
+            CertificateKind::Gaussian => self.gauss.state(),
+            CertificateKind::Wasserstein => self.wass.state(),
+            CertificateKind::Calibrated => self.calibrated_gate.state(),
+            CertificateKind::Nonlinear => self.nonlinear_gate.state(),
+        }
+    }
+
+    /// Gaps detected so far (see [`NotCertified::Gap`](crate::NotCertified::Gap)).
+    #[must_use]
+    pub fn gaps(&self) -> u64 {
+        self.gap.gaps()
+    }
+
+    /// The reference sampling step: the median of the last 32 accepted steps (NaN before
+    /// the second sample).
+    #[must_use]
+    pub fn reference_step(&self) -> f64 {
+        self.gap.reference()
+    }
+
     /// The latest look of each calibrated window, shortest window first (empty without a
     /// calibration; `None` for a window that has not looked yet or whose last look had no
     /// estimate).

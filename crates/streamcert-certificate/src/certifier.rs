@@ -2,6 +2,35 @@
 //! feeds the ambiguity estimators and the calibrated windows, and updates the gates. The
 //! checkpoint (serialise and restore with checks) is in `checkpoint.rs`, the calibrated and
 //! nonlinear part of a step in `calibrated_step.rs`.
+//!
+//! ## One step
+//!
+//! [`Certifier::push`] runs the regression, forms `J_cl = J_obs + B_obs K`
+//! (`linalg::closed_loop_jacobian`) and `β̂ = −λ_max(sym J_cl)` (from `p = 10` through
+//! `SlidingRegression::estimate_and_sym_max`, which solves first and then computes the Gram
+//! matrix's extremes and `λ_max(sym J_cl)` side by side, the same bits as one after the other),
+//! `ρ` (eq. rho), feeds the residual of the newest interval (or column) to one
+//! `AmbiguityRadius` per output (`ε` = the largest; for `p = 1` taken as the residual goes in,
+//! `push_and_snapshot`, since `ε` ends the step's longest chain of dependent operations), steps
+//! the calibrated state and returns [`Evidence`] with every certificate, gate and reason.
+//!
+//! On the `p = 1` path no value is read back in one load that spans several stores made just
+//! before (such a load is not forwarded from the stores and waits for them to reach the
+//! cache): the scalar update adds the sample's own interval from registers, `evaluate` is
+//! inlined so its result stays in registers, and `ε` is taken as its residual goes in
+//! (measured by the benchmarks in `benches/regression.rs`).
+//!
+//! ## The checkpoint (feature `checkpoint`, on by default)
+//!
+//! `checkpoint.rs`: the envelope (a text header line: magic, version, FNV-1a checksum of the
+//! payload, the configuration's fingerprint) and the whole state in CBOR (each float in the
+//! shortest exact width) or JSON. `pack.rs`: the binary encoding's packed block rings: each
+//! model guard's ring is written as the entries with an extra regressor or instrument (the
+//! rest are the linear ring's same products), every ring without the lower triangle of `H`;
+//! each derived entry is compared bit for bit with its source before it is left out, a ring
+//! that differs is written whole, and a packed ring that does not fit its layout is refused on
+//! restore. `verify.rs`: a deserialised state checked against its configuration and itself,
+//! whatever deserialised it.
 
 mod access;
 mod calibrated_step;

@@ -1,4 +1,15 @@
 //! `streamcert certify`: one output row per sample ([`EvidenceWriter`]) and a summary.
+//!
+//! A live input (a pipe's `SampleReader` or a live [`Source`]) runs on
+//! one thread, row by row, through [`run_source`]. A file runs in three stages
+//! (`batched.rs`): one thread reads and parses, a second certifies, the calling thread writes,
+//! in batches of 1024 rows carrying their evidence, region values, due checkpoints (sealed
+//! bytes, written after the rows they hold are out) and the error that stops the run; the two
+//! paths give the same output and checkpoints (tested). `checkpoint.rs`: the sealed checkpoint
+//! (binary, or JSON with `seal_checkpoint_as`) written to a unique temporary file, fsynced and
+//! renamed; on resume it is refused when damaged or written under another configuration, and
+//! the rows it already holds at the start of the input are passed over. `summary.rs`: the
+//! run's counts (continued across checkpoints) and its verdict line.
 
 use std::io::{Read, Write};
 use std::path::PathBuf;

@@ -2,6 +2,19 @@
 //! sufficient statistics over the window (see the crate docs). The per-sample update lives in
 //! `update.rs`, the solve in `solve.rs`, the consistency check of a restored state in
 //! `checkpoint.rs`.
+//!
+//! Rings: the last `h + 1` samples with their one-interval regressors `[∫y; ∫u]` (stored twice,
+//! so the `h` intervals of a column are one contiguous run), the last `h + 1` regressors
+//! (instruments), and `M` columns. [`SlidingRegression::ranges`] is the window's region (every
+//! output and input over the last `M + h` samples, `range.rs`: the block algorithm of van Herk
+//! and Gil–Werman, exact, `O(1)` per channel; the range is joined with the previous block's
+//! suffix only when asked). Under the affine model the origin and the `τ`-weighted sums live in
+//! `affine.rs`; for `p = m = 1` with the ordinary estimator `push` takes the scalar path of
+//! `scalar.rs` (the same arithmetic in the same order, so the same bits) and `estimate` solves
+//! the `2 × 2` ridge system by its closed-form inverse. The refresh's sums are formed by
+//! `linalg::outer` (each entry's products added in column order, the same bits on every vector
+//! width). `estimate` solves by Cholesky (ridge) or LU (instrumented); for `d >= 8` every output
+//! row in one pass, and for a wide ordinary regression the two eigenvalue problems side by side.
 
 mod affine;
 mod checkpoint;

@@ -13,6 +13,7 @@
 //! measured by `cargo xtask validity` (VALIDITY.md).
 
 pub(crate) mod change;
+mod curvature;
 pub(crate) mod model;
 
 pub(crate) use change::{ChangeGuard, Fresh};

@@ -78,6 +78,6 @@ pub use estimate::{Estimate, EstimateStatus};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{
-    AnchoredWindow, BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MIN_LEVERAGE_PIVOT,
-    MIN_RESIDUAL_SHARE, Solve, WindowEstimate,
+    AnchoredWindow, BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MAX_TAIL,
+    MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, Solve, WindowEstimate,
 };

@@ -378,6 +378,21 @@ impl SlidingRegression {
         (self.hist_len >= 2).then(|| self.hist_t[b] - self.hist_t[a])
     }
 
+    /// The newest sample interval's two samples `(t_{k−1}, t_k, y_{k−1}, y_k)` (outputs, `p`
+    /// each), once two samples are in: what a caller that keeps per-interval terms of its
+    /// own (the curvature guard's integrals of `y²` and `y³`) adds at each sample, `O(1)`.
+    #[must_use]
+    #[inline]
+    pub fn newest_interval_samples(&self) -> Option<(f64, f64, &[f64], &[f64])> {
+        let (p, cap) = (self.cfg.outputs, self.cfg.horizon + 1);
+        let b = self.hist_head;
+        let a = if b == 0 { cap - 1 } else { b - 1 };
+        (self.hist_len >= 2).then(|| {
+            let (ya, yb) = (&self.hist_y[a * p..(a + 1) * p], &self.hist_y[b * p..(b + 1) * p]);
+            (self.hist_t[a], self.hist_t[b], ya, yb)
+        })
+    }
+
     /// Check a sample without absorbing it.
     ///
     /// # Errors

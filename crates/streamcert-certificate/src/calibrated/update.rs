@@ -5,7 +5,7 @@
 use streamcert_regression::SlidingRegression;
 
 use super::{CalibratedState, CalibratedVerdict};
-use crate::guard::{Fresh, ModelGuard};
+use crate::guard::Fresh;
 
 /// A window's estimate `(β̂, variance, ν)` as the change guard's fresh estimate at time `t`.
 fn fresh_at(t: f64, (beta_hat, variance, nu): (f64, f64, f64)) -> Fresh {
@@ -85,14 +85,11 @@ impl CalibratedState {
         } else {
             z
         };
-        let samples = self.nonlinear.is_some() || self.model.iter().any(ModelGuard::needs_samples);
-        if samples {
-            reg.column_samples(&mut self.ts, &mut self.ys);
-        }
         for o in &mut self.model {
-            o.push(z, dy, (&self.ts, &self.ys, reg.origin()));
+            o.push(z, dy, reg);
         }
         if let Some(n) = &mut self.nonlinear {
+            reg.column_samples(&mut self.ts, &mut self.ys);
             if self.affine && n.is_polynomial() {
                 // Powers of `y − y_o` (the regression's origin): with the intercept the
                 // polynomial class is the same, and the digits are those of the plant's

@@ -67,15 +67,21 @@
 //! validity; a false closing costs power (measured in the tests and VALIDITY.md).
 //!
 //! `O(k d' + k²)` per column (`d'` the larger fit's regressors, `k` its instruments), no
-//! allocation; a test per look `O(B p² d'² + q³)`. On the default `p = m = 1` step the two
-//! guards cost about 300 ns per sample together, of which about 23 and 29 ns push their
-//! columns (BENCHMARKS.md).
+//! allocation; a test per look `O(B (d' k + q k + k²) + q³)` for one output with the
+//! first-order covariance, whose blocks form their influence on the `q` tested coefficients
+//! only (with more outputs or the jackknife, the whole covariance: `O(B p² d'²)` more). The curvature regressors are kept per sample
+//! interval, so a column adds its newest interval's (`curvature.rs`). On the default
+//! `p = m = 1` step the two guards cost about 280 ns per sample together, of which about 23
+//! and 32 ns push their columns (BENCHMARKS.md).
 //!
 //! [`Calibration::hidden_dynamics`]: crate::Calibration::hidden_dynamics
 //! [`Calibration::nonlinearity`]: crate::Calibration::nonlinearity
 
 use serde::{Deserialize, Serialize};
 
+use streamcert_regression::SlidingRegression;
+
+use super::curvature::CurvatureTerms;
 use crate::look::hotelling::NonlinearityTest;
 use crate::look::larger::LargerFit;
 use crate::{CertifyError, GuardVariance, NotCertified};
@@ -119,6 +125,10 @@ pub(crate) struct ModelGuard {
     /// The covariance of the tests ([`Calibration::guard_variance`](crate::Calibration::guard_variance)).
     #[serde(default)]
     variance: GuardVariance,
+    /// The curvature regressors' per-interval terms (a cache: not in a checkpoint, sized by
+    /// [`restore_scratch`](Self::restore_scratch)).
+    #[serde(skip)]
+    terms: CurvatureTerms,
 }
 
 impl ModelGuard {
@@ -149,6 +159,11 @@ impl ModelGuard {
             latest: vec![None; lengths.len()],
             curvature: vec![None; lengths.len()],
             variance: GuardVariance::FirstOrder,
+            terms: if groups.curvature {
+                CurvatureTerms::new(p, horizon)
+            } else {
+                CurvatureTerms::default()
+            },
         })
     }
 
@@ -158,16 +173,14 @@ impl ModelGuard {
         self
     }
 
-    /// Whether the guard fits the curvature terms (and so needs the column's samples).
-    pub(crate) fn needs_samples(&self) -> bool {
-        self.groups.curvature
-    }
-
     /// Size the scratch a checkpoint does not carry (its fit's batched covariance), as a
     /// fresh guard's, after a restore.
     pub(crate) fn restore_scratch(&mut self) {
         let pp = self.p * self.p;
         self.fit.est.batched.score_cov.resize(pp * pp, 0.0);
+        if self.groups.curvature {
+            self.terms = CurvatureTerms::new(self.p, self.horizon);
+        }
     }
 
     /// Forget every column and test.
@@ -187,13 +200,13 @@ impl ModelGuard {
         if self.groups.curvature { &self.curvature } else { &[] }
     }
 
-    /// Absorb a column: the linear windows' regressors `z` (`d`) and its `dy` (`p`); with the
-    /// curvature group, its `h + 1` sample times `ts` and outputs `ys` (row-major, `p` per
-    /// sample) and the working origin `origin` (`p`), integrated by the trapezoidal rule as
-    /// the outputs are. The order group's regressor is the increment of the column `h`
-    /// columns earlier (zero for the first `h` columns after a reset, so the guard's blocks
-    /// stay aligned with the linear ones).
-    pub(crate) fn push(&mut self, z: &[f64], dy: &[f64], samples: (&[f64], &[f64], &[f64])) {
+    /// Absorb the newest column of `reg`: the linear windows' regressors `z` (`d`) and its
+    /// `dy` (`p`); with the curvature group, the integrals of the squares and cubes of the
+    /// outputs' excursions from the working origin over the column (trapezoidal, as the
+    /// outputs are; `curvature.rs`). The order group's regressor is the increment of the
+    /// column `h` columns earlier (zero for the first `h` columns after a reset, so the
+    /// guard's blocks stay aligned with the linear ones).
+    pub(crate) fn push(&mut self, z: &[f64], dy: &[f64], reg: &SlidingRegression) {
         let (p, d) = (self.p, self.d);
         self.fit.z[..d].copy_from_slice(&z[..d]);
         let mut at = d;
@@ -202,22 +215,7 @@ impl ModelGuard {
             at += p;
         }
         if self.groups.curvature {
-            let (ts, ys, origin) = samples;
-            for i in 0..p {
-                let (mut sq, mut cu) = (0.0, 0.0);
-                let e0 = ys[i] - origin[i];
-                let (mut a2, mut a3) = (e0 * e0, e0 * e0 * e0);
-                for s in 1..ts.len() {
-                    let e = ys[s * p + i] - origin[i];
-                    let (b2, b3) = (e * e, e * e * e);
-                    let half = 0.5 * (ts[s] - ts[s - 1]);
-                    sq += half * (a2 + b2);
-                    cu += half * (a3 + b3);
-                    (a2, a3) = (b2, b3);
-                }
-                self.fit.z[at + 2 * i] = sq;
-                self.fit.z[at + 2 * i + 1] = cu;
-            }
+            self.terms.column(reg, &mut self.fit.z[at..at + 2 * p]);
         }
         self.fit.push(dy);
     }
@@ -237,7 +235,7 @@ impl ModelGuard {
         // what makes that test anti-conservative.)
         self.fit.dir.fill(0.0);
         self.fit.dir[d * p..].fill(1.0);
-        let Some(nu) = self.fit.fit(w, (ridge, min_pivot), self.variance) else { return };
+        let Some(nu) = self.fit.fit(w, (ridge, min_pivot), self.variance, d) else { return };
         let mut first = d;
         if self.groups.order {
             self.latest[w] = self.fit.wald(first, p, nu, self.alpha);

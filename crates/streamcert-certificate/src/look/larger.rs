@@ -5,7 +5,7 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
 
-use super::hotelling::{NonlinearityTest, wald_entries};
+use super::hotelling::{NonlinearityTest, hotelling_wald, wald_entries};
 use super::same_windows;
 use crate::{CertifyError, GuardVariance};
 
@@ -28,6 +28,9 @@ pub(crate) struct LargerFit {
     pub(crate) z: Vec<f64>,
     pub(crate) dir: Vec<f64>,
     cov: Vec<f64>,
+    /// Where `cov` holds only the coefficients of regressors `tail..d` (see [`fit`](Self::fit)).
+    #[serde(skip)]
+    tail: Option<usize>,
     sub: Vec<f64>,
     rhs: Vec<f64>,
     work: Vec<f64>,
@@ -54,6 +57,7 @@ impl LargerFit {
             z: vec![0.0; d],
             dir: vec![0.0; d * p],
             cov: vec![0.0; (p * d) * (p * d)],
+            tail: None,
             sub: vec![0.0; q * q],
             rhs: vec![0.0; q],
             work: vec![0.0; q],
@@ -92,18 +96,30 @@ impl LargerFit {
     }
 
     /// Fit window `w` (the direction in `dir`) with the covariance `variance`: the degrees
-    /// of freedom `ν = min(ESS, B) − d` of its tests, `None` when the fit is not ready.
+    /// of freedom `ν = min(ESS, B) − d` of its tests, `None` when the fit is not ready. The
+    /// tests read only the coefficients of regressors `tested..d`; with the first-order
+    /// covariance, one output and batches of one block, only their covariance is formed
+    /// ([`InstrumentedWindows::estimate_tail_first_order`], the same bits as the corner of
+    /// the whole covariance), else the whole.
     pub(crate) fn fit(
         &mut self,
         w: usize,
         (ridge, min_pivot): (f64, f64),
         variance: GuardVariance,
+        tested: usize,
     ) -> Option<f64> {
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
         let solve = Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot };
+        self.tail = None;
         let ready = match variance {
             GuardVariance::FirstOrder => {
-                windows.estimate_coefficients_first_order(w, solve, est, cov)
+                match windows.estimate_tail_first_order(w, solve, tested, est, cov) {
+                    Some(ready) => {
+                        self.tail = Some(tested);
+                        ready
+                    }
+                    None => windows.estimate_coefficients_first_order(w, solve, est, cov),
+                }
             }
             GuardVariance::Jackknife => windows.estimate_coefficients(w, solve, est, cov),
         };
@@ -111,9 +127,10 @@ impl LargerFit {
     }
 
     /// The Wald test `θ̂_Sᵀ Ω̂_SS⁻¹ θ̂_S` of the coefficients of regressors `first .. first + e`
-    /// in every output's equation (`q = p e` entries of `vec(Θ̂)`) after [`fit`](Self::fit),
-    /// against Hotelling's quantile with `q` and `ν` degrees of freedom at risk `alpha`.
-    /// `None` when `e = 0`, `Ω̂_SS` is not positive definite, or `ν − q + 1 <= 0`.
+    /// in every output's equation (`q = p e` entries of `vec(Θ̂)`) after [`fit`](Self::fit)
+    /// (whose `tested` is at most `first`), against Hotelling's quantile with `q` and `ν`
+    /// degrees of freedom at risk `alpha`. `None` when `e = 0`, `Ω̂_SS` is not positive
+    /// definite, or `ν − q + 1 <= 0`.
     pub(crate) fn wald(
         &mut self,
         first: usize,
@@ -126,7 +143,17 @@ impl LargerFit {
         // Entry a: output a / e, regressor first + a % e, at index (a / e)·d + first + a % e.
         let index = |a: usize| (a / e) * dd + first + a % e;
         let scratch = (&mut self.sub[..], &mut self.rhs[..], &mut self.work[..]);
-        wald_entries((&self.est.theta, &self.cov), (p * e, index), (nu, alpha), scratch)
+        match self.tail {
+            // One output: the covariance of regressors `tail..d` only.
+            Some(tail) => {
+                let n = dd - tail;
+                let at = |a: usize| index(a) - tail;
+                tail_wald((&self.est.theta, &self.cov, n), (p * e, index, at), (nu, alpha), scratch)
+            }
+            None => {
+                wald_entries((&self.est.theta, &self.cov), (p * e, index), (nu, alpha), scratch)
+            }
+        }
     }
 
     /// Whether a deserialised fit matches a fresh one of the same configuration.
@@ -147,4 +174,24 @@ impl LargerFit {
             .iter()
             .all(|(a, b)| a == b)
     }
+}
+
+/// [`wald_entries`] on a covariance of some coefficients only: entry `a` of the test is
+/// `theta[index(a)]`, its covariances at `cov[at(a) n + at(b)]` (`n × n`).
+fn tail_wald(
+    (theta, cov, n): (&[f64], &[f64], usize),
+    (q, index, at): (usize, impl Fn(usize) -> usize, impl Fn(usize) -> usize),
+    (nu, alpha): (f64, f64),
+    (sub, rhs, work): (&mut [f64], &mut [f64], &mut [f64]),
+) -> Option<NonlinearityTest> {
+    if q == 0 {
+        return None;
+    }
+    for a in 0..q {
+        for b in 0..q {
+            sub[a * q + b] = cov[at(a) * n + at(b)];
+        }
+        rhs[a] = theta[index(a)];
+    }
+    hotelling_wald(q, nu, alpha, (sub, rhs, work))
 }

@@ -124,7 +124,7 @@ impl LackOfFit {
         dir[..dg].copy_from_slice(&dir_main[..dg]);
         dir[dg..dg + e + o].fill(0.0);
         dir[dg + e + o..].copy_from_slice(&dir_main[dg..d - e - o]);
-        let nu = self.fit.fit(w, (ridge, min_pivot), GuardVariance::Jackknife)?;
+        let nu = self.fit.fit(w, (ridge, min_pivot), GuardVariance::Jackknife, dg)?;
         self.fit.wald(dg, e + o, nu, alpha)
     }
 

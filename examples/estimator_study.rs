@@ -1,5 +1,4 @@
-//! Measured figures behind the regression and certificate claims (the module docs of
-//! `streamcert-regression` and `calibrated.rs` quote this output):
+//! Measured figures behind the regression and certificate claims:
 //!
 //! 1. the noise bias of the ordinary estimate and its removal by the instrumented one;
 //! 2. how often the Gaussian certificate `β̂ − ρ` stays below the true closed-loop rate.

@@ -1,8 +1,9 @@
 //! One calibrated certifier's sealed checkpoint: writing it (encode and seal) and restoring it
 //! (check, decode, verify) in the binary encoding the command line writes (CBOR with the
-//! block rings packed, version 6) against the JSON export (version 4) of the same state in
-//! the same run, and the sizes (printed once, before the timings), with the unpacked binary's
-//! (version 5: the JSON's payload re-encoded in CBOR, every ring whole).
+//! sliding block rings rebuilt from the sample trail and the rest packed, version 7) against
+//! the JSON export (version 4) of the same state in the same run, and the sizes (printed
+//! once, before the timings), with the unpacked binary's (version 5: the JSON's payload
+//! re-encoded in CBOR, every ring whole).
 //!
 //! The state: `examples/data/certify_b.toml` (G5's subsystem B, the default calibrated
 //! certificate with every guard) after 20 000 steps of Experiment 1's data, seed 1 (the

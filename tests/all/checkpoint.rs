@@ -1,8 +1,11 @@
-//! The binary checkpoint's packed block rings (`certifier/pack.rs`): the resume bit for bit,
-//! against the JSON export (every ring whole) and the unpacked binary of version 5.
+//! The binary checkpoint's compact block rings: the sliding rings left out and rebuilt from
+//! the sample trail (`calibrated/replay.rs`), the anchored ring packed (`certifier/pack.rs`);
+//! the resume bit for bit, against the JSON export (every ring whole) and the binary
+//! versions 5 and 6 still read.
 
 use streamcert::certificate::{
-    CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Certifier, Encoding, encode, seal, unseal,
+    CHECKPOINT_PACKED_VERSION, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Certifier,
+    Encoding, encode, seal, unseal,
 };
 use streamcert::dynamics::LinearScenario;
 
@@ -12,8 +15,8 @@ use crate::support::{json_payload, resume_matches, run};
 /// The default calibrated certificate (both model guards, the change guard, the anchored
 /// window) past the wrap of its longest window's ring (2400 columns): the packed checkpoint
 /// resumes bit for bit (every row, and the whole state at the end, scratch included),
-/// restores the state the JSON export does, is under 0.6 of the unpacked binary's size (0.52
-/// measured), and the unpacked binary still restores under its own version.
+/// restores the state the JSON export does, is under 0.3 of the unpacked binary's size, and
+/// the unpacked binary still restores under versions 5 and 6.
 #[test]
 fn packed_rings_resume_bit_for_bit_and_the_unpacked_version_still_reads() {
     let traj = run(&LinearScenario { steps: 6000, ..short_window_plant() }, 11);
@@ -51,7 +54,114 @@ fn packed_rings_resume_bit_for_bit_and_the_unpacked_version_still_reads() {
         // verdict, which a restore recomputes at the next step.
         let restored = Certifier::restore(&packed).expect("restores");
         assert_eq!(Certifier::restore(&v5).expect("version 5 restores"), restored);
+        // A state written before the sample trail (version 6: the same decoder; its rings
+        // here whole) restores with an empty trail, so its next checkpoint writes the rings
+        // (packed) and restores to the same state; the rows after it are the uninterrupted
+        // run's.
+        let mut old_state = state.clone();
+        old_state["calibrated"].as_object_mut().expect("a map").remove("trail");
+        let old =
+            seal(&encode(&old_state, Encoding::Binary).expect("encodes"), Encoding::Binary, &cfg)
+                .expect("seals");
+        let v6 = [
+            header(CHECKPOINT_PACKED_VERSION).as_bytes(),
+            &old[header(CHECKPOINT_VERSION).len()..],
+        ]
+        .concat();
+        let from_v6 = Certifier::restore(&v6).expect("version 6 restores");
+        let again = from_v6.checkpoint().expect("serialises");
+        assert_eq!(calibrated_entry(&again, "rings_replayed"), None);
+        let mut resumed = Certifier::restore(&again).expect("restores");
+        assert_eq!(resumed, from_v6);
+        for k in split..traj.len() {
+            let ev = resumed.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+            assert_eq!(ev, all[k], "row {k} after a restore of version 6 at {split}");
+        }
         let (packed_len, unpacked_len) = (packed.len(), sealed.len());
-        assert!(5 * packed_len < 3 * unpacked_len, "{packed_len} B packed, {unpacked_len} B whole");
+        assert!(
+            10 * packed_len < 3 * unpacked_len,
+            "{packed_len} B packed, {unpacked_len} B whole"
+        );
+    }
+}
+
+/// The calibrated state's `key` entry of a binary checkpoint's payload.
+fn calibrated_entry(sealed: &[u8], key: &str) -> Option<ciborium::Value> {
+    let payload = &sealed[sealed.iter().position(|&b| b == b'\n')? + 1..];
+    let value: ciborium::Value = ciborium::from_reader(payload).ok()?;
+    let get = |v: &ciborium::Value, k: &str| {
+        v.as_map()?.iter().find(|(n, _)| n.as_text() == Some(k)).map(|(_, v)| v.clone())
+    };
+    get(&get(&value, "calibrated")?, key)
+}
+
+/// The entry `key` of the map `v`.
+fn field<'a>(v: &'a mut ciborium::Value, key: &str) -> &'a mut ciborium::Value {
+    let map = v.as_map_mut().expect("a map");
+    &mut map.iter_mut().find(|(k, _)| k.as_text() == Some(key)).expect("the entry").1
+}
+
+/// The payload of `sealed` with the calibrated state's sample trail emptied.
+fn cut_trail(sealed: &[u8]) -> Vec<u8> {
+    let payload = &sealed[sealed.iter().position(|&b| b == b'\n').expect("header") + 1..];
+    let mut value: ciborium::Value = ciborium::from_reader(payload).expect("CBOR");
+    let trail = field(field(&mut value, "calibrated"), "trail");
+    // No rows: the varint 0.
+    *field(trail, "rows") = ciborium::Value::Bytes(vec![0]);
+    let mut out = Vec::new();
+    ciborium::into_writer(&value, &mut out).expect("encodes");
+    out
+}
+
+/// The default calibrated certificate with a gap (the regression and every ring reset) at
+/// sample 3000: at every split (before the first column, before the rings fill, just before
+/// and after the gap, past the longest window's wrap, one sample before the end) the binary
+/// checkpoint leaves the sliding block rings out (`rings_replayed`, the linear ring's blocks
+/// empty) and the resume is bit for bit: every row, every serialised bit of the state at the
+/// end, and every field once a look has recomputed the scratch a checkpoint does not carry.
+/// With the trail cut to nothing (the checksum made valid again) the restore is refused,
+/// saying why.
+#[test]
+fn the_sliding_rings_are_rebuilt_from_the_sample_trail_bit_for_bit() {
+    let traj = run(&LinearScenario { steps: 6000, ..short_window_plant() }, 12);
+    let cfg = calibrated(1, vec![-1.5], 150, 10);
+    let push_all = |c: &mut Certifier, from: usize, to: usize| -> Vec<_> {
+        (from..to)
+            .map(|k| {
+                if k == 3000 {
+                    c.gap();
+                }
+                c.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid")
+            })
+            .collect()
+    };
+    let mut whole = Certifier::new(cfg.clone()).expect("valid");
+    let all = push_all(&mut whole, 0, traj.len());
+    assert!(all.iter().any(|e| e.calibrated.open), "the calibrated gate opened");
+    let json = |c: &Certifier| c.checkpoint_json().expect("serialises");
+    for split in [3, 700, 2999, 3004, 3400, 5999] {
+        let mut first = Certifier::new(cfg.clone()).expect("valid");
+        push_all(&mut first, 0, split);
+        let sealed = first.checkpoint().expect("serialises");
+        let replayed = calibrated_entry(&sealed, "rings_replayed");
+        assert_eq!(replayed, Some(ciborium::Value::Bool(true)), "split {split}");
+        let windows = calibrated_entry(&sealed, "windows").expect("the linear windows");
+        let blocks = windows.as_map().and_then(|m| {
+            m.iter().find(|(k, _)| k.as_text() == Some("blocks")).map(|(_, v)| v.clone())
+        });
+        assert_eq!(blocks, Some(ciborium::Value::Array(Vec::new())), "split {split}");
+        let mut second = Certifier::restore(&sealed)
+            .unwrap_or_else(|e| panic!("the checkpoint at {split} restores: {e}"));
+        assert_eq!(push_all(&mut second, split, traj.len()), all[split..], "after {split}");
+        assert_eq!(json(&second), json(&whole), "the state at the end after {split}");
+        if split < 5999 {
+            assert_eq!(second, whole, "every field at the end after {split}");
+        }
+        if split == 5999 {
+            let cut = cut_trail(&sealed);
+            let err = Certifier::restore(seal(&cut, Encoding::Binary, &cfg).expect("seals"))
+                .expect_err("a trail that does not reach back is refused");
+            assert!(err.to_string().contains("does not reach back"), "{err}");
+        }
     }
 }

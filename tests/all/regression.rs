@@ -15,6 +15,7 @@ mod anchored;
 mod coefficients;
 mod estimators;
 mod moments;
+mod replay;
 mod side_by_side;
 mod units;
 mod window_range;

@@ -235,6 +235,8 @@ mod config;
 mod coupling;
 mod look;
 mod options;
+mod replay;
+mod trail;
 mod update;
 mod validate;
 mod window_look;
@@ -261,6 +263,7 @@ use crate::{CertifyError, NonlinearConfig, NotCertified};
 use anchor::AnchoredState;
 use build::{change_guard, closed_loop_map, model_guards};
 use streamcert_regression::Model;
+use trail::SampleTrail;
 
 fn one() -> f64 {
     1.0
@@ -339,6 +342,13 @@ pub(crate) struct CalibratedState {
     change: Option<ChangeGuard>,
     /// The column count (`seen`) at each window's latest look.
     look_cols: Vec<u64>,
+    /// The newest samples, from which a checkpoint's sliding block rings are rebuilt
+    /// (`replay.rs`; `None` in a state written before it, made on restore).
+    #[serde(default)]
+    trail: Option<SampleTrail>,
+    /// `true` in a checkpoint that left the sliding block rings out (rebuilt on restore).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    rings_replayed: bool,
     // Scratch: the newest column's samples (times, outputs) and output ranges.
     ts: Vec<f64>,
     ys: Vec<f64>,
@@ -387,6 +397,7 @@ impl CalibratedState {
             })
             .transpose()?;
         let tmat = closed_loop_map(p, m, d, gain);
+        let trail = SampleTrail::new(reg, replay::trail_cap(&windows, reg.horizon));
         let anchored = (cal.anchored_share > 0.0)
             .then(|| AnchoredState::new(&windows, &cal, p, reg.horizon))
             .transpose()?;
@@ -420,6 +431,8 @@ impl CalibratedState {
             nl_origin: 0.0,
             model: model_guards(&cal, (p, d, reg.horizon), &lengths)?,
             change: change_guard(&cal, reg.horizon, &lengths),
+            trail: Some(trail),
+            rings_replayed: false,
             ts: vec![0.0; reg.horizon + 1],
             ys: vec![0.0; (reg.horizon + 1) * p],
             col_range: vec![Interval::EMPTY; p],
@@ -430,6 +443,9 @@ impl CalibratedState {
     fn reset(&mut self) {
         self.windows.reset();
         self.seen = 0;
+        // Read only beside a window's latest look, which the reset clears; zeroed so that a
+        // state checkpointed before the next look passes the restore's check (`≤ seen`).
+        self.look_cols.fill(0);
         self.until_look.fill(0);
         self.latest.fill(None);
         self.weak.fill(None);

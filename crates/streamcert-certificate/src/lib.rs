@@ -86,8 +86,9 @@ pub use calibrated::{
 pub use certifier::Certifier;
 #[cfg(feature = "checkpoint")]
 pub use certifier::checkpoint::{
-    CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION,
-    Encoding, Sealed, config_fingerprint, decode, encode, fnv1a64, seal, seal_value, unseal,
+    CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_PACKED_VERSION,
+    CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Encoding, Sealed, config_fingerprint, decode,
+    encode, fnv1a64, seal, seal_value, unseal,
 };
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;

@@ -265,7 +265,7 @@ impl SlidingRegression {
 
     /// The range of each output over the `h + 1` samples of the newest column, into `out`
     /// (`p` values); `false` (untouched) before `h + 1` samples are held. `O(h p)`, no copy.
-    #[inline]
+    #[inline(always)]
     pub fn newest_column_ranges(&self, out: &mut [Interval]) -> bool {
         let (p, cap) = (self.cfg.outputs, self.cfg.horizon + 1);
         if self.hist_len < cap {
@@ -355,6 +355,28 @@ impl SlidingRegression {
     #[must_use]
     pub fn origin(&self) -> &[f64] {
         &self.origin
+    }
+
+    /// A regression that starts from the working origin `origin` (`[y; u]`, `p + m` values)
+    /// instead of its first sample: the same configuration fed the samples that followed that
+    /// first one then builds the same columns bit for bit (a state's replay from its recent
+    /// samples). Through the origin, or with the wrong length, the origin stays unset.
+    #[must_use]
+    pub fn with_origin(mut self, origin: &[f64]) -> Self {
+        if origin.len() == self.d() {
+            self.set_origin(&origin[..self.cfg.outputs], &origin[self.cfg.outputs..]);
+        }
+        self
+    }
+
+    /// The newest sample `(t, y, u)` absorbed since the last [`reset`](Self::reset), if any.
+    #[must_use]
+    #[inline]
+    pub fn newest_sample(&self) -> Option<(f64, &[f64], &[f64])> {
+        let (p, m, k) = (self.cfg.outputs, self.cfg.inputs, self.hist_head);
+        (self.hist_len > 0).then(|| {
+            (self.hist_t[k], &self.hist_y[k * p..(k + 1) * p], &self.hist_u[k * m..(k + 1) * m])
+        })
     }
 
     /// The span `τ = t_new − t_old` of the newest column, if any (the regressor of the

@@ -49,6 +49,7 @@ mod moments;
 mod outcome;
 mod quantile;
 mod region;
+mod replay;
 mod scores;
 mod tail;
 
@@ -356,12 +357,20 @@ impl InstrumentedWindows {
         }
     }
 
-    /// Forget every column.
+    /// Forget every column: every value zero (every range empty), as built, so that a state
+    /// holds nothing from before its reset (and a replay of its newest columns rebuilds it
+    /// bit for bit, see [`refill_from`](Self::refill_from)).
     pub fn reset(&mut self) {
         self.head = 0;
         self.len = 0;
         self.usable = 0;
-        self.open.fill(0.0);
+        for v in [&mut self.ring_z, &mut self.ring_dy, &mut self.open, &mut self.blocks] {
+            v.fill(0.0);
+        }
+        self.w.fill(0.0);
+        self.open_values.fill(0.0);
+        self.block_values.fill(0.0);
+        self.block_ranges.fill(Interval::EMPTY);
         self.in_open = 0;
         self.block_head = 0;
         self.block_len = 0;

@@ -43,7 +43,12 @@ impl CalibratedState {
             (None, None) => true,
             _ => false,
         };
+        let trail_ok =
+            self.trail.as_ref().is_some_and(|t| {
+                t.fits(reg, super::replay::trail_cap(&self.windows, self.horizon))
+            }) && !self.rings_replayed;
         let ok = coupling_ok
+            && trail_ok
             && anchored_ok
             && self.sliding_share == fresh.sliding_share
             && order_ok

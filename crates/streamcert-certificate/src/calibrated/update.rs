@@ -4,6 +4,7 @@
 
 use streamcert_regression::SlidingRegression;
 
+use super::replay::ring_column;
 use super::{CalibratedState, CalibratedVerdict};
 use crate::guard::Fresh;
 
@@ -28,6 +29,9 @@ impl CalibratedState {
         reg: &SlidingRegression,
         margin: f64,
     ) -> &CalibratedVerdict {
+        if let Some(trail) = &mut self.trail {
+            trail.record(reg);
+        }
         let built = reg.columns_built();
         let mut looked = false;
         if built < self.seen {
@@ -73,17 +77,9 @@ impl CalibratedState {
     /// and the windows; true when it completed a block.
     #[inline]
     fn absorb(&mut self, reg: &SlidingRegression) -> bool {
-        let Some((z, dy)) = reg.newest_column() else { return false };
-        if !reg.newest_column_ranges(&mut self.col_range) {
+        let Some((z, dy)) = ring_column(reg, self.affine, &mut self.zaug, &mut self.col_range)
+        else {
             return false;
-        }
-        let z = if self.affine {
-            let d = z.len();
-            self.zaug[..d].copy_from_slice(z);
-            self.zaug[d] = reg.newest_column_span().unwrap_or(0.0);
-            &self.zaug[..]
-        } else {
-            z
         };
         for o in &mut self.model {
             o.push(z, dy, reg);

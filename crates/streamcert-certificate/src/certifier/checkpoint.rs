@@ -8,15 +8,20 @@
 //! <payload>
 //! ```
 //!
-//! Version 6 ([`Encoding::Binary`], what [`Certifier::checkpoint`] writes) encodes the payload
-//! in CBOR (RFC 8949; each float in the shortest of 2, 4 or 8 bytes that holds it exactly),
-//! with the calibrated state's block rings packed: an entry that another entry determines bit
-//! for bit (the model guards' sums shared with the linear windows', the lower triangle of each
-//! `H`) is not written, and the rest are raw `f64` bytes (`pack.rs`). For a default
-//! calibrated certifier that is 0.23 of the JSON's size (BENCHMARKS.md). Version 5 is the
-//! same CBOR with every ring whole; version 4 ([`Encoding::Json`], [`Certifier::checkpoint_json`])
-//! is JSON text with every ring whole, kept as a readable export and for the checkpoints
-//! written before the binary ones. [`Certifier::restore`] reads all three.
+//! Version 7 ([`Encoding::Binary`], what [`Certifier::checkpoint`] writes) encodes the payload
+//! in CBOR (RFC 8949; each float in the shortest of 2, 4 or 8 bytes that holds it exactly).
+//! The calibrated state's sliding block rings (the linear windows' and the model guards'
+//! larger fits') are left out where its sample trail rebuilds them bit for bit, and rebuilt
+//! from it on restore (`calibrated/replay.rs`; the trail's times cost about a byte each on a
+//! regular grid, `calibrated/trail.rs`); a ring the trail does not rebuild is written, packed:
+//! an entry that another entry determines bit for bit (the model guards' sums shared with the
+//! linear windows', the lower triangle of each `H`) is not written, and the rest are raw `f64`
+//! bytes (`pack.rs`), as is the anchored window's ring. For a default calibrated certifier
+//! after 20 000 rows that is 0.09 of the JSON's size, 133 KB (BENCHMARKS.md). Version 6 is the
+//! same CBOR with every ring packed and no trail, version 5 every ring whole; version 4
+//! ([`Encoding::Json`], [`Certifier::checkpoint_json`]) is JSON text with every ring whole,
+//! kept as a readable export and for the checkpoints written before the binary ones.
+//! [`Certifier::restore`] reads all four.
 //!
 //! The checksum detects every change of one byte with certainty (each FNV-1a step is a
 //! bijection of the state for a fixed input byte) and any other corruption with probability
@@ -39,7 +44,10 @@ use crate::CertifyError;
 pub const CHECKPOINT_MAGIC: &str = "streamcert-checkpoint";
 /// The checkpoint format version this build writes ([`Encoding::Binary`]); it also reads
 /// [`CHECKPOINT_UNPACKED_VERSION`] and [`CHECKPOINT_JSON_VERSION`].
-pub const CHECKPOINT_VERSION: u32 = 6;
+pub const CHECKPOINT_VERSION: u32 = 7;
+/// The binary encoding before the sample trail (every block ring written, packed; no trail),
+/// still read.
+pub const CHECKPOINT_PACKED_VERSION: u32 = 6;
 /// The binary encoding before the packed block rings (every ring written whole), still read.
 pub const CHECKPOINT_UNPACKED_VERSION: u32 = 5;
 /// The version of the JSON encoding ([`Encoding::Json`]): the export, and every checkpoint
@@ -49,10 +57,11 @@ pub const CHECKPOINT_JSON_VERSION: u32 = 4;
 /// How a checkpoint's payload is encoded; its header's version says which.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Encoding {
-    /// CBOR (RFC 8949) with the block rings packed, version [`CHECKPOINT_VERSION`] (version
-    /// [`CHECKPOINT_UNPACKED_VERSION`] read as well): the compact default.
+    /// CBOR (RFC 8949) with the sliding block rings rebuilt from the sample trail and the
+    /// rest packed, version [`CHECKPOINT_VERSION`] (versions [`CHECKPOINT_PACKED_VERSION`]
+    /// and [`CHECKPOINT_UNPACKED_VERSION`] read as well): the compact default.
     Binary,
-    /// JSON text, version [`CHECKPOINT_JSON_VERSION`]: readable, about twice as large.
+    /// JSON text, version [`CHECKPOINT_JSON_VERSION`]: readable, about ten times as large.
     Json,
 }
 
@@ -67,7 +76,9 @@ impl Encoding {
     }
 
     fn of_version(v: &str) -> Option<Self> {
-        if v == CHECKPOINT_UNPACKED_VERSION.to_string() {
+        if v == CHECKPOINT_UNPACKED_VERSION.to_string()
+            || v == CHECKPOINT_PACKED_VERSION.to_string()
+        {
             return Some(Self::Binary);
         }
         [Self::Binary, Self::Json].into_iter().find(|e| v == e.version().to_string())
@@ -235,7 +246,8 @@ fn open(bytes: &[u8]) -> Result<(Sealed<'_>, u64), CertifyError> {
     let Some(encoding) = Encoding::of_version(version) else {
         return bad(format!(
             "checkpoint format version `{}`, this build reads versions {CHECKPOINT_VERSION}, \
-             {CHECKPOINT_UNPACKED_VERSION} and {CHECKPOINT_JSON_VERSION}",
+             {CHECKPOINT_PACKED_VERSION}, {CHECKPOINT_UNPACKED_VERSION} and \
+             {CHECKPOINT_JSON_VERSION}",
             version.escape_debug()
         ));
     };
@@ -318,6 +330,6 @@ mod tests {
         // Another version, or none, is refused with what this build reads.
         let text = String::from_utf8(seal_value(&value, Encoding::Json, &"cfg").unwrap()).unwrap();
         let err = unseal(text.replacen(" 4 ", " 3 ", 1).as_bytes(), None::<&()>).unwrap_err();
-        assert!(err.to_string().contains("reads versions 6, 5 and 4"), "{err}");
+        assert!(err.to_string().contains("reads versions 7, 6, 5 and 4"), "{err}");
     }
 }

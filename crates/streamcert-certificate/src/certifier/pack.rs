@@ -1,5 +1,7 @@
 //! The binary checkpoint's packed block rings: a calibrated state's three rings of block sums
-//! written once where they hold the same numbers.
+//! written once where they hold the same numbers. Where the sample trail rebuilds the
+//! sliding rings (`calibrated/replay.rs`, tried first), they are left out instead and only
+//! the anchored window's ring is packed here.
 //!
 //! The linear windows' ring and each model guard's larger fit (see `guard::model`) keep, per
 //! block of `h` columns, `N = Σ Z Wᵀ`, `Cw = Σ ΔY Wᵀ` and `H = Σ W Wᵀ`. A guard's regressors
@@ -362,7 +364,11 @@ pub(super) fn serialize<S: Serializer>(
     let Some(state) = state.as_ref().filter(|_| !serializer.is_human_readable()) else {
         return state.serialize(serializer);
     };
-    let mut value = Value::serialized(state).map_err(S::Error::custom)?;
+    // The sliding rings left out where the sample trail rebuilds them (`replay.rs`), the
+    // rest packed.
+    let stripped = state.stripped();
+    let mut value =
+        Value::serialized(stripped.as_ref().unwrap_or(state)).map_err(S::Error::custom)?;
     pack(&mut value);
     serializer.serialize_some(&value)
 }

@@ -43,6 +43,7 @@ impl Certifier {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));
         }
         if let Some(state) = &mut c.calibrated {
+            state.rebuild_rings(&c.regression)?;
             state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
             state.rebuild();
         }

@@ -79,7 +79,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use streamcert_regression::SlidingRegression;
+use streamcert_regression::{InstrumentedWindows, SlidingRegression};
 
 use super::curvature::CurvatureTerms;
 use crate::look::hotelling::NonlinearityTest;
@@ -218,6 +218,33 @@ impl ModelGuard {
             self.terms.column(reg, &mut self.fit.z[at..at + 2 * p]);
         }
         self.fit.push(dy);
+    }
+
+    /// The larger fit's windows (whose block ring a checkpoint may leave out, `replay.rs`).
+    pub(crate) fn ring(&self) -> &InstrumentedWindows {
+        &self.fit.windows
+    }
+
+    /// The larger fit's windows, to strip or refill.
+    pub(crate) fn ring_mut(&mut self) -> &mut InstrumentedWindows {
+        &mut self.fit.windows
+    }
+
+    /// How many columns before the `held` newest a replay feeds to the ring of past
+    /// increments only: the `h` whose increments the oldest held column's regressors take
+    /// (fewer where fewer were pushed since the reset), none without the order group.
+    pub(crate) fn lead_in(&self, held: usize) -> usize {
+        if self.groups.order {
+            self.fit.pushed().saturating_sub(held as u64).min(self.horizon as u64) as usize
+        } else {
+            0
+        }
+    }
+
+    /// A replay's column before the held ones ([`lead_in`](Self::lead_in)): its increment
+    /// joins the ring of past increments.
+    pub(crate) fn lead_column(&mut self, dy: &[f64]) {
+        self.fit.skip_column(self.d, &dy[..self.p]);
     }
 
     /// Window `w`'s tests at a look: replace the window's latest tests.

@@ -28,8 +28,9 @@ pub(crate) struct LargerFit {
     pub(crate) z: Vec<f64>,
     pub(crate) dir: Vec<f64>,
     cov: Vec<f64>,
-    /// Where `cov` holds only the coefficients of regressors `tail..d` (see [`fit`](Self::fit)).
-    #[serde(skip)]
+    /// Where `cov` holds only the coefficients of regressors `tail..d` (see [`fit`](Self::fit));
+    /// written with `cov`, so that a restored fit equals the live one.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     tail: Option<usize>,
     sub: Vec<f64>,
     rhs: Vec<f64>,
@@ -87,6 +88,21 @@ impl LargerFit {
         let slot = (self.pushed % h as u64) as usize;
         self.z[at..at + p].copy_from_slice(&self.lags[slot * p..(slot + 1) * p]);
         self.lags[slot * p..(slot + 1) * p].copy_from_slice(dy);
+    }
+
+    /// The columns pushed since the last reset.
+    pub(crate) fn pushed(&self) -> u64 {
+        self.pushed
+    }
+
+    /// Count a column that only feeds the ring of past increments (a replay's columns before
+    /// the windows' oldest, `replay.rs`): its `dy` joins the ring (read into `z[at..]` as
+    /// [`past_increment`](Self::past_increment) does), the windows take nothing.
+    pub(crate) fn skip_column(&mut self, at: usize, dy: &[f64]) {
+        if !self.lags.is_empty() {
+            self.past_increment(at, dy);
+        }
+        self.pushed += 1;
     }
 
     /// Absorb the column whose regressors are in `z`, its increments `dy`.

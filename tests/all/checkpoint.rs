@@ -4,13 +4,14 @@
 //! versions 5 and 6 still read.
 
 use streamcert::certificate::{
-    CHECKPOINT_PACKED_VERSION, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Certifier,
-    Encoding, encode, seal, unseal,
+    CHECKPOINT_PACKED_VERSION, CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Calibration,
+    Certifier, CertifierConfig, Encoding, NonlinearConfig, encode, seal, unseal,
 };
-use streamcert::dynamics::LinearScenario;
+use streamcert::dynamics::{LinearScenario, Trajectory};
+use streamcert::regression::Model;
 
 use crate::calibrated::{calibrated, short_window_plant};
-use crate::support::{json_payload, resume_matches, run};
+use crate::support::{coupled_pair, json_payload, resume_matches, run};
 
 /// The default calibrated certificate (both model guards, the change guard, the anchored
 /// window) past the wrap of its longest window's ring (2400 columns): the packed checkpoint
@@ -162,6 +163,76 @@ fn the_sliding_rings_are_rebuilt_from_the_sample_trail_bit_for_bit() {
             let err = Certifier::restore(seal(&cut, Encoding::Binary, &cfg).expect("seals"))
                 .expect_err("a trail that does not reach back is refused");
             assert!(err.to_string().contains("does not reach back"), "{err}");
+        }
+    }
+}
+
+/// Every shape the calibrated state takes, checkpointed past the longest window's wrap (and
+/// one just before it): two outputs; two instrument intervals with a lag of two and batches
+/// of two blocks; the paper's model through the origin without guards; outputs in stated
+/// units (two outputs); the nonlinear certificate beside the calibrated one. In each the binary checkpoint
+/// leaves the sliding rings out and the resume is the uninterrupted run's, every row and every
+/// serialised bit of the state at the end.
+#[test]
+fn the_sliding_rings_are_rebuilt_in_every_shape_of_the_calibrated_state() {
+    let base = calibrated(1, vec![-1.5], 150, 10);
+    let cal = base.calibration.expect("calibrated");
+    let scalar = run(&LinearScenario { steps: 3200, ..short_window_plant() }, 21);
+    let pair = run(&coupled_pair(short_window_plant(), 3200), 22);
+    let mut origin = base.clone();
+    origin.regression.model = Model::ThroughOrigin;
+    origin.calibration = Some(cal.unguarded());
+    let cases: Vec<(&str, CertifierConfig, &Trajectory)> = vec![
+        ("two outputs", calibrated(2, vec![-1.5, 0.0, 0.0, -1.5], 150, 10), &pair),
+        (
+            "two intervals, lag 2, batches of 2",
+            CertifierConfig {
+                calibration: Some(Calibration {
+                    instrument_intervals: 2,
+                    instrument_lag: 2,
+                    batch_blocks: 2,
+                    ..cal
+                }),
+                ..base.clone()
+            },
+            &scalar,
+        ),
+        ("through the origin, unguarded", origin, &scalar),
+        (
+            "two outputs in stated units",
+            CertifierConfig {
+                metric: Some(vec![1000.0, 0.5]),
+                ..calibrated(2, vec![-1.5, 0.0, 0.0, -1.5], 150, 10)
+            },
+            &pair,
+        ),
+        (
+            "with the nonlinear certificate",
+            CertifierConfig { nonlinear: Some(NonlinearConfig::with_degree(3)), ..base.clone() },
+            &scalar,
+        ),
+    ];
+    for (name, cfg, traj) in cases {
+        let mut whole = Certifier::new(cfg.clone()).expect("valid");
+        let all: Vec<_> = (0..traj.len())
+            .map(|k| whole.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid"))
+            .collect();
+        for split in [2390, 3100] {
+            let mut first = Certifier::new(cfg.clone()).expect("valid");
+            for k in 0..split {
+                first.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+            }
+            let sealed = first.checkpoint().expect("serialises");
+            let replayed = calibrated_entry(&sealed, "rings_replayed");
+            assert_eq!(replayed, Some(ciborium::Value::Bool(true)), "{name}, split {split}");
+            let mut second = Certifier::restore(&sealed)
+                .unwrap_or_else(|e| panic!("{name}: the checkpoint at {split} restores: {e}"));
+            for k in split..traj.len() {
+                let ev = second.push(traj.t[k], traj.output(k), traj.input(k)).expect("valid");
+                assert_eq!(ev, all[k], "{name}: row {k} after a restore at {split}");
+            }
+            let json = |c: &Certifier| c.checkpoint_json().expect("serialises");
+            assert_eq!(json(&second), json(&whole), "{name}: the state after {split}");
         }
     }
 }

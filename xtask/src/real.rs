@@ -1,6 +1,7 @@
 //! `cargo xtask real`: the two public plant records of `examples/real/` (streamcert's CSV,
 //! checked by hash), certified with their configurations, and the heat exchanger's verdict
-//! compared in °C and in K (it must be the same: the affine model).
+//! compared in °C and in K (it must be the same: the affine model); and for each record the
+//! calibrated gate's share of open rows at fixed horizons and base windows (`real/grid.rs`).
 //!
 //! The committed files are conversions of `exchanger.csv` and `tanque.csv` of the public
 //! repository `Rafa7046/Non_Linear_Identification` at commit
@@ -20,6 +21,8 @@ use streamcert_pipeline::certify::{Options, Summary, run as certify};
 use streamcert_pipeline::config::parse;
 
 use crate::common::{markdown, median, write};
+
+mod grid;
 
 /// One record: the original's file name under `DIR` and its SHA-256, the committed
 /// conversion and its SHA-256, its configuration and the conversion.
@@ -229,7 +232,7 @@ fn units_check(config: &str, csv: &str, affine: &Certified) -> Result<String> {
 pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
     std::fs::create_dir_all(out)?;
     let mut rows = Vec::new();
-    let mut units = String::new();
+    let (mut units, mut grids) = (String::new(), String::new());
     for rec in &RECORDS {
         let csv = checked(Path::new(rec.converted), rec.converted_sha256)?;
         if let Some(from) = from {
@@ -266,6 +269,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
         if rec.name == "exchanger" {
             units.push_str(&units_check(&config, &csv, &affine)?);
         }
+        grids.push_str(&grid::grid(rec.name, &config, &csv)?);
     }
     let mut s = String::from(
         "# Real plant records\n\nProduced by `cargo xtask real` (the records' sources, hashes and configurations: examples/real/README.md).\n\n",
@@ -288,6 +292,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
         )
     );
     s.push_str(&units);
+    s.push_str(&grids);
     write(&out.join("REAL.md"), &s)?;
     println!("wrote {}", out.join("REAL.md").display());
     Ok(())

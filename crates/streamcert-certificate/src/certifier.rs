@@ -24,13 +24,15 @@
 //!
 //! `checkpoint.rs`: the envelope (a text header line: magic, version, FNV-1a checksum of the
 //! payload, the configuration's fingerprint) and the whole state in CBOR (each float in the
-//! shortest exact width) or JSON. `pack.rs`: the binary encoding's packed block rings: each
-//! model guard's ring is written as the entries with an extra regressor or instrument (the
-//! rest are the linear ring's same products), every ring without the lower triangle of `H`;
-//! each derived entry is compared bit for bit with its source before it is left out, a ring
-//! that differs is written whole, and a packed ring that does not fit its layout is refused on
-//! restore. `verify.rs`: a deserialised state checked against its configuration and itself,
-//! whatever deserialised it.
+//! shortest exact width) or JSON. In the binary encoding the calibrated state's sliding block
+//! rings are left out where its sample trail rebuilds them bit for bit (`calibrated/replay.rs`,
+//! checked before they are left out, rebuilt by `verify.rs` on restore). `pack.rs`: the block
+//! rings still written, packed: each model guard's ring as the entries with an extra regressor
+//! or instrument (the rest are the linear ring's same products), every ring without the lower
+//! triangle of `H`; each derived entry is compared bit for bit with its source before it is
+//! left out, a ring that differs is written whole, and a packed ring that does not fit its
+//! layout is refused on restore. `verify.rs`: a deserialised state checked against its
+//! configuration and itself, whatever deserialised it.
 
 mod access;
 mod calibrated_step;
@@ -63,7 +65,8 @@ pub struct Certifier {
     skipped: u64,
     wass: Gate,
     calibrated_gate: Gate,
-    /// In a binary checkpoint, with its block rings packed (`pack.rs`).
+    /// In a binary checkpoint, its sliding block rings left out for the sample trail where it
+    /// rebuilds them (`calibrated/replay.rs`), the rest packed (`pack.rs`).
     #[cfg_attr(
         feature = "checkpoint",
         serde(serialize_with = "pack::serialize", deserialize_with = "pack::deserialize")

@@ -102,13 +102,13 @@ fn field<'a>(v: &'a mut ciborium::Value, key: &str) -> &'a mut ciborium::Value {
     &mut map.iter_mut().find(|(k, _)| k.as_text() == Some(key)).expect("the entry").1
 }
 
-/// The payload of `sealed` with the calibrated state's sample trail emptied.
-fn cut_trail(sealed: &[u8]) -> Vec<u8> {
+/// The payload of `sealed` with the calibrated state's sample trail's entry `key` set to
+/// `to`.
+fn edit_trail(sealed: &[u8], key: &str, to: ciborium::Value) -> Vec<u8> {
     let payload = &sealed[sealed.iter().position(|&b| b == b'\n').expect("header") + 1..];
     let mut value: ciborium::Value = ciborium::from_reader(payload).expect("CBOR");
     let trail = field(field(&mut value, "calibrated"), "trail");
-    // No rows: the varint 0.
-    *field(trail, "rows") = ciborium::Value::Bytes(vec![0]);
+    *field(trail, key) = to;
     let mut out = Vec::new();
     ciborium::into_writer(&value, &mut out).expect("encodes");
     out
@@ -120,8 +120,8 @@ fn cut_trail(sealed: &[u8]) -> Vec<u8> {
 /// checkpoint leaves the sliding block rings out (`rings_replayed`, the linear ring's blocks
 /// empty) and the resume is bit for bit: every row, every serialised bit of the state at the
 /// end, and every field once a look has recomputed the scratch a checkpoint does not carry.
-/// With the trail cut to nothing (the checksum made valid again) the restore is refused,
-/// saying why.
+/// With the trail cut to nothing, or its capacity made huge (the checksum made valid again),
+/// the restore is refused, saying why.
 #[test]
 fn the_sliding_rings_are_rebuilt_from_the_sample_trail_bit_for_bit() {
     let traj = run(&LinearScenario { steps: 6000, ..short_window_plant() }, 12);
@@ -159,10 +159,16 @@ fn the_sliding_rings_are_rebuilt_from_the_sample_trail_bit_for_bit() {
             assert_eq!(second, whole, "every field at the end after {split}");
         }
         if split == 5999 {
-            let cut = cut_trail(&sealed);
+            // No rows (the varint 0): the rings cannot be rebuilt.
+            let cut = edit_trail(&sealed, "rows", ciborium::Value::Bytes(vec![0]));
             let err = Certifier::restore(seal(&cut, Encoding::Binary, &cfg).expect("seals"))
                 .expect_err("a trail that does not reach back is refused");
             assert!(err.to_string().contains("does not reach back"), "{err}");
+            // A capacity of 2⁶⁰ samples: refused against the configuration, nothing allocated.
+            let huge = edit_trail(&sealed, "cap", ciborium::Value::Integer((1u64 << 60).into()));
+            let err = Certifier::restore(seal(&huge, Encoding::Binary, &cfg).expect("seals"))
+                .expect_err("a trail of another capacity is refused");
+            assert!(err.to_string().contains("does not fit its configuration"), "{err}");
         }
     }
 }

@@ -3,8 +3,8 @@
 //! the block sums (`replay.rs`).
 //!
 //! For the default certifier (`p = m = 1`, `h = 5`, the longest window `16 M = 2 400` columns)
-//! that is about 2 430 samples of `(t, y, u)`: 58 KB as raw `f64` bytes, against about 220 KB
-//! of block sums in three rings.
+//! that is 2 420 samples of `(t, y, u)`: 58 KB in memory, about 41 KB in a checkpoint (the
+//! times packed, [`pack_rows`]), against about 220 KB of block sums in three rings.
 
 use serde::de::{self, Deserializer, SeqAccess, Visitor};
 use serde::ser::{SerializeStruct, Serializer};
@@ -15,9 +15,10 @@ use streamcert_regression::{RegressionConfig, SlidingRegression};
 /// of them needs besides: the regression's configuration and working origin (not written, set
 /// from the regression on restore).
 ///
-/// Serialised as `{width, cap, rows}`, `rows` the held samples oldest first: raw
-/// little-endian `f64` bytes in a binary encoding (8 bytes a value), numbers in a
-/// human-readable one.
+/// Serialised as `{width, cap, rows}`, `rows` the held samples oldest first: the bytes of
+/// [`pack_rows`] in a binary encoding, numbers in a human-readable one. A deserialised trail
+/// holds only its rows until [`settle`](Self::settle) has checked its shape against the
+/// configuration and sized its ring (so a damaged file's `cap` allocates nothing).
 #[derive(Debug, Clone)]
 pub(crate) struct SampleTrail {
     width: usize,
@@ -53,7 +54,7 @@ impl SampleTrail {
             head: 0,
             len: 0,
             last: f64::NEG_INFINITY,
-            source: Some((*reg, Vec::new())),
+            source: Some((*reg, Vec::with_capacity(reg.outputs + reg.inputs))),
         }
     }
 
@@ -115,14 +116,31 @@ impl SampleTrail {
         self.source.as_ref().map(|(c, o)| (c, &o[..]))
     }
 
-    /// Set the replay's source from the regression the trail follows (after a restore).
-    pub(crate) fn set_source(&mut self, reg: &SlidingRegression) {
-        let origin = if reg.columns_built() > 0 || reg.newest_sample().is_some() {
-            reg.origin().to_vec()
-        } else {
-            Vec::new()
-        };
-        self.source = Some((*reg.config(), origin));
+    /// After a restore: `false` unless the trail's shape fits `reg`'s configuration and `cap`
+    /// samples; then its ring sized to `cap` (a deserialised trail holds only its rows) and
+    /// the replay's source set from `reg` (its working origin once it has absorbed a sample,
+    /// else taken at the first sample recorded).
+    pub(crate) fn settle(&mut self, reg: &SlidingRegression, cap: usize) -> bool {
+        let cfg = reg.config();
+        let rows_only = self.data.len() == self.len * self.width;
+        let shape_ok = self.width == 1 + cfg.outputs + cfg.inputs
+            && self.cap == cap
+            && self.len <= cap
+            && (rows_only || self.data.len() == cap * self.width)
+            && self.data.iter().all(|v| v.is_finite());
+        if !shape_ok {
+            return false;
+        }
+        if rows_only {
+            self.data.resize(cap * self.width, 0.0);
+            self.head = self.len % cap;
+        }
+        let mut origin = Vec::with_capacity(cfg.outputs + cfg.inputs);
+        if reg.columns_built() > 0 || reg.newest_sample().is_some() {
+            origin.extend_from_slice(reg.origin());
+        }
+        self.source = Some((*cfg, origin));
+        true
     }
 
     /// `true` when the trail's shape fits `reg` and `cap` (a restored state's check).
@@ -218,7 +236,10 @@ fn pack_rows<'a>(rows: impl Iterator<Item = &'a [f64]> + Clone, n: usize, width:
 fn unpack_rows(bytes: &[u8], width: usize) -> Option<Vec<f64>> {
     let (n, mut rest) = take_varint(bytes)?;
     let n = usize::try_from(n).ok()?;
-    if width == 0 || n > bytes.len() {
+    // Every row takes at least one byte and `8 (width − 1)` more: what the bytes cannot hold
+    // is refused before anything is allocated.
+    let raw = n.checked_mul(width.checked_sub(1)?)?.checked_mul(8)?;
+    if n > bytes.len() || raw > bytes.len() {
         return None;
     }
     let mut out = vec![0.0; n.checked_mul(width)?];
@@ -284,7 +305,7 @@ impl<'de> Deserialize<'de> for SampleTrail {
     fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
         let TrailIn { width, cap, rows } = TrailIn::deserialize(d)?;
         let bad = || de::Error::custom("the checkpoint's sample trail does not fit its shape");
-        let mut data = match rows {
+        let data = match rows {
             RowsIn::Values(v) => v,
             RowsIn::Bytes(b) => unpack_rows(&b, width).ok_or_else(bad)?,
         };
@@ -292,8 +313,8 @@ impl<'de> Deserialize<'de> for SampleTrail {
             return Err(bad());
         }
         let len = data.len() / width;
-        data.resize(cap * width, 0.0);
         let last = if len == 0 { f64::NEG_INFINITY } else { data[(len - 1) * width] };
+        // The ring is sized by `settle`, against the configuration.
         Ok(Self { width, cap, data, head: len % cap, len, last, source: None })
     }
 }
@@ -327,6 +348,20 @@ mod tests {
             let mut longer = bytes.clone();
             longer.push(0);
             prop_assert!(unpack_rows(&longer, width).is_none());
+        }
+
+        /// Bytes that claim more rows or wider rows than they hold are refused before anything
+        /// is allocated (a hostile file cannot ask for a large buffer).
+        #[test]
+        fn bytes_claiming_more_than_they_hold_are_refused(
+            n in 1u64..u64::MAX,
+            width in 2usize..usize::MAX,
+        ) {
+            let mut bytes = Vec::new();
+            super::put_varint(&mut bytes, n);
+            bytes.extend_from_slice(&[0; 16]);
+            prop_assume!(n > 17 || (width - 1).saturating_mul(8) > 17);
+            prop_assert!(unpack_rows(&bytes, width).is_none());
         }
 
         /// Times on a regular grid (as parsed from decimal text: `k dt` rounded) cost at most

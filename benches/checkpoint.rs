@@ -10,6 +10,9 @@
 //! data of `streamcert simulate g5 --experiment 1 --seed 1 --steps 20000`), so that every
 //! window and the anchored window hold data.
 //!
+//! Also printed: the size of the same state under `horizon = "auto"` (the horizon ladder:
+//! four calibrated certificates, `h = 1, 2, 5, 10`), the configuration's default.
+//!
 //! Run: `cargo bench --bench checkpoint`.
 
 use std::hint::black_box;
@@ -20,9 +23,16 @@ use streamcert::experiments::{Experiment, G5Dataset};
 
 const ROWS: usize = 20_000;
 
-fn certifier() -> Certifier {
-    let toml = include_str!("../examples/data/certify_b.toml");
-    let cfg = streamcert_pipeline::config::parse(toml, "certify_b.toml").expect("valid");
+/// `examples/data/certify_b.toml`, with `horizon` and `window` `"auto"` when `auto`.
+fn certifier(auto: bool) -> Certifier {
+    let mut toml = include_str!("../examples/data/certify_b.toml").to_string();
+    if auto {
+        toml = toml
+            .replace("window = 150", "window = \"auto\"")
+            .replace("horizon = 5", "horizon = \"auto\"");
+    }
+    let cfg = streamcert_pipeline::config::parse(&toml, "certify_b.toml").expect("valid");
+    assert_eq!(cfg.certifier.ladder.is_some(), auto);
     let data = G5Dataset { steps: Some(ROWS), ..G5Dataset::defaults(Experiment::One) };
     let traj = data.run_seeded(1).expect("simulates");
     let mut cert = Certifier::new(cfg.certifier).expect("valid");
@@ -35,7 +45,8 @@ fn certifier() -> Certifier {
 }
 
 fn checkpoint(c: &mut Criterion) {
-    let cert = certifier();
+    let auto = certifier(true).checkpoint().expect("encodes").len();
+    let cert = certifier(false);
     let binary = cert.checkpoint().expect("encodes");
     let json = cert.checkpoint_json().expect("encodes");
     let state: serde_json::Value =
@@ -49,6 +60,11 @@ fn checkpoint(c: &mut Criterion) {
         binary.len() as f64 / json.len() as f64,
         unpacked.len(),
         unpacked.len() as f64 / json.len() as f64
+    );
+    eprintln!(
+        "the same state with horizon = \"auto\" (four horizons): binary {auto} bytes ({:.2}× the \
+         single horizon's)",
+        auto as f64 / binary.len() as f64
     );
     let mut group = c.benchmark_group("checkpoint");
     group.sample_size(20);

@@ -17,7 +17,9 @@
 //! `through_origin_gaussian_and_calibrated_unguarded`: the calibrated step before the
 //! intercept, the guards, the fifth window and the anchored window, the baseline of the
 //! default step's target), `unguarded`, `without_change`, `without_model` (the default with
-//! no guard, without its change guard, without its two model guards), all for `p = m = 1`; `wide` (`Certifier::push`,
+//! no guard, without its change guard, without its two model guards), `auto` (the default
+//! with the horizon ladder of `horizon = "auto"`: `h = 1, 2, 5, 10`, `M = 30 h`), all for
+//! `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
 
@@ -27,7 +29,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, NonlinearConfig, RiskSplit,
+    Calibration, Certifier, CertifierConfig, HorizonLadder, NonlinearConfig, RiskSplit,
 };
 use streamcert::regression::{Model, RegressionConfig, SlidingRegression};
 
@@ -37,7 +39,7 @@ use streamcert::regression::{Model, RegressionConfig, SlidingRegression};
 /// risk split by length), `nonlinear` (the default with the nonlinear certificate of degree
 /// 3), and the default with a part of it off, for the share of each part (BENCHMARKS.md):
 /// `unguarded` (no guard), `without_change` (no change guard), `without_model` (no model
-/// guard).
+/// guard), `auto` (the default with the automatic horizon ladder).
 fn calibrated(
     reg_cfg: RegressionConfig,
     mode: &str,
@@ -62,6 +64,10 @@ fn calibrated(
         "unguarded" => default.unguarded(),
         "without_change" => Calibration { plant_change: false, ..default },
         "without_model" => Calibration { hidden_dynamics: false, nonlinearity: false, ..default },
+        "auto" => {
+            cfg.ladder = Some(HorizonLadder::automatic());
+            default
+        }
         _ => return Ok(None),
     };
     cfg.calibration = Some(cal);

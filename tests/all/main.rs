@@ -13,6 +13,7 @@ mod compose;
 mod crate_graph;
 mod dynamics;
 mod identification;
+mod ladder;
 mod network;
 mod network_coupling;
 mod nonlinear;

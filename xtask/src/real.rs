@@ -268,6 +268,14 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
         }
         if rec.name == "exchanger" {
             units.push_str(&units_check(&config, &csv, &affine)?);
+            // The automatic horizons, with only the columns, gain and margin set: the same
+            // verdict in K.
+            let auto = grid::minimal(&config, None)?;
+            let _ = writeln!(
+                units,
+                "With only the columns, gain and margin set (`horizon` and `window` \"auto\"):\n"
+            );
+            units.push_str(&units_check(&auto, &csv, &certify_text(&auto, &csv, rec.name)?)?);
         }
         grids.push_str(&grid::grid(rec.name, &config, &csv)?);
     }

@@ -38,6 +38,10 @@ mod access;
 mod calibrated_step;
 #[cfg(feature = "checkpoint")]
 pub(crate) mod checkpoint;
+mod closed;
+mod ladder_step;
+use closed::closed_reason;
+pub use ladder_step::RungStatus;
 #[cfg(feature = "checkpoint")]
 mod pack;
 mod verify;
@@ -49,7 +53,7 @@ use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, l
 use crate::calibrated::CalibratedState;
 use crate::gap::{Gap, GapDetector};
 use crate::{
-    AmbiguityLevel, BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Fit, Gate, GateState,
+    AmbiguityLevel, BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Fit, Gate,
     NotCertified, Verdict, certificate_value,
 };
 
@@ -86,6 +90,19 @@ pub struct Certifier {
     gain: Vec<f64>,
     /// Scratch: one sample's outputs in the metric's units (empty without a metric).
     scaled: Vec<f64>,
+    /// A [`HorizonLadder`](crate::HorizonLadder)'s other rungs, in the ladder's order without
+    /// this certifier's horizon; each computes the calibrated certificate only.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    rungs: Vec<Certifier>,
+    /// Every rung's latest calibrated verdict, in the ladder's order (this certifier's too).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    rung_verdicts: Vec<Verdict>,
+    /// The rung whose look stands (an index into `rungs`; `None`: this certifier's own).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    standing: Option<usize>,
+    /// A rung of another certifier's ladder: the paper's estimate is not computed.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    calibrated_only: bool,
 }
 
 /// The regression's outcome, reduced to what the certificate needs.
@@ -127,7 +144,7 @@ impl Certifier {
             nonlinear_gate: Gate::new(cfg.margin, cfg.consecutive),
             calibrated_window: None,
             calibrated: cfg
-                .calibration
+                .calibration_in_effect()
                 .map(|c| {
                     let coupling = cfg.couplings.as_ref();
                     CalibratedState::new(c, cfg.nonlinear, coupling, &cfg.regression, &gain)
@@ -145,6 +162,10 @@ impl Certifier {
             work: vec![0.0; p * p],
             eig_work: vec![0.0; linalg::eig_work_len(p)],
             scaled: vec![0.0; if cfg.metric.is_some() { p } else { 0 }],
+            rungs: ladder_step::rungs(&cfg)?,
+            rung_verdicts: ladder_step::verdicts(&cfg),
+            standing: None,
+            calibrated_only: false,
             gain,
             cfg,
         })
@@ -213,7 +234,8 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let (calibrated_gate, mut calibrated_reason, best, nl) = self.calibrated_step(t, y);
+        let ((mut calibrated, calibrated_window, calibrated_horizon), nl) =
+            self.calibrated_step(t, y, u);
         let (nonlinear_gate, mut nonlinear_reason, nl_best) = nl;
         let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
         let mut wass_reason = if amb.is_none() {
@@ -223,7 +245,7 @@ impl Certifier {
         };
         if let Some(g) = gap {
             let reasons =
-                [&mut reason, &mut wass_reason, &mut calibrated_reason, &mut nonlinear_reason];
+                [&mut reason, &mut wass_reason, &mut calibrated.reason, &mut nonlinear_reason];
             self.gap_reasons(g, amb.is_some(), reasons);
         }
         Ok(Evidence {
@@ -247,13 +269,9 @@ impl Certifier {
                 open: wass_gate.open,
                 reason: wass_reason,
             },
-            calibrated: Verdict {
-                value: best.map(|b| b.value),
-                radius: best.map(|b| b.radius),
-                open: calibrated_gate.open,
-                reason: calibrated_reason,
-            },
-            calibrated_window: best.map(|b| b.window),
+            calibrated,
+            calibrated_window,
+            calibrated_horizon,
             nonlinear: Verdict {
                 value: nl_best.map(|b| b.value),
                 radius: nl_best.map(|b| b.radius),
@@ -302,6 +320,7 @@ impl Certifier {
     /// ```
     pub fn gap(&mut self) {
         self.gap.force();
+        self.rungs.iter_mut().for_each(Self::gap);
     }
 
     /// A sample that cannot be used (a NaN or infinite value, a time not after the previous
@@ -318,6 +337,7 @@ impl Certifier {
         self.calibrated_gate.update(t, None);
         self.nonlinear_gate.update(t, None);
         self.calibrated_window = None;
+        self.skip_rungs(t);
         Evidence {
             t,
             columns: self.regression.columns(),
@@ -327,6 +347,7 @@ impl Certifier {
             wasserstein: closed,
             calibrated: closed,
             calibrated_window: None,
+            calibrated_horizon: None,
             nonlinear: closed,
             nonlinear_window: None,
             nonlinear_region: None,
@@ -359,6 +380,9 @@ impl Certifier {
     /// of the `p = 1` step, `examples/step_profile`).
     #[inline(always)]
     fn evaluate(&mut self, scale: f64) -> Evaluated {
+        if self.calibrated_only {
+            return (None, self.regression.columns(), None, None);
+        }
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
         if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {
             self.evaluate_dims(1, 1, scale)
@@ -464,27 +488,5 @@ fn form_sym_jcl(theta: &[f64], k: &[f64], jcl: &mut [f64], sym: &mut [f64], p: u
         for j in i..p {
             sym[i * p + j] = 0.5 * (jcl[i * p + j] + jcl[j * p + i]);
         }
-    }
-}
-
-/// Why a gate is closed after this sample (`None` when it is open).
-fn closed_reason(
-    blocked: Option<NotCertified>,
-    cert: Option<f64>,
-    state: &GateState,
-    gate: &Gate,
-) -> Option<NotCertified> {
-    if state.open {
-        return None;
-    }
-    if blocked.is_some() {
-        return blocked;
-    }
-    match cert {
-        Some(c) if c >= gate.margin() => {
-            Some(NotCertified::Accumulating { streak: state.streak, needed: gate.needed() })
-        }
-        Some(c) => Some(NotCertified::BelowMargin { certificate: c, margin: gate.margin() }),
-        None => Some(NotCertified::InsufficientExcitation),
     }
 }

@@ -68,6 +68,10 @@ pub struct CertifierConfig {
     /// the identity metric of the units as logged. Regions are reported in the logged units.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metric: Option<Vec<f64>>,
+    /// The calibrated certificate at several horizons side by side, the risk split over them
+    /// ([`HorizonLadder`](crate::HorizonLadder)); `None`: at the regression's horizon only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ladder: Option<crate::HorizonLadder>,
 }
 
 fn default_gap_factor() -> f64 {
@@ -101,6 +105,7 @@ impl CertifierConfig {
             nonlinear: None,
             couplings: None,
             metric: None,
+            ladder: None,
         }
     }
 
@@ -198,6 +203,15 @@ impl CertifierConfig {
         }
         if let Some(c) = &self.couplings {
             c.validate(&self.regression, &self.gain, self.calibration.is_some())?;
+        }
+        if let Some(l) = &self.ladder {
+            l.validate(self)?;
+            for &h in &l.horizons {
+                self.rung(h).validate().map_err(|e| CertifyError::InvalidConfig {
+                    field: "horizon",
+                    reason: format!("the ladder's rung at h = {h}: {e}"),
+                })?;
+            }
         }
         Ok(())
     }

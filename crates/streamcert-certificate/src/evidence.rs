@@ -359,6 +359,9 @@ pub struct Evidence {
     pub calibrated: Verdict,
     /// Window length `M_w` (columns) of that look.
     pub calibrated_window: Option<usize>,
+    /// The horizon `h` (samples per column) of that look: the regression's, or with a
+    /// [`HorizonLadder`](crate::HorizonLadder) the standing rung's.
+    pub calibrated_horizon: Option<usize>,
     /// Nonlinear certificate `min_y β̂(y) − c s(y)` over the region of the largest standing
     /// nonlinear look (see the [`nonlinear`](crate::nonlinear) module).
     pub nonlinear: Verdict,

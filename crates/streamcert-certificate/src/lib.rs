@@ -73,6 +73,7 @@ mod fixed;
 mod gap;
 mod gate;
 mod guard;
+mod ladder;
 mod look;
 pub mod nonlinear;
 mod radius;
@@ -83,18 +84,19 @@ pub use calibrated::{
     WindowLook, anchored_look_risk, calibrated_radius, look_risk, rank_one_variance_bound,
     t_quantile,
 };
-pub use certifier::Certifier;
 #[cfg(feature = "checkpoint")]
 pub use certifier::checkpoint::{
     CHECKPOINT_JSON_VERSION, CHECKPOINT_MAGIC, CHECKPOINT_PACKED_VERSION,
     CHECKPOINT_UNPACKED_VERSION, CHECKPOINT_VERSION, Encoding, Sealed, config_fingerprint, decode,
     encode, fnv1a64, seal, seal_value, unseal,
 };
+pub use certifier::{Certifier, RungStatus};
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use fixed::{Sig, SigRange};
 pub use gate::{Gate, GateState};
+pub use ladder::HorizonLadder;
 pub use nonlinear::{
     Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest, RegionBound,
 };

@@ -16,13 +16,14 @@ pub enum ColumnKind {
     Gate,
     /// Why a gate is closed (text).
     Reason,
-    /// The window length `M_w` of a look (absent before one).
+    /// A count that describes a look: its window length `M_w` (columns), or for
+    /// `calibrated_horizon` its horizon `h` (samples per column); absent before a look.
     Window,
 }
 
 /// Every evidence column with what it holds, in the order of [`EvidenceRow`] and the CSV
 /// header: the one list the header, the Python package's arrays and their kinds come from.
-pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 23] = {
+pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 24] = {
     use ColumnKind::{Gate, Number, Reason, Window};
     [
         ("t", Number),
@@ -40,6 +41,7 @@ pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 23] = {
         ("rho_calibrated", Number),
         ("cert_calibrated", Number),
         ("calibrated_window", Window),
+        ("calibrated_horizon", Window),
         ("calibrated_open", Gate),
         ("reason_calibrated", Reason),
         ("cert_nonlinear", Number),
@@ -52,13 +54,13 @@ pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 23] = {
 };
 
 /// The column names of [`EvidenceRow`], in order (the CSV header).
-pub const EVIDENCE_COLUMNS: [&str; 23] = of_kind(None);
+pub const EVIDENCE_COLUMNS: [&str; 24] = of_kind(None);
 
 /// The [`ColumnKind::Number`] columns, in order ([`EvidenceRow::numbers`] gives their values).
 pub const NUMBER_COLUMNS: [&str; 13] = of_kind(Some(ColumnKind::Number));
 
 /// The [`ColumnKind::Window`] columns, in order.
-pub const WINDOW_COLUMNS: [&str; 2] = of_kind(Some(ColumnKind::Window));
+pub const WINDOW_COLUMNS: [&str; 3] = of_kind(Some(ColumnKind::Window));
 
 /// The names of the columns of `kind` (every column for `None`), in order; a count that is
 /// not `N` fails the build.
@@ -161,6 +163,8 @@ pub struct EvidenceRow {
     pub cert_calibrated: Option<f64>,
     /// `M_w`.
     pub calibrated_window: Option<usize>,
+    /// `h` of the standing calibrated look ([`Evidence::calibrated_horizon`]).
+    pub calibrated_horizon: Option<usize>,
     /// Calibrated gate, 0 or 1.
     pub calibrated_open: u8,
     /// Why the calibrated gate is closed.
@@ -220,6 +224,7 @@ impl From<&Evidence> for EvidenceRow {
             rho_calibrated: e.calibrated.radius,
             cert_calibrated: e.calibrated.value,
             calibrated_window: e.calibrated_window,
+            calibrated_horizon: e.calibrated_horizon,
             calibrated_open: u8::from(e.calibrated.open),
             reason_calibrated: e.calibrated.reason.map(ReasonText),
             cert_nonlinear: e.nonlinear.value,
@@ -259,6 +264,7 @@ mod tests {
             reason_gauss: None,
             reason_wass: Some(ReasonText(NotCertified::WarmingUp { columns: 3, needed: 150 })),
             calibrated_window: Some(600),
+            calibrated_horizon: Some(5),
             calibrated_open: 1,
             reason_calibrated: None,
             nonlinear_window: None,
@@ -279,6 +285,6 @@ mod tests {
         let kinds = |k: ColumnKind| EVIDENCE_COLUMN_KINDS.iter().filter(move |c| c.1 == k);
         assert!(kinds(ColumnKind::Gate).all(|(n, _)| n.ends_with("_open")));
         assert!(kinds(ColumnKind::Reason).all(|(n, _)| n.starts_with("reason_")));
-        assert_eq!(WINDOW_COLUMNS, ["calibrated_window", "nonlinear_window"]);
+        assert_eq!(WINDOW_COLUMNS, ["calibrated_window", "calibrated_horizon", "nonlinear_window"]);
     }
 }

@@ -45,17 +45,22 @@ fn the_calibrated_certificate_is_the_default_verdict() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
     assert!(lines[0].contains(
-        ",rho_calibrated,cert_calibrated,calibrated_window,calibrated_open,reason_calibrated,"
+        ",rho_calibrated,cert_calibrated,calibrated_window,calibrated_horizon,calibrated_open,\
+         reason_calibrated,"
     ));
     assert!(lines[0].ends_with(",region_lo_calibrated_y_b,region_hi_calibrated_y_b"));
     let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
-    assert_eq!(last.len(), 23 + 6);
+    assert_eq!(last.len(), 24 + 6);
     let rho_cal: f64 = last[12].parse().expect("rho_calibrated");
     let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
     let window: usize = last[14].parse().expect("calibrated_window");
-    assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200, 2400].contains(&window));
+    let h: usize = last[15].parse().expect("calibrated_horizon");
+    // The automatic choice: a rung at h = 1, 2, 5 or 10 with 30 blocks of h columns per base
+    // window, its sliding and anchored windows longer.
+    assert!([1, 2, 5, 10].contains(&h), "{last:?}");
+    assert!(rho_cal > 0.0 && cert_cal.is_finite() && window >= 30 * h, "{last:?}");
     // The gate is open exactly when no reason is given.
-    assert_eq!(last[15] == "1", last[16].is_empty(), "{last:?}");
+    assert_eq!(last[16] == "1", last[17].is_empty(), "{last:?}");
     // The summary's first line is the calibrated verdict, with its risk.
     let stderr = text(&out.stderr);
     let first = stderr.lines().next().expect("a summary");

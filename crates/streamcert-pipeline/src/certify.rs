@@ -23,10 +23,12 @@ pub use crate::output::{Flush, Format, Header};
 pub use crate::reasons::{reason_phrase, reason_words};
 use crate::source::{Next, Source};
 use crate::watch::{NoWatch, Watch};
+pub use horizons::HorizonCount;
 pub use summary::Summary;
 
 mod batched;
 mod checkpoint;
+mod horizons;
 mod summary;
 use crate::output::{EvidenceWriter, region_columns};
 pub(crate) use checkpoint::write_atomic;
@@ -423,6 +425,7 @@ pub fn record(
     summary.first_deploy_nonlinear = first(ev.nonlinear.open, summary.first_deploy_nonlinear);
     summary.last_time = Some(t);
     summary.count_calibrated(t, ev);
+    summary.count_rungs(t, ev, cert.rungs_status());
     region.extend(cert.region());
     if cert.config().calibration.is_some() {
         let p = cert.config().regression.outputs;

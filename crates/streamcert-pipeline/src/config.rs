@@ -9,9 +9,11 @@ use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 
 use crate::CliError;
 
+mod choice;
 mod nonlinear;
 mod required;
 
+use choice::Choice;
 use nonlinear::NonlinearSection;
 use required::required_message;
 pub use required::{REQUIRED_KEYS, REQUIRED_VALUE, g5_node_b, unset_required};
@@ -222,8 +224,8 @@ fn default_consecutive() -> usize {
 #[serde(deny_unknown_fields, default)]
 struct Regression {
     model: Model,
-    window: usize,
-    horizon: usize,
+    window: Choice,
+    horizon: Choice,
     ridge: f64,
     min_columns: Option<usize>,
     input_integral: InputIntegral,
@@ -234,8 +236,8 @@ impl Default for Regression {
     fn default() -> Self {
         Self {
             model: Model::Affine,
-            window: 150,
-            horizon: 5,
+            window: Choice::Auto,
+            horizon: Choice::Auto,
             ridge: 1e-4,
             min_columns: None,
             input_integral: InputIntegral::ZeroOrderHold,
@@ -354,12 +356,13 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     let f: File = toml::from_str(text).map_err(|e| bad(toml_message(&e, text, place)))?;
     let (p, m) = check_shape(&f).map_err(&bad)?;
     let r = &f.regression;
+    let (window, horizon, ladder) = choice::resolve(r.window, r.horizon, f.calibration.enabled);
     let reg = RegressionConfig {
-        min_columns: r.min_columns.unwrap_or(r.window),
+        min_columns: r.min_columns.unwrap_or(window),
         input_integral: r.input_integral,
         estimator: r.estimator,
         model: r.model,
-        ..RegressionConfig::new(p, m, r.window, r.horizon, r.ridge)
+        ..RegressionConfig::new(p, m, window, horizon, r.ridge)
     };
     let mut certifier = CertifierConfig::new(
         reg,
@@ -378,6 +381,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     if f.calibration.enabled {
         certifier.calibration = Some(f.calibration.calibration());
     }
+    certifier.ladder = ladder;
     certifier.nonlinear = f.nonlinear.config().map_err(&bad)?;
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.

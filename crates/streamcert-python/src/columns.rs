@@ -29,7 +29,7 @@ pub struct EvidenceColumns {
     /// One vector per [`GATES`] name: whether that gate is open.
     pub open: [Vec<bool>; 4],
     /// One vector per [`WINDOW_COLUMNS`] name.
-    pub windows: [Vec<f64>; 2],
+    pub windows: [Vec<f64>; WINDOW_COLUMNS.len()],
     /// One column per [`GATES`] name: why that gate is closed.
     pub reasons: [ReasonColumn; 4],
     /// The region columns' names (`region_lo_<channel>`, `region_hi_<channel>`, as in the CSV).
@@ -79,7 +79,7 @@ impl EvidenceColumns {
             open.push(g.open);
             reason.push(g.reason);
         }
-        let windows = [r.calibrated_window, r.nonlinear_window];
+        let windows = [r.calibrated_window, r.calibrated_horizon, r.nonlinear_window];
         for (col, w) in self.windows.iter_mut().zip(windows) {
             col.push(w.map_or(f64::NAN, |w| w as f64));
         }

@@ -19,8 +19,9 @@ const HORIZONS: [usize; 4] = [1, 2, 5, 10];
 const WINDOWS: [usize; 5] = [40, 60, 100, 150, 300];
 
 /// The record's configuration reduced to its `[columns]` section, its `gain` and its
-/// `margin`, with `window = m` and `horizon = h`.
-fn minimal(config: &str, h: usize, m: usize) -> Result<String> {
+/// `margin`, with `window = m` and `horizon = h`, or (`None`) both left at their default,
+/// `"auto"`.
+pub(super) fn minimal(config: &str, fixed: Option<(usize, usize)>) -> Result<String> {
     let mut lines = config.lines().skip_while(|l| l.trim() != "[columns]");
     let mut columns = String::new();
     if let Some(head) = lines.next() {
@@ -38,8 +39,10 @@ fn minimal(config: &str, h: usize, m: usize) -> Result<String> {
             .map(|l| l.split('#').next().unwrap_or(l).trim().to_string())
             .with_context(|| format!("no `{key}` in the record's configuration"))
     };
+    let regression = fixed
+        .map_or(String::new(), |(h, m)| format!("\n[regression]\nwindow = {m}\nhorizon = {h}\n"));
     Ok(format!(
-        "{columns}\n[controller]\n{}\n\n[certificate]\n{}\n\n[regression]\nwindow = {m}\nhorizon = {h}\n",
+        "{columns}\n[controller]\n{}\n\n[certificate]\n{}\n{regression}",
         line("gain")?,
         line("margin")?,
     ))
@@ -51,7 +54,7 @@ pub(super) fn grid(name: &str, config: &str, csv: &str) -> Result<String> {
     for h in HORIZONS {
         let mut row = vec![format!("h = {h}")];
         for m in WINDOWS {
-            let text = minimal(config, h, m)?;
+            let text = minimal(config, Some((h, m)))?;
             // A window shorter than the fit allows (`h (p + m + 1)` columns at least for
             // every window) is refused by the configuration's validation; any other error
             // stops the report.
@@ -74,6 +77,16 @@ pub(super) fn grid(name: &str, config: &str, csv: &str) -> Result<String> {
         "{name}: the share of rows with the calibrated gate open at each fixed horizon `h` and base window `M`, every other setting at its default (only the record's columns, gain and margin kept). A sensitivity report: trying pairs until one certifies spends the risk once per pair.\n"
     );
     let _ = writeln!(s, "{}", markdown(&header, &rows));
+    let auto = certify_text(&minimal(config, None)?, csv, name)?;
+    let _ = writeln!(
+        s,
+        "With `horizon` and `window` left at their default, `\"auto\"` (the calibrated certificate at h = 1, 2, 5 and 10 side by side, M = 30 h, each at risk δ/4): the gate open on {:.1} % of rows ({}).\n\n{}\n",
+        100.0 * auto.summary.share_calibrated(),
+        auto.summary
+            .first_deploy_calibrated
+            .map_or("never opened".into(), |t| format!("first at t = {t} s")),
+        auto.summary.horizons_line().unwrap_or_default(),
+    );
     Ok(s)
 }
 
@@ -86,10 +99,12 @@ mod tests {
     #[test]
     fn the_reduced_configuration_keeps_columns_gain_and_margin() {
         let config = "# a record\n[columns]\ntime = \"t\"\noutputs = [\"y\"]\n\n[controller]\ngain = [[0.5]]  # K\n\n[certificate]\nconservatism = 0.1\nmargin = 0.05\n\n[regression]\nwindow = 150\nhorizon = 5\n";
-        let text = minimal(config, 10, 60).unwrap();
+        let text = minimal(config, Some((10, 60))).unwrap();
         assert!(text.starts_with("[columns]\ntime = \"t\"\noutputs = [\"y\"]\n"), "{text}");
         assert!(text.contains("gain = [[0.5]]\n") && text.contains("margin = 0.05\n"), "{text}");
         assert!(text.contains("window = 60\nhorizon = 10\n") && !text.contains("conservatism"));
-        assert!(minimal("[columns]\n", 1, 40).is_err());
+        assert!(minimal("[columns]\n", Some((1, 40))).is_err());
+        let auto = minimal(config, None).unwrap();
+        assert!(!auto.contains("[regression]") && auto.contains("margin = 0.05\n"), "{auto}");
     }
 }

@@ -1,7 +1,7 @@
 //! The study's cells: the linear loops, their candidate gains and truths, and the
 //! certifier settings each runs.
 
-use streamcert_certificate::{Calibration, CertifierConfig, RiskSplit};
+use streamcert_certificate::{Calibration, CertifierConfig, HorizonLadder, RiskSplit};
 use streamcert_dynamics::{LinearScenario, Process};
 use streamcert_regression::{InputIntegral, Model, RegressionConfig};
 
@@ -101,6 +101,12 @@ impl Cell {
             } else if self.filed_windows {
                 filed
             } else {
+                // The default: the horizon ladder (`horizon = "auto"`), the base window
+                // `window / h` blocks of h columns at every horizon.
+                cfg.ladder = self.window.is_multiple_of(H).then(|| HorizonLadder {
+                    blocks: Some(self.window / H),
+                    ..HorizonLadder::automatic()
+                });
                 cal
             });
         }

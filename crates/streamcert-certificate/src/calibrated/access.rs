@@ -13,6 +13,11 @@ impl CalibratedState {
         self.nonlinear.as_ref().map_or(&[], |n| n.looks())
     }
 
+    /// The calibration the state runs at (with a horizon ladder, at the rung's risk).
+    pub(crate) fn calibration(&self) -> super::Calibration {
+        self.cal
+    }
+
     /// The region (output ranges) of the standing look's data: the anchored window's when
     /// it stands, else that of window length `window`'s latest look.
     pub(crate) fn region(&self, window: usize) -> &[Interval] {

@@ -132,6 +132,18 @@ impl Calibration {
         Ok(())
     }
 
+    /// The smallest window (columns) [`check_window`](Self::check_window) accepts for `reg`'s
+    /// dimensions and horizon: `h · (unknowns + 2)` with the guards' extra regressors, or the
+    /// batched fit's `h · (b (unknowns + 1) + 1)` where that is larger.
+    pub(crate) fn smallest_valid_window(&self, reg: &RegressionConfig) -> usize {
+        let d = reg.outputs
+            + reg.inputs
+            + usize::from(reg.model == streamcert_regression::Model::Affine);
+        let min = self.smallest_window(reg.horizon, d);
+        let guarded = Self::min_window(reg.horizon, d + self.guard_unknowns(reg.outputs));
+        min.max(guarded)
+    }
+
     /// The window against the fits it must hold.
     fn check_window(&self, reg: &RegressionConfig) -> Result<(), CertifyError> {
         // The affine model's intercept is one more unknown; the model guard's larger fit has

@@ -40,7 +40,7 @@ impl Certifier {
         match kind {
             CertificateKind::Gaussian => self.gauss.state(),
             CertificateKind::Wasserstein => self.wass.state(),
-            CertificateKind::Calibrated => self.calibrated_gate.state(),
+            CertificateKind::Calibrated => self.calibrated_gate_state(),
             CertificateKind::Nonlinear => self.nonlinear_gate.state(),
         }
     }
@@ -136,7 +136,9 @@ impl Certifier {
     /// samples of its window at its look (empty when none stands).
     #[must_use]
     pub fn calibrated_region(&self) -> impl ExactSizeIterator<Item = Interval> + '_ {
-        let region = match (&self.calibrated, self.calibrated_window) {
+        // With a horizon ladder, the standing rung's look (its outputs in the same units).
+        let standing = self.standing_rung();
+        let region = match (&standing.calibrated, standing.calibrated_window) {
             (Some(c), Some(w)) => c.region(w),
             _ => &[],
         };

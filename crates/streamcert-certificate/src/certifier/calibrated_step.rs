@@ -5,9 +5,12 @@
 use streamcert_regression::Interval;
 
 use super::{Certifier, closed_reason};
-use crate::{GateState, NotCertified};
+use crate::{GateState, NotCertified, Verdict};
 
 pub(super) type NonlinearStep = (GateState, Option<NotCertified>, Option<Standing>);
+
+/// The calibrated verdict the evidence reports, with its look's window and horizon.
+pub(super) type CalibratedStep = (Verdict, Option<usize>, Option<usize>);
 
 /// What the evidence needs of a standing look: its certificate, radius, window length and,
 /// for the nonlinear certificate, region (not the whole look, which is copied otherwise).
@@ -21,10 +24,28 @@ pub(super) struct Standing {
 
 impl Certifier {
     /// Feed the newest column to the calibrated (and nonlinear) certificate, update their
-    /// gates, say why closed. `y`: the sample's outputs in the metric's units (the nonlinear
-    /// gate stays closed while `y` lies outside the standing look's region, which is all that
-    /// look speaks for).
+    /// gates, say why closed; with a horizon ladder, feed the sample to the other rungs and
+    /// combine (`ladder_step.rs`). `y`: the sample's outputs in the metric's units (the
+    /// nonlinear gate stays closed while `y` lies outside the standing look's region, which
+    /// is all that look speaks for), `u` its inputs.
     pub(super) fn calibrated_step(
+        &mut self,
+        t: f64,
+        y: &[f64],
+        u: &[f64],
+    ) -> (CalibratedStep, NonlinearStep) {
+        let (gate, reason, best, nl) = self.own_calibrated_step(t, y);
+        let own = Verdict {
+            value: best.map(|b| b.value),
+            radius: best.map(|b| b.radius),
+            open: gate.open,
+            reason,
+        };
+        (self.ladder_step(t, y, u, (own, best.map(|b| b.window))), nl)
+    }
+
+    /// [`calibrated_step`](Self::calibrated_step) at this certifier's own horizon.
+    fn own_calibrated_step(
         &mut self,
         t: f64,
         y: &[f64],

@@ -47,6 +47,7 @@ impl Certifier {
             state.check(c.cfg.nonlinear, c.cfg.couplings.as_ref(), &c.cfg.regression, &gain)?;
             state.rebuild();
         }
+        c.verify_rungs()?;
         Ok(c)
     }
 }

@@ -105,6 +105,13 @@ pub struct Summary {
     /// the resume.
     #[serde(skip)]
     pub trace: Option<crate::picture::Trace>,
+    /// With a horizon ladder, each horizon's counts (empty without one).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub horizons: Vec<super::horizons::HorizonCount>,
+    /// With a horizon ladder, the horizon `h` whose look the open calibrated verdict was at
+    /// the last row.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated_horizon: Option<usize>,
 }
 
 impl Summary {
@@ -198,6 +205,7 @@ impl Summary {
         self.nonlinear_region = None;
         self.nonlinear_last_reason = Some(NotCertified::SkippedSample);
         self.count_reason(NotCertified::SkippedSample);
+        self.count_rungs_skip();
     }
 
     /// One row closed by `r`: counted by kind, and the latest reason.
@@ -346,9 +354,10 @@ impl Summary {
                 } else {
                     "the nonlinearity guard is off"
                 };
+                let at = self.calibrated_horizon.map_or(String::new(), |h| format!(" at h = {h}"));
                 format!(
-                    "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate, risk \
-                     delta = {} over the run), over the region {}; the risk assumes dynamics \
+                    "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate{at}, \
+                     risk delta = {} over the run), over the region {}; the risk assumes dynamics \
                      linear over that region ({scope})",
                     when(Some(since)),
                     Sig(cal.delta),
@@ -379,6 +388,7 @@ impl Summary {
                 first(self.first_deploy_calibrated),
             ));
         }
+        lines.extend(self.horizons_line());
         if cfg.nonlinear.is_some() {
             lines.push(format!(
                 "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % \
@@ -457,6 +467,8 @@ impl Summary {
             "warning": self.units_warning(cfg),
             "hint": self.time_unit_hint(),
             "source": self.source,
+            "horizons": self.horizons,
+            "calibrated_horizon": self.calibrated_horizon,
         })
     }
 }

@@ -58,7 +58,9 @@ fn calibration_section_selects_the_calibrated_certificate() {
     // A window below h (u + 2) has no calibrated bound: refused, naming the smallest. With
     // the guards u = p + m + 1 + 2p = 5 (the nonlinearity guard's fit: 35 columns); through
     // the origin 30; without the guards 25 and 20.
-    let short = on.replace("window = 150 ", "window = 10 ");
+    let short = on
+        .replace("window = \"auto\" ", "window = 10 ")
+        .replace("horizon = \"auto\" ", "horizon = 5 ");
     let err = parse(&short, "x").unwrap_err().to_string();
     assert!(err.contains("smallest valid window is 35"), "{err}");
     let origin = short.replace("model = \"affine\"", "model = \"through_origin\"");

@@ -266,8 +266,11 @@ pub fn parse(text: &str, path: &str) -> Result<NetConfig, CliError> {
         dims.push((c.columns.outputs.len(), c.columns.inputs.len()));
         let mut certifier = c.certifier;
         if !blocks.is_empty() {
-            // The risk is set by `split_risk` below.
+            // The risk is set by `split_risk` below. Coupling gains are estimated at one
+            // horizon: a subsystem whose gains are estimated runs at the regression's own
+            // (`horizon = "auto"`: the paper's h = 5) without a horizon ladder.
             certifier.couplings = Some(CouplingConfig { blocks, delta: 0.5 });
+            certifier.ladder = None;
         }
         specs.push(SubsystemSpec::new(&s.name, certifier));
     }

@@ -188,6 +188,8 @@ impl CsvRows {
         sep(self);
         self.uint(row.calibrated_window);
         sep(self);
+        self.uint(row.calibrated_horizon);
+        sep(self);
         self.uint(Some(usize::from(row.calibrated_open)));
         sep(self);
         self.reason(2, row.reason_calibrated.map(|r| r.0));
@@ -265,7 +267,13 @@ mod tests {
         (
             (number(), number(), number(), number(), number(), number(), number(), number()),
             (any::<bool>(), any::<bool>(), reason(), reason(), number(), number()),
-            (proptest::option::of(0usize..100_000), any::<bool>(), reason(), number()),
+            (
+                proptest::option::of(0usize..100_000),
+                any::<bool>(),
+                reason(),
+                number(),
+                proptest::option::of(1usize..100),
+            ),
             (proptest::option::of(0usize..9), any::<bool>(), reason(), number(), number()),
         )
             .prop_map(|(a, b, c, d)| EvidenceRow {
@@ -284,6 +292,7 @@ mod tests {
                 rho_calibrated: b.4,
                 cert_calibrated: b.5,
                 calibrated_window: c.0,
+                calibrated_horizon: c.4,
                 calibrated_open: u8::from(c.1),
                 reason_calibrated: c.2,
                 cert_nonlinear: c.3,

@@ -280,6 +280,11 @@ impl PyEvidence {
     fn calibrated_window(&self) -> Option<usize> {
         self.row.calibrated_window
     }
+    /// The calibrated look's horizon `h` (with `horizon = "auto"`, the standing horizon's).
+    #[getter]
+    fn calibrated_horizon(&self) -> Option<usize> {
+        self.row.calibrated_horizon
+    }
     /// The nonlinear certificate.
     #[getter]
     fn cert_nonlinear(&self) -> Option<f64> {
@@ -327,6 +332,7 @@ impl PyEvidence {
             d.set_item(format!("reason_{gate}"), reason.map(|r| r.to_string()))?;
         }
         d.set_item("calibrated_window", r.calibrated_window)?;
+        d.set_item("calibrated_horizon", r.calibrated_horizon)?;
         d.set_item("nonlinear_window", r.nonlinear_window)?;
         Ok(d)
     }

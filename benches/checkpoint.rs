@@ -28,7 +28,7 @@ fn certifier(auto: bool) -> Certifier {
     let mut toml = include_str!("../examples/data/certify_b.toml").to_string();
     if auto {
         toml = toml
-            .replace("window = 150", "window = \"auto\"")
+            .replace("\nwindow = 150", "\nwindow = \"auto\"")
             .replace("horizon = 5", "horizon = \"auto\"");
     }
     let cfg = streamcert_pipeline::config::parse(&toml, "certify_b.toml").expect("valid");

@@ -140,7 +140,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
             }
-            "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model" => {
+            "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model"
+            | "auto" => {
                 let Some(cert) = cal.as_mut() else { unreachable!("built for these modes") };
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));

@@ -84,6 +84,11 @@ enum Command {
         /// written to POWER.md.
         #[arg(long)]
         only_power: Option<usize>,
+        /// The calibrated certificate's horizon in the default cells: `fixed` (h = 5, the
+        /// default) or `auto` (the horizon ladder of `horizon = "auto"`: h = 1, 2, 5, 10,
+        /// `M / 5` blocks of h columns per base window, δ/4 each), on the same seeds.
+        #[arg(long, default_value = "fixed", value_parser = ["fixed", "auto"])]
+        horizon: String,
     },
     /// The two public plant records of examples/real/ (the heat exchanger and the cascaded
     /// tanks), checked by SHA-256, converted, certified, and the exchanger compared in °C
@@ -276,6 +281,9 @@ fn main() -> Result<()> {
         return Ok(());
     };
     plot::init_fonts()?;
+    if let Command::Validity { horizon, .. } = &command {
+        validity::set_horizon_auto(horizon == "auto");
+    }
     match command {
         Command::Reproduce(run) => report::reproduce(&run.options()?, true, true),
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),

@@ -16,6 +16,7 @@ use crate::common::{markdown, median, progress, write};
 mod cells;
 mod change;
 mod held;
+pub(crate) use cells::set_horizon_auto;
 use cells::{Cell, near_margin_cells, power_cells};
 
 const DELTA: f64 = 0.01;
@@ -166,6 +167,11 @@ fn refusal_share(results: &[RunResult]) -> String {
     format!("{:.1} %", 100.0 * weak as f64 / samples)
 }
 
+/// The `--horizon` flag as the command line gave it (empty for the default, `fixed`).
+fn flag() -> &'static str {
+    if cells::horizon_auto() { " --horizon auto" } else { "" }
+}
+
 /// Two-sided 95 % Clopper–Pearson interval for `k` events in `n` runs.
 pub(crate) fn clopper_pearson(k: usize, n: usize) -> (f64, f64) {
     let lo = if k == 0 {
@@ -248,7 +254,8 @@ pub(crate) fn held_only(runs: usize, out: &Path) -> Result<()> {
     write(
         &out.join("HELD.md"),
         &format!(
-            "# Held inputs and units\n\nProduced by `cargo xtask validity --only-held {runs}`.\n\n{s}"
+            "# Held inputs and units\n\nProduced by `cargo xtask validity --only-held {runs}{}`.\n\n{s}",
+            flag()
         ),
     )
 }
@@ -341,7 +348,10 @@ pub(crate) fn power_only(runs: usize, out: &Path) -> Result<()> {
     bar.finish_and_clear();
     write(
         &out.join("POWER.md"),
-        &format!("# Power\n\nProduced by `cargo xtask validity --only-power {runs}`.\n\n{s}"),
+        &format!(
+            "# Power\n\nProduced by `cargo xtask validity --only-power {runs}{}`.\n\n{s}",
+            flag()
+        ),
     )
 }
 
@@ -397,7 +407,13 @@ pub(crate) fn run(runs: usize, out: &Path) -> Result<()> {
     let mut s = String::new();
     let _ = writeln!(
         s,
-        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (the affine model: an intercept in every regression; the guards: hidden dynamics, nonlinearity, plant change; the anchored window, every block since the start (or a change point), looking at sizes M·√2^(j−1) at 0.9 δ of the risk; windows doubling from M until the longest holds 200 blocks of h columns, at least five, each at an equal share of the other 0.1 δ; looks every half window; instrument lag 1). `guard closed`: the share of samples whose calibrated gate a guard held closed (its reason is a guard's: false closings on the first-order linear cells), and of those the hidden-dynamics guard's alone. The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.\n"
+        "# Validity of the calibrated certificate\n\nProduced by `cargo xtask validity --runs {runs}{}`. Each run: 40 s at dt = 0.01 of a linear system `dx = (A x + u) dt + E dη` measured as `y = x (+ sensor noise)`, explored by `u = K_e y + PRBS(±1, held 0.2 s)`; h = {H}, ridge 1e-4, zero-order-hold input integral, β_margin = {MARGIN}, δ = {DELTA}; calibrated certificate with its defaults (the affine model: an intercept in every regression; the guards: hidden dynamics, nonlinearity, plant change; the anchored window, every block since the start (or a change point), looking at sizes M·√2^(j−1) at 0.9 δ of the risk; windows doubling from M until the longest holds 200 blocks of h columns, at least five, each at an equal share of the other 0.1 δ; looks every half window; instrument lag 1). `guard closed`: the share of samples whose calibrated gate a guard held closed (its reason is a guard's: false closings on the first-order linear cells), and of those the hidden-dynamics guard's alone. The paper's certificate runs on the same data with c = 0.1, 0.3, 1 and its gate of the same length.{}\n",
+        flag(),
+        if cells::horizon_auto() {
+            " With `--horizon auto` every default cell runs the horizon ladder (`horizon = \"auto\"`: the calibrated certificate at h = 1, 2, 5 and 10 side by side, base windows of M/5 blocks of h columns, each at risk δ/4, the gate open when any is); the columns that read one certificate's looks (`q99`, `anchored look above β*`, `ρ / (z·sd)`, `spending`, `spread`, `7th anchored look`) read the h = 5 rung's."
+        } else {
+            ""
+        }
     );
     // Near-margin cells.
     let mut rows = Vec::new();

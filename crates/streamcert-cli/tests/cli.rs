@@ -55,10 +55,9 @@ fn the_calibrated_certificate_is_the_default_verdict() {
     let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
     let window: usize = last[14].parse().expect("calibrated_window");
     let h: usize = last[15].parse().expect("calibrated_horizon");
-    // The automatic choice: a rung at h = 1, 2, 5 or 10 with 30 blocks of h columns per base
-    // window, its sliding and anchored windows longer.
-    assert!([1, 2, 5, 10].contains(&h), "{last:?}");
-    assert!(rho_cal > 0.0 && cert_cal.is_finite() && window >= 30 * h, "{last:?}");
+    // The default horizon, h = 5, and one of its windows (M = 150 doubling to 16 M).
+    assert_eq!(h, 5, "{last:?}");
+    assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200, 2400].contains(&window));
     // The gate is open exactly when no reason is given.
     assert_eq!(last[16] == "1", last[17].is_empty(), "{last:?}");
     // The summary's first line is the calibrated verdict, with its risk.

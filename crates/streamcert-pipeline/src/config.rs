@@ -236,8 +236,8 @@ impl Default for Regression {
     fn default() -> Self {
         Self {
             model: Model::Affine,
-            window: Choice::Auto,
-            horizon: Choice::Auto,
+            window: Choice::Fixed(150),
+            horizon: Choice::Fixed(5),
             ridge: 1e-4,
             min_columns: None,
             input_integral: InputIntegral::ZeroOrderHold,

@@ -7,6 +7,19 @@ use streamcert_regression::{InputIntegral, Model, RegressionConfig};
 
 use super::{DELTA, H, MARGIN};
 
+/// `--horizon auto`: the default cells run the horizon ladder (set once, before any cell).
+static HORIZON_AUTO: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Run the default cells with the horizon ladder (`true`) or at `h = 5` (`false`).
+pub(crate) fn set_horizon_auto(auto: bool) {
+    HORIZON_AUTO.store(auto, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Whether the default cells run the horizon ladder.
+pub(super) fn horizon_auto() -> bool {
+    HORIZON_AUTO.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 /// One cell: a data-generating scenario, a candidate gain and a certifier setting.
 #[derive(Clone)]
 pub(super) struct Cell {
@@ -101,11 +114,10 @@ impl Cell {
             } else if self.filed_windows {
                 filed
             } else {
-                // The default: the horizon ladder (`horizon = "auto"`), the base window
-                // `window / h` blocks of h columns at every horizon.
-                cfg.ladder = self.window.is_multiple_of(H).then(|| HorizonLadder {
-                    blocks: Some(self.window / H),
-                    ..HorizonLadder::automatic()
+                // `--horizon auto`: the horizon ladder (`horizon = "auto"`), the base
+                // window `window / h` blocks of h columns at every horizon.
+                cfg.ladder = (horizon_auto() && self.window.is_multiple_of(H)).then(|| {
+                    HorizonLadder { blocks: Some(self.window / H), ..HorizonLadder::automatic() }
                 });
                 cal
             });

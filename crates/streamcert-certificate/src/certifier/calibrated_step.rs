@@ -28,6 +28,7 @@ impl Certifier {
     /// combine (`ladder_step.rs`). `y`: the sample's outputs in the metric's units (the
     /// nonlinear gate stays closed while `y` lies outside the standing look's region, which
     /// is all that look speaks for), `u` its inputs.
+    #[inline]
     pub(super) fn calibrated_step(
         &mut self,
         t: f64,
@@ -41,7 +42,12 @@ impl Certifier {
             open: gate.open,
             reason,
         };
-        (self.ladder_step(t, y, u, (own, best.map(|b| b.window))), nl)
+        let window = best.map(|b| b.window);
+        if self.rungs.is_empty() {
+            let h = self.cfg.regression.horizon;
+            return ((own, window, own.value.map(|_| h)), nl);
+        }
+        (self.ladder_step(t, y, u, (own, window)), nl)
     }
 
     /// [`calibrated_step`](Self::calibrated_step) at this certifier's own horizon.

@@ -53,9 +53,9 @@ pub struct RungStatus {
 }
 
 impl Certifier {
-    /// With a ladder, feed the sample to the other rungs and combine: `own` is this
-    /// certifier's calibrated verdict and window. Returns the calibrated verdict, window and
-    /// horizon the evidence reports. No allocation.
+    /// With a ladder (the caller checks that there are rungs), feed the sample to the other
+    /// rungs and combine: `own` is this certifier's calibrated verdict and window. Returns the
+    /// calibrated verdict, window and horizon the evidence reports. No allocation.
     pub(super) fn ladder_step(
         &mut self,
         t: f64,
@@ -63,11 +63,7 @@ impl Certifier {
         u: &[f64],
         own: (Verdict, Option<usize>),
     ) -> (Verdict, Option<usize>, Option<usize>) {
-        let h = self.cfg.regression.horizon;
-        let own_horizon = own.0.value.map(|_| h);
-        if self.rungs.is_empty() {
-            return (own.0, own.1, own_horizon);
-        }
+        let own_horizon = own.0.value.map(|_| self.cfg.regression.horizon);
         let at = self.own_slot();
         self.rung_verdicts[at] = own.0;
         let mut best = (own.0, own.1, own_horizon);

@@ -58,9 +58,7 @@ fn calibration_section_selects_the_calibrated_certificate() {
     // A window below h (u + 2) has no calibrated bound: refused, naming the smallest. With
     // the guards u = p + m + 1 + 2p = 5 (the nonlinearity guard's fit: 35 columns); through
     // the origin 30; without the guards 25 and 20.
-    let short = on
-        .replace("window = \"auto\" ", "window = 10 ")
-        .replace("horizon = \"auto\" ", "horizon = 5 ");
+    let short = on.replace("window = 150 ", "window = 10 ");
     let err = parse(&short, "x").unwrap_err().to_string();
     assert!(err.contains("smallest valid window is 35"), "{err}");
     let origin = short.replace("model = \"affine\"", "model = \"through_origin\"");
@@ -262,4 +260,28 @@ fn the_committed_example_is_g5_node_b() {
     let committed = include_str!("../../../../examples/data/g5_node_b.toml");
     assert_eq!(committed, g5_node_b());
     assert!(parse(committed, "g5_node_b.toml").is_ok());
+}
+
+/// `horizon = "auto"` and `window = "auto"`: the horizon ladder (h = 1, 2, 5, 10, 30 blocks
+/// per base window) beside the paper's certificates at h = 5, M = 150; a number keeps one
+/// horizon; without the calibrated certificate `"auto"` is the paper's h = 5; anything else
+/// is refused naming what is valid.
+#[test]
+fn auto_horizon_and_window_select_the_ladder() {
+    let auto = base()
+        .replace("\nwindow = 150 ", "\nwindow = \"auto\" ")
+        .replace("horizon = 5 ", "horizon = \"auto\" ");
+    let c = parse(&auto, "x").unwrap().certifier;
+    let ladder = c.ladder.expect("a ladder");
+    assert_eq!((ladder.horizons, ladder.blocks), (vec![1, 2, 5, 10], Some(30)));
+    assert_eq!((c.regression.horizon, c.regression.window), (5, 150));
+    assert_eq!(parse(&base(), "x").unwrap().certifier.ladder, None);
+    let fixed_window = base().replace("horizon = 5 ", "horizon = \"auto\" ");
+    assert_eq!(parse(&fixed_window, "x").unwrap().certifier.ladder.unwrap().blocks, None);
+    let paper_only = auto.replace("enabled = true\ndelta", "enabled = false\ndelta");
+    assert_ne!(paper_only, auto);
+    assert_eq!(parse(&paper_only, "x").unwrap().certifier.ladder, None);
+    let bad = base().replace("horizon = 5 ", "horizon = \"automatic\" ");
+    let err = parse(&bad, "x").unwrap_err().to_string();
+    assert!(err.contains("a positive integer or \"auto\""), "{err}");
 }

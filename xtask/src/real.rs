@@ -273,7 +273,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
             let auto = grid::minimal(&config, None)?;
             let _ = writeln!(
                 units,
-                "With only the columns, gain and margin set (`horizon` and `window` \"auto\"):\n"
+                "With only the columns, gain and margin set and `horizon`, `window` \"auto\":\n"
             );
             units.push_str(&units_check(&auto, &csv, &certify_text(&auto, &csv, rec.name)?)?);
         }

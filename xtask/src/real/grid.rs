@@ -19,8 +19,7 @@ const HORIZONS: [usize; 4] = [1, 2, 5, 10];
 const WINDOWS: [usize; 5] = [40, 60, 100, 150, 300];
 
 /// The record's configuration reduced to its `[columns]` section, its `gain` and its
-/// `margin`, with `window = m` and `horizon = h`, or (`None`) both left at their default,
-/// `"auto"`.
+/// `margin`, with `window = m` and `horizon = h`, or (`None`) both `"auto"`.
 pub(super) fn minimal(config: &str, fixed: Option<(usize, usize)>) -> Result<String> {
     let mut lines = config.lines().skip_while(|l| l.trim() != "[columns]");
     let mut columns = String::new();
@@ -39,8 +38,10 @@ pub(super) fn minimal(config: &str, fixed: Option<(usize, usize)>) -> Result<Str
             .map(|l| l.split('#').next().unwrap_or(l).trim().to_string())
             .with_context(|| format!("no `{key}` in the record's configuration"))
     };
-    let regression = fixed
-        .map_or(String::new(), |(h, m)| format!("\n[regression]\nwindow = {m}\nhorizon = {h}\n"));
+    let regression = fixed.map_or_else(
+        || "\n[regression]\nwindow = \"auto\"\nhorizon = \"auto\"\n".to_string(),
+        |(h, m)| format!("\n[regression]\nwindow = {m}\nhorizon = {h}\n"),
+    );
     Ok(format!(
         "{columns}\n[controller]\n{}\n\n[certificate]\n{}\n{regression}",
         line("gain")?,
@@ -80,7 +81,7 @@ pub(super) fn grid(name: &str, config: &str, csv: &str) -> Result<String> {
     let auto = certify_text(&minimal(config, None)?, csv, name)?;
     let _ = writeln!(
         s,
-        "With `horizon` and `window` left at their default, `\"auto\"` (the calibrated certificate at h = 1, 2, 5 and 10 side by side, M = 30 h, each at risk δ/4): the gate open on {:.1} % of rows ({}).\n\n{}\n",
+        "With `horizon` and `window` set to `\"auto\"` (the calibrated certificate at h = 1, 2, 5 and 10 side by side, M = 30 h, each at risk δ/4): the gate open on {:.1} % of rows ({}).\n\n{}\n",
         100.0 * auto.summary.share_calibrated(),
         auto.summary
             .first_deploy_calibrated
@@ -105,6 +106,7 @@ mod tests {
         assert!(text.contains("window = 60\nhorizon = 10\n") && !text.contains("conservatism"));
         assert!(minimal("[columns]\n", Some((1, 40))).is_err());
         let auto = minimal(config, None).unwrap();
-        assert!(!auto.contains("[regression]") && auto.contains("margin = 0.05\n"), "{auto}");
+        assert!(auto.contains("window = \"auto\"\nhorizon = \"auto\"\n"), "{auto}");
+        assert!(auto.contains("margin = 0.05\n") && !auto.contains("conservatism"), "{auto}");
     }
 }

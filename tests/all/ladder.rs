@@ -172,3 +172,51 @@ fn a_candidate_just_below_the_margin_is_rarely_deployed_by_the_ladder() {
         );
     }
 }
+
+/// The summary of a ladder run (the committed heat exchanger record, only its columns, gain
+/// and margin, `horizon` and `window` "auto"): one count per horizon with its window; every
+/// open row's verdict stood at exactly one horizon; every row of a horizon is open or closed
+/// with a reason; the gate open on at least as many rows as any one horizon's; the words
+/// and the JSON name every horizon; and the same counts with the temperature in K.
+#[test]
+fn the_summary_counts_each_horizon_and_their_sum_is_the_gate() {
+    use streamcert_pipeline::certify::{Options, run};
+    let text = "[columns]\ntime = \"t\"\noutputs = [\"temp\"]\ninputs = [\"flow\"]\n\n\
+                [controller]\ngain = [[0.0]]\n\n[certificate]\nmargin = 0.05\n\n\
+                [regression]\nwindow = \"auto\"\nhorizon = \"auto\"\n";
+    let cfg = streamcert_pipeline::config::parse(text, "auto.toml").expect("valid");
+    let csv = include_str!("../../examples/real/exchanger.csv");
+    let summary = |csv: &str| {
+        let mut out = Vec::new();
+        run(&cfg, csv.as_bytes(), "exchanger", &mut out, &Options::default()).expect("runs")
+    };
+    let s = summary(csv);
+    let shape: Vec<(usize, usize)> = s.horizons.iter().map(|c| (c.horizon, c.window)).collect();
+    assert_eq!(shape, vec![(1, 30), (2, 60), (5, 150), (10, 300)]);
+    assert_eq!(s.horizons.iter().map(|c| c.stood).sum::<u64>(), s.calibrated_open);
+    for c in &s.horizons {
+        let closed: u64 = c.reasons.iter().map(|(_, n)| n).sum();
+        assert_eq!(c.open + closed, s.rows, "h = {}", c.horizon);
+        assert!(c.stood <= c.open && s.calibrated_open >= c.open, "h = {}", c.horizon);
+    }
+    assert!(s.horizons.iter().filter(|c| c.open > 0).count() >= 2, "{:?}", s.horizons);
+    let line = s.horizons_line().expect("a ladder");
+    for c in &s.horizons {
+        assert!(line.contains(&format!("h = {} (M = {})", c.horizon, c.window)), "{line}");
+    }
+    let json = s.json(&cfg.certifier, &cfg.columns.outputs);
+    assert_eq!(json["horizons"].as_array().map(Vec::len), Some(4));
+    // The same record in K (the temperature plus 273.15, as `cargo xtask real` converts it).
+    let kelvin: String = csv
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let mut f: Vec<String> = l.split(',').map(String::from).collect();
+            if i > 0 {
+                f[2] = format!("{}", f[2].parse::<f64>().expect("a temperature") + 273.15);
+            }
+            f.join(",") + "\n"
+        })
+        .collect();
+    assert_eq!(summary(&kelvin).horizons, s.horizons);
+}

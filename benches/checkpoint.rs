@@ -11,7 +11,7 @@
 //! window and the anchored window hold data.
 //!
 //! Also printed: the size of the same state under `horizon = "auto"` (the horizon ladder:
-//! four calibrated certificates, `h = 1, 2, 5, 10`), the configuration's default.
+//! four calibrated certificates, `h = 1, 2, 5, 10`), an explicit choice.
 //!
 //! Run: `cargo bench --bench checkpoint`.
 

@@ -58,14 +58,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         v.sort_by(f64::total_cmp);
         v[v.len() / 2]
     };
-    let phase = (0..spacing)
-        .max_by(|&a, &b| {
-            let at = |r: usize| {
-                median(&mut steady.iter().skip(r).step_by(spacing).copied().collect::<Vec<_>>())
-            };
-            at(a).total_cmp(&at(b))
-        })
-        .ok_or("no steps")?;
+    let medians: Vec<f64> = (0..spacing)
+        .map(|r| median(&mut steady.iter().skip(r).step_by(spacing).copied().collect()))
+        .collect();
+    let phase =
+        (0..spacing).max_by(|&a, &b| medians[a].total_cmp(&medians[b])).ok_or("no steps")?;
     // The look at sample `k` is the `(k − r)/spacing`-th, `r = k mod spacing`; window `i`
     // looks at every `2^i`-th, so `1 + (trailing zeros)` windows look (at most `W`).
     let first = settle + phase;

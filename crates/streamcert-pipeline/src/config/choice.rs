@@ -27,7 +27,9 @@ impl<'de> Deserialize<'de> for Choice {
                 })
             }
             fn visit_u64<E: de::Error>(self, v: u64) -> Result<Choice, E> {
-                self.visit_i64(i64::try_from(v).unwrap_or(-1))
+                usize::try_from(v).ok().filter(|&n| n > 0).map(Choice::Fixed).ok_or_else(|| {
+                    E::custom(format!("{v}: expected a positive integer or \"auto\""))
+                })
             }
             fn visit_str<E: de::Error>(self, v: &str) -> Result<Choice, E> {
                 if v == "auto" {

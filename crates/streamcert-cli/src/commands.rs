@@ -245,7 +245,8 @@ fn csv_rows(
 }
 
 /// `streamcert simulate g5 --opcua URL`: the CSV rows `csv` served by an OPC UA server, one
-/// variable per column, each sample written at its time (`--pace`).
+/// variable per column, each sample written at its time (`--pace`) from when a client first
+/// monitors its nodes.
 pub(super) fn serve_opcua(
     csv: &[u8],
     url: &str,
@@ -274,6 +275,14 @@ pub(super) fn serve_opcua(
         server.node_ids().join(" "),
         args.pki.join("own/cert.der").display()
     );
+    // The run starts when a client monitors the plant's nodes, so that it sees the first
+    // sample however long after the plant it was started.
+    if !server.monitored() {
+        eprintln!("opcua: the run starts when a client monitors the nodes");
+        while !server.monitored() {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+    }
     let start = std::time::Instant::now();
     let t0 = rows.first().map_or(0.0, |r| r[0]);
     for row in &rows {

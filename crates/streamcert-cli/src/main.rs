@@ -276,7 +276,8 @@ pub(crate) struct Publish {
     publish: Option<String>,
     /// Serve the plant at opc.tcp://HOST:PORT: one variable per column (ns of
     /// urn:streamcert:simulated-plant:signals, string ids: the column names), each sample
-    /// written with its source timestamp (the simulation's time, from the Unix epoch).
+    /// written with its source timestamp (the simulation's time, from the Unix epoch); the
+    /// run starts when a client first monitors the nodes.
     #[arg(long, value_name = "URL", conflicts_with = "publish")]
     opcua: Option<String>,
     /// The OPC UA server's PKI directory (its certificate and key are created there on first

@@ -8,14 +8,14 @@ use std::time::Duration;
 
 use futures_util::StreamExt;
 use opcua::client::{
-    ClientBuilder, DataChangeCallback, IdentityToken, MonitoredItem, Session, SessionConnectMode,
-    SessionPollResult,
+    ClientBuilder, IdentityToken, MonitoredItemMap, OnSubscriptionNotificationCore, Session,
+    SessionConnectMode, SessionPollResult,
 };
 use opcua::crypto::SecurityPolicy;
 use opcua::types::{
-    AttributeId, DataChangeFilter, DataChangeTrigger, DataValue, EndpointDescription,
+    AttributeId, DataChangeFilter, DataChangeNotification, DataChangeTrigger, EndpointDescription,
     ExtensionObject, MessageSecurityMode, MonitoredItemCreateRequest, MonitoringMode,
-    MonitoringParameters, NodeId, ReadValueId, TimestampsToReturn,
+    MonitoringParameters, NodeId, NotificationMessage, ReadValueId, TimestampsToReturn,
 };
 use streamcert_pipeline::CliError;
 use tokio::sync::oneshot;
@@ -222,6 +222,40 @@ fn absolute(p: &std::path::Path) -> std::path::PathBuf {
 }
 
 /// One subscription, one monitored item per node.
+/// A subscription's notifications, a publication at a time, handed on in order of source
+/// time. A server lists a publication's values node by node, so without the sort one node's
+/// values would trail another's by a whole publication (longer when the client falls behind
+/// and the server batches intervals); sorted, the alignment's reorder window need only span
+/// the skew between publications. The sort is stable: one node's values keep their order,
+/// and a value without a source timestamp (refused as bad) goes first.
+struct InTimeOrder {
+    signals: Signals,
+    tx: Sender<Event>,
+}
+
+impl OnSubscriptionNotificationCore for InTimeOrder {
+    fn on_subscription_notification(
+        &mut self,
+        notification: NotificationMessage,
+        items: MonitoredItemMap<'_>,
+    ) {
+        let mut values = Vec::new();
+        for object in notification.notification_data.into_iter().flatten() {
+            let Some(change) = object.into_inner_as::<DataChangeNotification>() else { continue };
+            for n in change.monitored_items.into_iter().flatten() {
+                let Some(item) = items.get(n.client_handle) else { continue };
+                if let Some(&i) = self.signals.get(&item.item_to_monitor().node_id) {
+                    values.push((i, n.value));
+                }
+            }
+        }
+        values.sort_by_key(|(_, dv)| dv.source_timestamp.map(|t| t.checked_ticks()));
+        for (i, dv) in values {
+            let _ = self.tx.send(Event::Value(i, dv));
+        }
+    }
+}
+
 async fn subscribe(
     session: &Session,
     cfg: &OpcUaConfig,
@@ -229,11 +263,7 @@ async fn subscribe(
     tx: Sender<Event>,
 ) -> Result<(), String> {
     let signals: Signals = ids.iter().cloned().enumerate().map(|(i, id)| (id, i)).collect();
-    let callback = DataChangeCallback::new(move |dv: DataValue, item: &MonitoredItem| {
-        if let Some(&i) = signals.get(&item.item_to_monitor().node_id) {
-            let _ = tx.send(Event::Value(i, dv));
-        }
-    });
+    let callback = InTimeOrder { signals, tx };
     let interval = cfg.publishing_interval.max(Duration::from_millis(1));
     let sub = session
         .create_subscription(interval, 600, 20, 0, 0, true, callback)

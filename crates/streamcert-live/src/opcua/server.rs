@@ -98,6 +98,20 @@ impl PlantServer {
         self.ids.iter().map(ToString::to_string).collect()
     }
 
+    /// Whether a client monitors any of the columns' nodes (their value, by an enabled
+    /// monitored item of its subscription). A client's items are created in one request, which
+    /// the server takes whole: a run written from then on reaches it from its first sample.
+    #[must_use]
+    pub fn monitored(&self) -> bool {
+        let subs = self.handle.subscriptions();
+        let mut notifier = subs.data_notifier();
+        self.ids.iter().any(|id| {
+            notifier
+                .notify_for(id, opcua::types::AttributeId::Value)
+                .is_some_and(|batch| batch.entries().next().is_some())
+        })
+    }
+
     /// Write one sample: each column's value, stamped with source time `t` (seconds since the
     /// Unix epoch, to the nearest 100 ns).
     ///

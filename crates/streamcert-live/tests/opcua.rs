@@ -63,8 +63,9 @@ fn config(server: &PlantServer, extra: &str) -> Config {
 /// The client's PKI directory is a scratch one of the server's port unless `extra` names one.
 fn config_with(server: &PlantServer, extra: &str, publishing: f64, window: f64) -> Config {
     let ids = server.node_ids();
-    let port = server.endpoint().rsplit(':').next().unwrap_or_default().to_string();
-    let pki = scratch(&format!("client-pki-{}", port.trim_end_matches('/'))).display().to_string();
+    let endpoint = server.endpoint();
+    let port = endpoint.trim_end_matches('/').rsplit(':').next().unwrap_or_default();
+    let pki = scratch(&format!("client-pki-{port}")).display().to_string();
     let extra = if extra.contains("pki_dir") {
         extra.to_string()
     } else {
@@ -125,7 +126,7 @@ fn publish_every(server: &PlantServer, samples: &[[f64; 3]], pace: Duration) {
 fn bit_for_bit(server: &PlantServer, cfg: &Config, samples: &[[f64; 3]], pace: Duration) {
     assert!(!server.monitored(), "monitored before any client subscribed");
     let mut src = source(cfg);
-    assert!(server.monitored(), "the client subscribed, yet a node is not monitored");
+    assert!(server.monitored(), "the client subscribed, yet no node is monitored");
     let (got, summary) = std::thread::scope(|scope| {
         scope.spawn(|| publish_every(server, samples, pace));
         live_run(cfg, &mut src)

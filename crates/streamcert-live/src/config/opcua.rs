@@ -215,9 +215,9 @@ pub fn parse(table: &toml::Table, columns: &Columns) -> Result<OpcUaConfig, Stri
 /// The alignment rule, its reorder window spanning a publication: a server lists a
 /// publication's values node by node and may split it over several messages (the client
 /// sorts a message's values by time, not across messages), so one node's values can arrive
-/// up to a publishing interval of source time after another's. Default: the publishing interval plus
-/// one period; a window shorter than the publishing interval is refused (its rows would drop
-/// most values as late).
+/// up to a publishing interval of source time after another's. Default: the publishing
+/// interval plus one period; a window shorter than the publishing interval is refused (its
+/// rows would drop many values as late).
 fn rule(raw: &Raw, publishing: f64) -> Result<AlignRule, String> {
     let mut rule = align_rule(raw.align.as_ref())?;
     match raw.align.as_ref().and_then(|a| a.reorder_window) {
@@ -225,9 +225,9 @@ fn rule(raw: &Raw, publishing: f64) -> Result<AlignRule, String> {
         Some(r) if r < publishing => {
             return Err(format!(
                 "source.align.reorder_window: {r} s is shorter than the publishing interval \
-                 ({publishing} s): a server may split a publication, its values node by node, over \
-                 several messages, so many would arrive late; give at least {publishing} s (the default is the \
-                 publishing interval plus one period)"
+                 ({publishing} s): a server may split a publication, its values node by \
+                 node, over several messages, so many would arrive late; give at least \
+                 {publishing} s (the default is the publishing interval plus one period)"
             ));
         }
         Some(_) => {}

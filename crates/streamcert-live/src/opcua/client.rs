@@ -221,7 +221,6 @@ fn absolute(p: &std::path::Path) -> std::path::PathBuf {
     std::env::current_dir().map(|d| d.join(p)).unwrap_or_else(|_| p.to_path_buf())
 }
 
-/// One subscription, one monitored item per node.
 /// A subscription's notifications, a publication at a time, handed on in order of source
 /// time. A server lists a publication's values node by node, so without the sort one node's
 /// values would trail another's by a whole publication (longer when the client falls behind
@@ -256,6 +255,7 @@ impl OnSubscriptionNotificationCore for InTimeOrder {
     }
 }
 
+/// One subscription, one monitored item per node.
 async fn subscribe(
     session: &Session,
     cfg: &OpcUaConfig,

@@ -66,6 +66,7 @@
 
 mod calibrated;
 mod certifier;
+mod clock;
 mod config;
 mod error;
 mod evidence;
@@ -91,6 +92,7 @@ pub use certifier::checkpoint::{
     encode, fnv1a64, seal, seal_value, unseal,
 };
 pub use certifier::{Certifier, RungStatus};
+pub use clock::{SampleTime, UNIX_SECONDS, iso8601_utc};
 pub use config::{BadSamplePolicy, CertifierConfig};
 pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};

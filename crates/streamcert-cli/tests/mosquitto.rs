@@ -274,3 +274,116 @@ fn per_signal_topics_killed_and_resumed_form_the_uninterrupted_rows() {
     assert_eq!(got.len(), want.len(), "rows; {err}");
     assert!(got == want, "the resumed aligned rows differ from the uninterrupted ones");
 }
+
+/// `mosquitto_pub` (Debian's mosquitto-clients) on `port`, QoS 1, with `args`; `stdin` fed to it.
+fn mosquitto_pub(port: u16, args: &[&str], stdin: Option<&std::path::Path>) {
+    let port = port.to_string();
+    let mut cmd = Command::new("mosquitto_pub");
+    cmd.args(["-h", "127.0.0.1", "-p", &port, "-q", "1"]).args(args);
+    if let Some(path) = stdin {
+        cmd.stdin(std::fs::File::open(path).unwrap());
+    }
+    let out = cmd.output().expect("mosquitto_pub (apt-get install mosquitto-clients)");
+    assert!(out.status.success(), "mosquitto_pub {args:?}: {}", text(&out.stderr));
+}
+
+fn text(bytes: &[u8]) -> String {
+    String::from_utf8_lossy(bytes).into_owned()
+}
+
+#[test]
+fn no_bad_message_from_a_foreign_publisher_stalls_the_certifier_and_each_is_counted_once() {
+    let broker = Mosquitto::start(free_port());
+    let (port, topic) = (broker.port, "g5/foreign");
+    let config = live_config("foreign", port, topic);
+    // A payload limit of 256 KiB, so that the nested arrays reach the JSON parser.
+    let mut toml = std::fs::read_to_string(&config).unwrap();
+    toml.push_str("max_payload = 262144\n");
+    std::fs::write(&config, toml).unwrap();
+    let file = |name: &str, bytes: &[u8]| {
+        let p = tmp(&format!("foreign-{name}"));
+        std::fs::write(&p, bytes).unwrap();
+        p
+    };
+    let nested = [vec![b'['; 100_000], vec![b']'; 100_000]].concat();
+    // (kind counted, the mosquitto_pub arguments), each followed by 1000 good rows.
+    let files = [
+        file("2mib", &vec![b'x'; 2 << 20]),
+        file("limit", &vec![b'x'; 262_145]),
+        file("nested", &nested),
+        file("utf8", &[0xff, 0xfe, 0x7b]),
+    ];
+    let f = |i: usize| files[i].to_str().unwrap().to_string();
+    let bad: Vec<Vec<String>> = vec![
+        vec!["-f".into(), f(0)],
+        vec!["-f".into(), f(1)],
+        vec!["-f".into(), f(2)],
+        vec!["-f".into(), f(3)],
+        vec!["-n".into()],
+    ];
+    // A retained bad message, there before the certifier subscribes.
+    mosquitto_pub(port, &["-t", topic, "-r", "-m", "{\"t\": "], None);
+    let (_, header, rows) = g5("4999");
+    assert_eq!(rows.len(), 5000);
+    let metrics_port = free_port();
+    let metrics = format!("127.0.0.1:{metrics_port}");
+    let (out, summary) = (tmp("live-foreign.csv"), tmp("live-foreign-summary.json"));
+    let args = ["--output", out.to_str().unwrap(), "--summary", summary.to_str().unwrap()];
+    let certify = Certify::start(&config, &[&args[..], &["--metrics", &metrics]].concat());
+    // The reference: the same rows from a file, a bad line where each bad message was.
+    let mut csv = format!("{}\nnot a row\n", header.join(","));
+    for (k, block) in rows.chunks(1000).enumerate() {
+        mosquitto_pub(
+            port,
+            &[&["-t", topic], &bad[k].iter().map(String::as_str).collect::<Vec<_>>()[..]].concat(),
+            None,
+        );
+        csv.push_str("not a row\n");
+        let lines: Vec<String> = block
+            .iter()
+            .map(|r| {
+                let pairs: Vec<String> =
+                    header.iter().zip(r).map(|(h, v)| format!("\"{h}\":{v}")).collect();
+                format!("{{{}}}", pairs.join(","))
+            })
+            .collect();
+        let jsonl = file(&format!("rows-{k}.jsonl"), (lines.join("\n") + "\n").as_bytes());
+        mosquitto_pub(port, &["-t", topic, "-l"], Some(&jsonl));
+        for r in block {
+            let v: Vec<String> = r.iter().map(f64::to_string).collect();
+            csv.push_str(&(v.join(",") + "\n"));
+        }
+    }
+    wait_rows(&out, 5000, "the good rows were not all certified");
+    // Prometheus' own linter passes the metrics served mid-run.
+    let scraped =
+        Command::new("curl").args(["-sf", &format!("http://{metrics}/metrics")]).output().unwrap();
+    assert!(scraped.status.success(), "curl: {}", text(&scraped.stderr));
+    let scraped_path = file("metrics.txt", &scraped.stdout);
+    let lint = Command::new("promtool")
+        .args(["check", "metrics"])
+        .stdin(std::fs::File::open(&scraped_path).unwrap())
+        .output()
+        .expect("promtool (apt-get install prometheus)");
+    assert!(lint.status.success(), "promtool: {}{}", text(&lint.stdout), text(&lint.stderr));
+    let (status, err) = certify.finish();
+    assert!(status.success(), "{err}");
+    mosquitto_pub(port, &["-t", topic, "-r", "-n"], None);
+    let csv_path = file("reference.csv", csv.as_bytes());
+    let cfg = tmp("live-foreign-file.toml");
+    std::fs::write(&cfg, streamcert_pipeline::config::g5_node_b()).unwrap();
+    let want = tmp("live-foreign-want.csv");
+    let ok = common::bin()
+        .args(["certify", "--config", cfg.to_str().unwrap(), "--on-bad-row", "skip", "--input"])
+        .args([csv_path.to_str().unwrap(), "--output", want.to_str().unwrap()])
+        .status()
+        .unwrap();
+    assert!(ok.success());
+    assert!(rows_of(&out) == rows_of(&want), "the live rows differ from the file's");
+    let source = err.lines().find(|l| l.contains(" messages, ")).expect("the source line");
+    for counted in
+        ["6 bad (", "not_json 3", "oversized 2", "not_utf8 1", "0 reconnects (0 attempts)"]
+    {
+        assert!(source.contains(counted), "{counted}: {source}");
+    }
+}

@@ -62,6 +62,12 @@ pub struct MqttConfig {
     pub layout: Layout,
     /// Payloads above this size are refused (`oversized`). Default 64 KiB.
     pub max_payload: usize,
+    /// The largest MQTT packet the client reads, bytes of its remaining length. Default
+    /// [`MAX_PACKET`], MQTT's largest: every message a broker can send is read whole, and
+    /// one above `max_payload` is refused (`oversized`), counted and acknowledged. A smaller
+    /// value bounds the memory one message takes; a packet above it cannot be read, breaks
+    /// the connection, and is passed over as a poison message ([`crate::mqtt`]).
+    pub max_packet: usize,
     /// Topics that delivered nothing after this long are reported by name. Default 10 s.
     pub silent_after: Duration,
     /// End the stream after this long without a message, counted from the subscription
@@ -152,6 +158,11 @@ pub struct Signal {
     pub value_key: String,
 }
 
+/// MQTT's largest packet, bytes of its remaining length (the protocol's four-byte variable
+/// length): the client's default read limit, so that no message a broker can send breaks the
+/// connection.
+pub const MAX_PACKET: usize = 268_435_455;
+
 #[derive(Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Raw {
@@ -176,6 +187,7 @@ struct Raw {
     json_time_key: Option<String>,
     csv_columns: Option<Vec<String>>,
     max_payload: Option<usize>,
+    max_packet: Option<usize>,
     silent_after: Option<f64>,
     idle_timeout: Option<f64>,
     max_unacked: Option<usize>,
@@ -265,6 +277,15 @@ fn parse_mqtt(table: &toml::Table, columns: &Columns) -> Result<MqttConfig, Stri
         );
     }
     let client_id = raw.client_id.clone().unwrap_or_else(|| "streamcert".into());
+    let max_payload = raw.max_payload.unwrap_or(DEFAULT_MAX_PAYLOAD);
+    let max_packet = raw.max_packet.unwrap_or(MAX_PACKET);
+    if max_packet <= max_payload || max_packet > MAX_PACKET {
+        return Err(format!(
+            "source.max_packet = {max_packet}: it must exceed max_payload ({max_payload}), so \
+             that an oversized payload is read, counted and acknowledged, and be at most \
+             {MAX_PACKET} (MQTT's largest packet)"
+        ));
+    }
     let idle_timeout = match raw.idle_timeout {
         Some(_) => Some(secs(raw.idle_timeout, 0.0, "idle_timeout")?),
         None => None,
@@ -276,7 +297,8 @@ fn parse_mqtt(table: &toml::Table, columns: &Columns) -> Result<MqttConfig, Stri
         credentials: credentials(&raw)?,
         tls: tls(&raw)?,
         layout: layout(&raw, columns)?,
-        max_payload: raw.max_payload.unwrap_or(DEFAULT_MAX_PAYLOAD),
+        max_payload,
+        max_packet,
         silent_after: secs(raw.silent_after, 10.0, "silent_after")?,
         idle_timeout,
         max_unacked: raw.max_unacked.unwrap_or(16).max(1),

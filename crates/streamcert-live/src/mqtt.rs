@@ -15,7 +15,21 @@
 //!   meanwhile arrives and the stream goes on; if not, messages may be lost, so a gap is
 //!   yielded ([`Next::Gap`]) and the certifier restarts its windows.
 //! - **Bad payloads**: counted by kind, reported with the topic and an excerpt, yielded as
-//!   [`Next::Bad`] (every gate closes for that sample, as a skipped row in a file).
+//!   [`Next::Bad`] (every gate closes for that sample, as a skipped row in a file), and
+//!   acknowledged as any message is. That holds for a payload of any size: the client reads
+//!   every packet up to `max_packet` (by default MQTT's largest), and one above
+//!   `max_payload` is refused unread (`oversized`).
+//! - **Poison messages**: a packet above `max_packet` cannot be read, so it cannot be
+//!   acknowledged, and breaks the connection; after [`POISON_TRIES`] such failures in a row
+//!   the session is discarded (the broker drops its queue with it), counted as `poison`,
+//!   named, and a gap is yielded; the run goes on. A retained message the client cannot read
+//!   comes back at every subscription: a second poison with no message read since the first
+//!   ends the source with an error that says so, rather than reconnect without end.
+//! - **Retained messages** come again at every subscription: one already taken (the same
+//!   payload on the same topic, also across a checkpoint) is passed over as `redelivered`.
+//! - **Counts**: every reconnection attempt and every reconnection is counted as it happens,
+//!   and the source yields [`Next::Idle`] while it waits, so that a watcher's counts are
+//!   current while no row comes.
 //! - **Silence**: a topic that delivered nothing within `silent_after` is named on stderr
 //!   and in the summary.
 
@@ -24,6 +38,7 @@ use std::sync::mpsc::RecvTimeoutError;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
+pub use connection::POISON_TRIES;
 use rumqttc::{Client, ConnectionError, Event, Packet, Publish, QoS};
 use streamcert_pipeline::input::Sample;
 use streamcert_pipeline::source::{Next, Source, SourceReport};
@@ -34,7 +49,7 @@ use crate::payload::{PayloadError, parse_row, parse_signal};
 use crate::rows::{SignalRows, Silence};
 
 pub(crate) mod connection;
-use connection::{Events, connect};
+use connection::{Driven, Events, connect};
 
 /// How long one wait for the broker lasts before the source checks its clocks (silence,
 /// idle timeout).
@@ -72,6 +87,10 @@ pub struct MqttSource {
     subacks: usize,
     /// Messages received while waiting for the subscriptions.
     early: std::collections::VecDeque<Publish>,
+    /// A poison message was passed over and no message has been read since.
+    poisoned: bool,
+    /// The session was just discarded: the next connection's new session is no surprise.
+    purged: bool,
 }
 
 impl MqttSource {
@@ -117,6 +136,8 @@ impl MqttSource {
             gap: None,
             early: std::collections::VecDeque::new(),
             subacks: 0,
+            poisoned: false,
+            purged: false,
         };
         // The subscriptions are asked for once the broker answers ([`Self::event`]): on every
         // connection whose session the broker did not keep.
@@ -133,17 +154,27 @@ impl MqttSource {
         let mut acked = 0;
         while acked < self.topics.len() && Instant::now() < deadline {
             match self.events.recv_timeout(POLL) {
-                Ok(Ok(Event::Incoming(Packet::SubAck(_)))) => {
+                Ok(Driven::Event(Event::Incoming(Packet::SubAck(_)))) => {
                     acked += 1;
                     self.subscribed();
                 }
-                Ok(Ok(Event::Incoming(Packet::Publish(p)))) => self.early.push_back(p),
-                Ok(Ok(Event::Incoming(Packet::ConnAck(ack)))) => {
+                Ok(Driven::Event(Event::Incoming(Packet::Publish(p)))) => self.early.push_back(p),
+                Ok(Driven::Event(Event::Incoming(Packet::ConnAck(ack)))) => {
                     if self.connack(ack.session_present).is_err() {
                         return false;
                     }
                 }
-                Ok(Ok(_) | Err(_)) | Err(RecvTimeoutError::Timeout) => {}
+                Ok(Driven::Lost(e)) => {
+                    if self.lost(&e).is_err() {
+                        return false;
+                    }
+                }
+                Ok(Driven::Poison(why)) => {
+                    if self.poison(why).is_err() {
+                        return false;
+                    }
+                }
+                Ok(Driven::Event(_)) | Err(RecvTimeoutError::Timeout) => {}
                 Err(RecvTimeoutError::Disconnected) => return false,
             }
         }
@@ -178,7 +209,12 @@ impl MqttSource {
     /// (asking again for a kept subscription changes nothing; a changed configuration's
     /// topics are taken).
     fn connack(&mut self, session_present: bool) -> Result<(), CliError> {
-        if self.ever_connected && !session_present {
+        if self.ever_connected {
+            self.report.reconnects += 1;
+        }
+        if std::mem::take(&mut self.purged) {
+            // The gap was declared when the session was discarded.
+        } else if self.ever_connected && !session_present {
             self.gap = Some(format!(
                 "the broker {} did not keep the session: messages published during the \
                  outage may be lost",
@@ -206,12 +242,11 @@ impl MqttSource {
         }
     }
 
-    /// A lost or refused connection: counted and reported (the connection's thread waits
-    /// before trying again); with several brokers, the next is tried.
+    /// A lost or refused connection: counted as a reconnection attempt and reported (the
+    /// connection's thread waits before trying again); with several brokers, the next is
+    /// tried.
     fn lost(&mut self, e: &ConnectionError) -> Result<(), CliError> {
-        if self.connected {
-            self.report.reconnects += 1;
-        }
+        self.report.reconnect_attempts += 1;
         self.connected = false;
         // Unacknowledged messages belong to the session: redelivered if the broker keeps it.
         self.unacked.clear();
@@ -226,6 +261,37 @@ impl MqttSource {
             self.driver = Some(driver);
             self.subscribe()?;
         }
+        Ok(())
+    }
+
+    /// A poison message passed over ([`POISON_TRIES`] failures to read a packet in a row):
+    /// counted as `poison`, named, and a gap declared (the session and its queue are
+    /// discarded). A second one with no message read since the first is a retained message
+    /// that comes back at every subscription: the source ends with an error saying so.
+    fn poison(&mut self, why: String) -> Result<(), CliError> {
+        let server = self.cfg.servers[self.server].to_string();
+        if self.poisoned {
+            return Err(CliError::io(
+                format!("mqtt {server}"),
+                std::io::Error::other(format!(
+                    "{why}, again after the session was discarded: a retained message above \
+                     max_packet ({} bytes) comes back at every subscription; raise max_packet \
+                     or clear the retained message",
+                    self.cfg.max_packet
+                )),
+            ));
+        }
+        self.poisoned = true;
+        self.report.count_bad("poison");
+        let what = if self.cfg.persistent_session {
+            self.purged = true;
+            "the session is discarded so that the broker drops it: messages queued with it are \
+             lost"
+        } else {
+            "the clean session dropped it: messages in flight with it are lost"
+        };
+        eprintln!("source: {server}: poison message: {why}; {what}");
+        self.gap = Some(format!("poison message passed over ({why}): {what}"));
         Ok(())
     }
 
@@ -248,10 +314,16 @@ impl MqttSource {
     fn message(&mut self, p: Publish, s: &mut Sample) -> Option<Next> {
         self.report.messages += 1;
         self.last_message = Instant::now();
+        self.poisoned = false;
         if let Some(seen) = self.topics.iter_mut().find(|(t, _)| rumqttc::matches(&p.topic, t)) {
             seen.1 = true;
         }
-        let next = self.parse(&p, s);
+        let next = if p.retain && self.report.retained_again(&p.topic, &p.payload) {
+            self.report.redelivered += 1;
+            None
+        } else {
+            self.parse(&p, s)
+        };
         // Without a checkpoint the client acknowledges each message as it arrives.
         if self.manual_acks {
             self.unacked.push(p);
@@ -350,17 +422,21 @@ impl Source for MqttSource {
                 return Some(Err(e));
             }
             match self.events.recv_timeout(POLL) {
-                Ok(Ok(event)) => match self.event(event, s) {
+                Ok(Driven::Event(event)) => match self.event(event, s) {
                     Ok(Some(next)) => return Some(Ok(next)),
                     Ok(None) => {}
                     Err(e) => return Some(Err(e)),
                 },
-                Ok(Err(e)) => {
-                    if let Err(e) = self.lost(&e) {
+                Ok(Driven::Lost(e)) => {
+                    return Some(self.lost(&e).map(|()| Next::Idle));
+                }
+                Ok(Driven::Poison(why)) => {
+                    if let Err(e) = self.poison(why) {
                         return Some(Err(e));
                     }
                 }
-                Err(RecvTimeoutError::Timeout) => {}
+                // Nothing within the poll: the run looks at the counts.
+                Err(RecvTimeoutError::Timeout) => return Some(Ok(Next::Idle)),
                 Err(RecvTimeoutError::Disconnected) => return None,
             }
         }
@@ -384,10 +460,13 @@ impl Source for MqttSource {
     }
 
     fn restore(&mut self, report: &SourceReport) -> Result<(), CliError> {
-        match (&mut self.rows, &report.state) {
-            (Some(rows), Some(state)) => rows.restore(state),
-            _ => Ok(()),
+        if let (Some(rows), Some(state)) = (&mut self.rows, &report.state) {
+            rows.restore(state)?;
         }
+        // The run's counts go on from the checkpoint's (what the broker delivers again that
+        // the checkpoint lacks is counted again, as the killed process's counts are lost).
+        self.report.continue_from(report);
+        Ok(())
     }
 }
 

@@ -75,6 +75,8 @@ pub struct OpcUaSource {
     silence: Silence,
     last_value: Instant,
     connected: bool,
+    /// A session was up at least once (a later one is a reconnection).
+    ever_connected: bool,
     subscribed: bool,
 }
 
@@ -110,6 +112,7 @@ impl OpcUaSource {
             nodes,
             last_value: Instant::now(),
             connected: false,
+            ever_connected: false,
             subscribed: false,
         })
     }
@@ -141,6 +144,10 @@ impl OpcUaSource {
         match event {
             Event::Value(i, dv) => Ok(self.value(i, &dv)),
             Event::Connected => {
+                if self.ever_connected {
+                    self.report.reconnects += 1;
+                }
+                self.ever_connected = true;
                 self.connected = true;
                 Ok(None)
             }
@@ -158,9 +165,9 @@ impl OpcUaSource {
             }
             Event::Lost(why) => {
                 eprintln!("source: {}: {why}; reconnecting", self.cfg.endpoint);
+                self.report.reconnect_attempts += 1;
                 if self.connected {
                     self.connected = false;
-                    self.report.reconnects += 1;
                     self.report.gaps += 1;
                     return Ok(Some(Next::Gap(format!(
                         "the connection to {} was lost: values sampled during the outage may \
@@ -286,7 +293,8 @@ impl Source for OpcUaSource {
                     Ok(None) => {}
                     Err(e) => return Some(Err(e)),
                 },
-                Err(RecvTimeoutError::Timeout) => {}
+                // Nothing within the poll: the run looks at the counts.
+                Err(RecvTimeoutError::Timeout) => return Some(Ok(Next::Idle)),
                 Err(RecvTimeoutError::Disconnected) => return None,
             }
         }
@@ -299,10 +307,12 @@ impl Source for OpcUaSource {
     }
 
     fn restore(&mut self, report: &SourceReport) -> Result<(), CliError> {
-        match &report.state {
-            Some(state) => self.rows.restore(state),
-            None => Ok(()),
+        if let Some(state) = &report.state {
+            self.rows.restore(state)?;
         }
+        // The run's counts go on from the checkpoint's.
+        self.report.continue_from(report);
+        Ok(())
     }
 }
 

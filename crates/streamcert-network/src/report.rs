@@ -1,7 +1,7 @@
 //! [`EpochReport`]: what the network service says at one epoch.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{NotCertified, Sig};
+use streamcert_certificate::{NotCertified, SampleTime};
 
 /// Why a subsystem does not count as certified at an epoch.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -28,7 +28,12 @@ impl std::fmt::Display for NotCertifiedLocal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::NoSample => f.write_str("no sample yet"),
-            Self::Stale { last } => write!(f, "stale: last sample at t = {}", Sig(*last)),
+            Self::Stale { last } if SampleTime::is_unix(*last) => {
+                write!(f, "stale: last sample at {}", SampleTime::new(*last, None))
+            }
+            Self::Stale { last } => {
+                write!(f, "stale: last sample at t = {}", SampleTime::new(*last, None))
+            }
             Self::Local(r) => write!(f, "{r}"),
             Self::CouplingUnbounded { from } => {
                 write!(f, "the coupling from subsystem {from} has no upper bound yet")

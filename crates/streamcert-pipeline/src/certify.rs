@@ -29,7 +29,7 @@ pub use summary::Summary;
 mod batched;
 mod checkpoint;
 mod horizons;
-mod summary;
+pub(crate) mod summary;
 use crate::output::{EvidenceWriter, region_columns};
 pub(crate) use checkpoint::write_atomic;
 use checkpoint::{checkpoint_bytes, load, save};
@@ -282,6 +282,7 @@ fn run_live<W: Write>(
                 step.skip_bad(&e);
                 None
             }
+            Ok(Next::Idle) => None,
             Err(e) => step.row(Err(e), &s, &mut region)?,
         };
         if step.watch.wants_source() {

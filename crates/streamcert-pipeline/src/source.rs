@@ -9,7 +9,10 @@
 //!   as a gap in a file's time column does, never integrated across;
 //! - [`Next::Bad`]: a payload that could not be a sample (not a number, a missing field, NaN,
 //!   time going backwards, too large): counted and reported, closing every gate as a skipped
-//!   row does, never a number the certifier sees.
+//!   row does, never a number the certifier sees;
+//! - [`Next::Idle`]: nothing to certify yet (a live source waited, or its connection changed):
+//!   the run looks at the source's counts ([`Source::report`]) and asks again, so that what a
+//!   watcher shows (reconnections, messages passed over) is current while no row comes.
 //!
 //! A source with at-least-once delivery (an MQTT persistent session) holds its
 //! acknowledgements until the rows they carried are in a written checkpoint
@@ -30,6 +33,10 @@ pub enum Next {
     Gap(String),
     /// A payload that is not a sample: where and why (its topic or node, an excerpt).
     Bad(RowError),
+    /// Nothing to certify yet: a live source waited its poll interval or its connection
+    /// changed. The caller may look at [`Source::report`] and asks again; the certifier sees
+    /// nothing of it.
+    Idle,
 }
 
 /// A stream of samples: a CSV file or pipe ([`SampleReader`]) or a live plant source.
@@ -83,6 +90,13 @@ impl<R: std::io::Read> Source for SampleReader<R> {
     }
 }
 
+/// FNV-1a, 64 bits, of `bytes` (a retained payload's fingerprint).
+fn fnv1a64(bytes: &[u8]) -> u64 {
+    bytes
+        .iter()
+        .fold(0xcbf2_9ce4_8422_2325, |h, &b| (h ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3))
+}
+
 /// A live source's counts, in the summary (text and JSON) and the checkpoint.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SourceReport {
@@ -107,10 +121,18 @@ pub struct SourceReport {
     pub stale_rows: u64,
     /// Gaps yielded (outages and stale stretches; each starts new windows).
     pub gaps: u64,
-    /// Connections lost and made again.
+    /// Reconnections: connections made again after one was lost.
     pub reconnects: u64,
+    /// Reconnection attempts: every connection lost or refused, each followed by another
+    /// attempt (at least `reconnects`; more while the broker or server is away).
+    #[serde(default)]
+    pub reconnect_attempts: u64,
     /// Topics or nodes that delivered nothing within the stated time, by name.
     pub silent: Vec<String>,
+    /// The retained message last taken on each topic, as `(topic, FNV-1a 64 of its
+    /// payload)`: a broker sends it again at every subscription, and it is taken once.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub retained: Vec<(String, u64)>,
     /// The source's own state at a checkpoint ([`Source::restore`]), when its rows depend on
     /// messages already acknowledged; `None` otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -126,6 +148,39 @@ impl SourceReport {
         }
     }
 
+    /// Whether a retained message (`payload` on `topic`) is the one already taken there; if
+    /// not, it is remembered as the topic's.
+    pub fn retained_again(&mut self, topic: &str, payload: &[u8]) -> bool {
+        let hash = fnv1a64(payload);
+        match self.retained.iter_mut().find(|(t, _)| t == topic) {
+            Some((_, h)) if *h == hash => true,
+            Some((_, h)) => {
+                *h = hash;
+                false
+            }
+            None => {
+                self.retained.push((topic.to_string(), hash));
+                false
+            }
+        }
+    }
+
+    /// Continue the counts of `saved` (a checkpoint's report): a resumed run's counts are the
+    /// run's, not the process's. The name, the silent topics and the source's state stay
+    /// this process's own.
+    pub fn continue_from(&mut self, saved: &SourceReport) {
+        self.messages = saved.messages;
+        self.rows = saved.rows;
+        self.bad.clone_from(&saved.bad);
+        self.late = saved.late;
+        self.redelivered = saved.redelivered;
+        self.stale_rows = saved.stale_rows;
+        self.gaps = saved.gaps;
+        self.reconnects = saved.reconnects;
+        self.reconnect_attempts = saved.reconnect_attempts;
+        self.retained.clone_from(&saved.retained);
+    }
+
     /// Bad payloads of every kind.
     #[must_use]
     pub fn bad_total(&self) -> u64 {
@@ -133,7 +188,8 @@ impl SourceReport {
     }
 
     /// One line for the summary: `source: mqtt ... : 1200 messages, 400 rows, 3 bad
-    /// (not_a_number 2, oversized 1), 1 late, 0 stale rows, 1 gap, 1 reconnect`.
+    /// (not_a_number 2, oversized 1), 1 late, 0 redelivered, 0 stale rows, 1 gaps, 1
+    /// reconnects (4 attempts)`.
     #[must_use]
     pub fn line(&self) -> String {
         let bad = if self.bad.is_empty() {
@@ -144,7 +200,7 @@ impl SourceReport {
         };
         let mut line = format!(
             "source: {}: {} messages, {} rows, {} bad{bad}, {} late, {} redelivered, {} stale \
-             rows, {} gaps, {} reconnects",
+             rows, {} gaps, {} reconnects ({} attempts)",
             self.name,
             self.messages,
             self.rows,
@@ -153,7 +209,8 @@ impl SourceReport {
             self.redelivered,
             self.stale_rows,
             self.gaps,
-            self.reconnects
+            self.reconnects,
+            self.reconnect_attempts
         );
         if !self.silent.is_empty() {
             line.push_str(&format!("; silent: {}", self.silent.join(", ")));

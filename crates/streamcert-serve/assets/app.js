@@ -17,7 +17,9 @@ function gate(s) {
   box.className = "gate " + state;
   document.body.dataset.gate = s.open ? "open" : "closed";
   text("gate", s.ended ? "ended" : state);
-  const since = s.since === null ? "" : "since t = " + num(s.since, 6) + " s";
+  // The server writes the time as a person reads it: UTC for Unix seconds, else seconds.
+  const since = s.since_text === null ? "" : /Z$/.test(s.since_text)
+    ? "since " + s.since_text : "since t = " + s.since_text + " s";
   if (s.ended) {
     text("gate-words", "The run ended: " + s.ended + ". Nothing is vouched for after its last sample.");
   } else if (s.open) {

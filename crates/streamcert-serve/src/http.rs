@@ -6,7 +6,7 @@
 //! |---|---|
 //! | `/` | the status page (`assets/index.html`, its script and style) |
 //! | `/api/status` | the page's document ([`crate::Status`], JSON) |
-//! | `/metrics` | the Prometheus metrics (OpenMetrics text) |
+//! | `/metrics` | the Prometheus metrics (text format 0.0.4; OpenMetrics when the scraper's `Accept` asks for it) |
 //! | `/healthz` | `ok` while the server runs |
 //!
 //! Anything else is 404; a method other than GET or HEAD on a known path 405; a request
@@ -123,13 +123,22 @@ fn asset(body: &'static str, kind: &'static str) -> Response {
     r
 }
 
-async fn metrics(State(shared): State<Arc<Shared>>) -> Response {
-    let body = shared.metrics_text(Instant::now());
+/// The metrics in the format the scraper asks for: OpenMetrics when its `Accept` header names
+/// it (as Prometheus' own scraper does), else the text format 0.0.4 (`curl`, `promtool`).
+async fn metrics(State(shared): State<Arc<Shared>>, headers: axum::http::HeaderMap) -> Response {
+    let open = shared.metrics_text(Instant::now());
+    let openmetrics = headers
+        .get_all(header::ACCEPT)
+        .iter()
+        .filter_map(|v| v.to_str().ok())
+        .any(|v| v.contains("application/openmetrics-text"));
+    let (body, kind) = if openmetrics {
+        (open, "application/openmetrics-text; version=1.0.0; charset=utf-8")
+    } else {
+        (crate::metrics::to_text_format(&open), "text/plain; version=0.0.4; charset=utf-8")
+    };
     let mut r = body.into_response();
-    r.headers_mut().insert(
-        header::CONTENT_TYPE,
-        HeaderValue::from_static("application/openmetrics-text; version=1.0.0; charset=utf-8"),
-    );
+    r.headers_mut().insert(header::CONTENT_TYPE, HeaderValue::from_static(kind));
     r
 }
 

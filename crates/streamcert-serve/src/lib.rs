@@ -58,6 +58,7 @@ use streamcert_certificate::CertifierConfig;
 use streamcert_network::NetworkConfig;
 
 pub use http::{Routes, Server};
+pub use metrics::to_text_format;
 pub use status::{Counters, STATUS_SCHEMA, Status, Subsystem};
 pub use verdict::{Candidate, Reason, Risk, VERDICT_SCHEMA, VerdictMessage, VerdictSink};
 pub use watch::network::NetworkWatch;
@@ -121,7 +122,7 @@ impl Shared {
         let (evidence, counters, age) = {
             let st = self.status();
             let age = st.arrived.map(|a| now.saturating_duration_since(a).as_secs_f64());
-            (st.evidence, st.counters.clone(), age.unwrap_or(f64::NAN))
+            (st.evidence, st.counters, age.unwrap_or(f64::NAN))
         };
         let series = self.loop_series.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         match series.as_ref() {
@@ -193,7 +194,8 @@ impl Monitor {
         self.shared.status().at(Instant::now())
     }
 
-    /// The metrics now (what `/metrics` serves).
+    /// The metrics now, in OpenMetrics text (what `/metrics` serves a scraper that asks for
+    /// OpenMetrics; [`to_text_format`] gives the text format 0.0.4 served otherwise).
     #[must_use]
     pub fn metrics_text(&self) -> String {
         self.shared.metrics_text(Instant::now())

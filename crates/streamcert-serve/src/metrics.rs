@@ -19,12 +19,19 @@
 //! | `streamcert_gaps_total` | counter | loop | gaps (a file's time column, a source's outage) |
 //! | `streamcert_skipped_rows_total` | counter | loop | rows passed over as bad |
 //! | `streamcert_bad_payloads_total` | counter | loop | a live source's bad payloads |
-//! | `streamcert_reconnects_total` | counter | loop | a live source's reconnections |
+//! | `streamcert_reconnects_total` | counter | loop | a live source's reconnections (connections made again) |
+//! | `streamcert_reconnect_attempts_total` | counter | loop | a live source's reconnection attempts (every connection lost or refused) |
 //! | `streamcert_last_sample_time_seconds` | gauge | loop | the last sample's time |
 //! | `streamcert_last_sample_age_seconds` | gauge | loop | wall time since the last sample arrived |
 //! | `streamcert_evidence_lag_seconds` | gauge | loop | wall clock less the sample's time when its evidence was computed (sample times in Unix seconds only; NaN otherwise) |
 //!
 //! `loop` is the run's name (`--name`; a network run's too).
+//!
+//! `/metrics` serves the Prometheus text format 0.0.4 (`text/plain; version=0.0.4`), whose
+//! counter families are declared with their `_total` names, as `promtool check metrics`
+//! wants; a scraper that asks for OpenMetrics (`Accept: application/openmetrics-text`) is
+//! served that format, as the registry encodes it ([`to_text_format`] turns one into the
+//! other).
 
 use std::sync::atomic::AtomicU64;
 
@@ -58,6 +65,7 @@ pub(crate) struct Metrics {
     skipped: Family<Labels, Counter>,
     bad: Family<Labels, Counter>,
     reconnects: Family<Labels, Counter>,
+    reconnect_attempts: Family<Labels, Counter>,
     last_time: Family<Labels, FGauge>,
     age: Family<Labels, FGauge>,
     lag: Family<Labels, FGauge>,
@@ -83,6 +91,7 @@ pub(crate) struct RunSeries {
     pub(crate) skipped: Counter,
     pub(crate) bad: Counter,
     pub(crate) reconnects: Counter,
+    pub(crate) reconnect_attempts: Counter,
     pub(crate) last_time: FGauge,
     pub(crate) age: FGauge,
     pub(crate) lag: FGauge,
@@ -145,6 +154,10 @@ impl Metrics {
             skipped: counter("streamcert_skipped_rows", "Rows passed over as bad"),
             bad: counter("streamcert_bad_payloads", "A live source's bad payloads"),
             reconnects: counter("streamcert_reconnects", "A live source's reconnections"),
+            reconnect_attempts: counter(
+                "streamcert_reconnect_attempts",
+                "A live source's reconnection attempts",
+            ),
             registry,
             certificate,
             estimate,
@@ -210,6 +223,7 @@ impl Metrics {
             skipped: self.skipped.get_or_create(&l).clone(),
             bad: self.bad.get_or_create(&l).clone(),
             reconnects: self.reconnects.get_or_create(&l).clone(),
+            reconnect_attempts: self.reconnect_attempts.get_or_create(&l).clone(),
             last_time: self.last_time.get_or_create(&l).clone(),
             age: self.age.get_or_create(&l).clone(),
             lag: self.lag.get_or_create(&l).clone(),
@@ -266,6 +280,33 @@ impl Metrics {
         let _ = encode(&mut out, &self.registry);
         out
     }
+}
+
+/// The OpenMetrics text `open` in the Prometheus text format 0.0.4: a counter family's
+/// `# HELP` and `# TYPE` lines name it with `_total`, as its samples do (OpenMetrics names
+/// the family without it); `# UNIT` and `# EOF` lines, which 0.0.4 does not have, are left
+/// out. Samples and the other families are the same in both formats.
+#[must_use]
+pub fn to_text_format(open: &str) -> String {
+    let counters: std::collections::HashSet<&str> =
+        open.lines().filter_map(|l| l.strip_prefix("# TYPE ")?.strip_suffix(" counter")).collect();
+    let mut out = String::with_capacity(open.len() + 16 * counters.len());
+    for line in open.lines() {
+        if line == "# EOF" || line.starts_with("# UNIT ") {
+            continue;
+        }
+        let meta = ["# HELP ", "# TYPE "].into_iter().find_map(|p| {
+            let rest = line.strip_prefix(p)?;
+            let (name, tail) = rest.split_once(' ')?;
+            counters.contains(name).then(|| format!("{p}{name}_total {tail}"))
+        });
+        match meta {
+            Some(l) => out.push_str(&l),
+            None => out.push_str(line),
+        }
+        out.push('\n');
+    }
+    out
 }
 
 /// Set the state set `states` to `current` (1 for it, 0 for the others).

@@ -8,7 +8,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use streamcert_certificate::NotCertified;
+use streamcert_certificate::{NotCertified, SampleTime};
 
 use crate::verdict::Reason;
 
@@ -35,14 +35,20 @@ pub struct Status {
     pub margin: f64,
     /// Whether the deciding gate is open.
     pub open: bool,
-    /// The sample time from which it has been in this state.
+    /// The sample time from which it has been in this state (seconds).
     pub since: Option<f64>,
+    /// `since` as a person reads it: ISO 8601 UTC where it reads as Unix seconds, else
+    /// seconds with the decimals the sampling step resolves
+    /// ([`streamcert_certificate::SampleTime`]).
+    pub since_text: Option<String>,
     /// Why it is closed.
     pub reason: Option<Reason>,
     /// The verdict line, as the summary would give it if the input ended here.
     pub verdict: String,
-    /// The last sample's time.
+    /// The last sample's time (seconds).
     pub t: Option<f64>,
+    /// `t` as a person reads it (as `since_text`).
+    pub t_text: Option<String>,
     /// The deciding certificate at `t` (the network rate for a network).
     pub value: Option<f64>,
     /// Counts so far.
@@ -63,6 +69,9 @@ pub struct Status {
     pub chart_seconds: f64,
     /// A network's subsystems.
     pub subsystems: Vec<Subsystem>,
+    /// The sampling step the times are written with (`None`: not known).
+    #[serde(skip)]
+    pub(crate) step: Option<f64>,
     /// When the last sample arrived (for `age_seconds`).
     #[serde(skip)]
     pub(crate) arrived: Option<Instant>,
@@ -76,7 +85,7 @@ pub struct Status {
 }
 
 /// Counts of a run.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
 pub struct Counters {
     /// Rows certified.
     pub samples: u64,
@@ -88,8 +97,11 @@ pub struct Counters {
     pub skipped: u64,
     /// A live source's bad payloads.
     pub bad: u64,
-    /// A live source's reconnections.
+    /// A live source's reconnections: connections made again after one was lost.
     pub reconnects: u64,
+    /// A live source's reconnection attempts: every connection lost or refused, each followed
+    /// by another attempt (at least `reconnects`, more while the broker or server is away).
+    pub reconnect_attempts: u64,
     /// A live source's late messages.
     pub late: u64,
 }
@@ -119,9 +131,11 @@ impl Status {
             margin: 0.0,
             open: false,
             since: None,
+            since_text: None,
             reason: None,
             verdict: "no sample yet".into(),
             t: None,
+            t_text: None,
             value: None,
             counters: Counters::default(),
             age_seconds: None,
@@ -132,6 +146,7 @@ impl Status {
             chart: VecDeque::with_capacity(CHART_POINTS + 1),
             chart_seconds: 300.0,
             subsystems: Vec::new(),
+            step: None,
             arrived: None,
             sample_reason: None,
             evidence: None,
@@ -144,6 +159,8 @@ impl Status {
         if let Some(r) = self.sample_reason {
             s.reason = r.map(|r| crate::watch::reason(r.kind(), &r.to_string()));
         }
+        let text = |t: Option<f64>| t.map(|t| SampleTime::new(t, self.step).to_string());
+        (s.since_text, s.t_text) = (text(self.since), text(self.t));
         s.age_seconds = self.arrived.map(|a| now.saturating_duration_since(a).as_secs_f64());
         s.stalled =
             self.ended.is_none() && s.age_seconds.is_some_and(|age| age > self.stale_after_seconds);

@@ -4,14 +4,20 @@
 //! ```json
 //! {"schema": "streamcert.verdict/1", "sequence": 3, "name": "loop7", "kind": "loop",
 //!  "certificate": "calibrated", "candidate": {"gain": [[0.5]], "margin": 0.001},
-//!  "open": true, "since": 12.5, "t": 12.5, "value": 0.0021, "reason": null,
-//!  "risk": {"delta": 0.05}, "ended": false}
+//!  "open": true, "since": 12.5, "t": 12.5, "since_text": "12.5", "t_text": "12.5",
+//!  "value": 0.0021, "reason": null, "risk": {"delta": 0.05}, "ended": false,
+//!  "counters": {"samples": 626, "epochs": 0, "gaps": 0, "skipped": 0, "bad": 0,
+//!               "reconnects": 0, "reconnect_attempts": 0, "late": 0}}
 //! ```
 //!
 //! `open` is the gate that decides deployment: the calibrated certificate's when it is
 //! configured (the default), else the paper's Gaussian one, whose `risk` is `null` (no stated
 //! risk); a network's gate for `network`. `since` is the sample time from which the gate has
-//! been in this state, `t` the sample time of the message. `reason` is `null` exactly when
+//! been in this state, `t` the sample time of the message, both in seconds; `since_text` and
+//! `t_text` are the same times as a person reads them: ISO 8601 UTC to the millisecond where
+//! the times read as Unix seconds (a live source's timestamps), else seconds with the decimals
+//! the sampling step resolves. `counters` are the run's counts when the message was sent
+//! (a live source's bad payloads, reconnection attempts and reconnections among them). `reason` is `null` exactly when
 //! the gate is open; otherwise its `kind` (one of the evidence rows' reason kinds), the kind
 //! in `words` and the row's own `detail`. `sequence` counts the messages of one run from 0,
 //! so a subscriber drops a repeat (a message published again after a reconnection). The last
@@ -44,6 +50,11 @@ pub struct VerdictMessage {
     pub since: Option<f64>,
     /// The sample time of the message (`None` before a sample).
     pub t: Option<f64>,
+    /// `since` as a person reads it ([`streamcert_certificate::SampleTime`]): ISO 8601 UTC
+    /// where it reads as Unix seconds, else seconds.
+    pub since_text: Option<String>,
+    /// `t` as a person reads it (as `since_text`).
+    pub t_text: Option<String>,
     /// The certificate at `t` (1/s; the network rate for a network).
     pub value: Option<f64>,
     /// Why the gate is closed (`None` exactly when it is open).
@@ -52,6 +63,8 @@ pub struct VerdictMessage {
     pub risk: Option<Risk>,
     /// The run ended: the last message, the gate closed.
     pub ended: bool,
+    /// The run's counts when the message was sent.
+    pub counters: crate::status::Counters,
 }
 
 /// A candidate: its gain (rows of `K`, one per input; empty for a network) and the margin the

@@ -6,7 +6,9 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
 
-use streamcert_certificate::{CertificateKind, Certifier, CertifierConfig, Evidence, NotCertified};
+use streamcert_certificate::{
+    CertificateKind, Certifier, CertifierConfig, Evidence, NotCertified, SampleTime,
+};
 use streamcert_pipeline::certify::{Summary, reason_words};
 use streamcert_pipeline::source::SourceReport;
 use streamcert_pipeline::watch::Watch;
@@ -30,6 +32,7 @@ impl LoopSeries {
         metrics::advance(&r.skipped, counters.skipped);
         metrics::advance(&r.bad, counters.bad);
         metrics::advance(&r.reconnects, counters.reconnects);
+        metrics::advance(&r.reconnect_attempts, counters.reconnect_attempts);
         r.age.set(age);
         let Some(ev) = ev else { return };
         r.last_time.set(ev.t);
@@ -62,21 +65,24 @@ pub const REFRESH: Duration = Duration::from_millis(100);
 /// How often a live source's counts are asked for.
 const SOURCE_EVERY: Duration = Duration::from_secs(1);
 
-/// Sample times between these are taken as Unix seconds (2001 to 5138), for the evidence
-/// lag; others are a clock of their own and have no lag.
-const UNIX_SECONDS: std::ops::RangeInclusive<f64> = 1e9..=1e11;
+/// Sample times that read as Unix seconds (2001 to 2100) have an evidence lag and are written
+/// in UTC; others are a clock of their own.
+use streamcert_certificate::UNIX_SECONDS;
 
 /// The deciding gate's state and the verdict messages it sends (shared by both watchers).
 pub(crate) struct Gate {
     pub(crate) message: VerdictMessage,
     sinks: Vec<Box<dyn VerdictSink>>,
+    /// The last positive step between two samples' times: the decimals the times are
+    /// written with.
+    pub(crate) step: Option<f64>,
 }
 
 impl Gate {
     /// A closed gate before any sample; the first message (sequence 0) sent to every sink.
     pub(crate) fn new(message: VerdictMessage, mut sinks: Vec<Box<dyn VerdictSink>>) -> Self {
         sinks.iter_mut().for_each(|s| s.publish(&message));
-        Self { message, sinks }
+        Self { message, sinks, step: None }
     }
 
     /// The gate at sample time `t`, closed for `why` (its kind, and its detail made only when
@@ -94,6 +100,9 @@ impl Gate {
     ) -> (bool, bool) {
         let m = &mut self.message;
         let changed = open != m.open;
+        if let Some(d) = m.t.map(|last| t - last).filter(|d| *d > 0.0) {
+            self.step = Some(d);
+        }
         m.t = Some(t);
         m.value = value;
         if changed || m.since.is_none() {
@@ -144,7 +153,11 @@ impl Gate {
     }
 
     fn send(&mut self) {
-        self.message.sequence += 1;
+        let step = self.step;
+        let m = &mut self.message;
+        m.sequence += 1;
+        let text = |t: Option<f64>| t.map(|t| SampleTime::new(t, step).to_string());
+        (m.since_text, m.t_text) = (text(m.since), text(m.t));
         let m = &self.message;
         self.sinks.iter_mut().for_each(|s| s.publish(m));
     }
@@ -213,10 +226,13 @@ impl CertifyWatch {
             open: false,
             since: None,
             t: None,
+            since_text: None,
+            t_text: None,
             value: None,
             reason: Some(reason("starting", "no sample yet")),
             risk: cfg.calibration.as_ref().map(|c| Risk { delta: c.delta }),
             ended: false,
+            counters: Counters::default(),
         };
         Self {
             shown: Shown::new(&shared, message, sinks),
@@ -261,7 +277,7 @@ impl Watch for CertifyWatch {
         let now = Instant::now();
         let shown = &mut self.shown;
         shown.arrived = Some(now);
-        let c = &mut shown.counters;
+        let c = shown.counters();
         (c.samples, c.gaps, c.skipped) = (summary.rows, summary.gaps, summary.skipped);
         let d = ev.verdict(self.deciding);
         let due = shown.due(now);
@@ -280,7 +296,7 @@ impl Watch for CertifyWatch {
     }
 
     fn skipped(&mut self, summary: &Summary) {
-        self.shown.counters.skipped = summary.skipped;
+        self.shown.counters().skipped = summary.skipped;
         let why = "a bad row was passed over: every gate closes";
         let closed = self.shown.gate.close("skipped_sample", why);
         self.refresh(Instant::now(), None, closed.then_some(summary), None);

@@ -112,7 +112,15 @@ fn metrics_scraped_between_rows_equal_the_evidence_rows_so_far() {
     let mut opened = 0;
     for (k, r) in &scrapes {
         assert_eq!(r.status, 200);
-        assert!(r.headers.contains("content-type: application/openmetrics-text"));
+        // The text format 0.0.4, as promtool reads it: a counter family by its `_total` name.
+        assert!(r.headers.contains("content-type: text/plain; version=0.0.4"), "{}", r.headers);
+        assert!(!r.body.contains("# EOF"));
+        for family in r.body.lines().filter_map(|l| l.strip_prefix("# TYPE ")) {
+            let (name, kind) = family.split_once(' ').unwrap();
+            assert!(kind != "counter" || name.ends_with("_total"), "{family}");
+            let help = format!("# HELP {name} ");
+            assert!(r.body.contains(&help), "no help text for {name}");
+        }
         let seen: Vec<&str> = r.body.lines().filter(|l| !l.starts_with('#')).collect();
         for name in &names {
             assert!(seen.iter().any(|l| l.starts_with(name.as_str())), "no {name} in\n{}", r.body);

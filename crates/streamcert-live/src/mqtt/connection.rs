@@ -5,13 +5,28 @@ use std::sync::mpsc::Receiver;
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use rumqttc::{Client, ConnectionError, Event, MqttOptions, Packet};
+use rumqttc::{Client, ConnectionError, Event, MqttOptions, Packet, StateError};
 use streamcert_pipeline::CliError;
 
 use crate::config::MqttConfig;
 
+/// Failures to read a packet in a row, with no message taken between them, after which the
+/// packet is a poison message and the session is discarded.
+pub const POISON_TRIES: u32 = 3;
+
+/// What the thread that drives a connection hands over.
+pub(super) enum Driven {
+    /// An event of the connection.
+    Event(Event),
+    /// The connection was lost or refused; the thread waits, then tries again.
+    Lost(ConnectionError),
+    /// A packet the client cannot read broke the connection [`POISON_TRIES`] times: the next
+    /// connection discards the session (why, in words).
+    Poison(String),
+}
+
 /// A connection's events, handed over by the thread that drives it.
-pub(super) type Events = Receiver<Result<Event, ConnectionError>>;
+pub(super) type Events = Receiver<Driven>;
 
 /// A client for the `i`-th server, the events of its connection and the thread that drives
 /// it. The thread polls the connection without pause and hands every event over as it comes,
@@ -21,6 +36,14 @@ pub(super) type Events = Receiver<Result<Event, ConnectionError>>;
 /// crash, messages a checkpoint already holds). After an error the thread waits, doubling
 /// from `reconnect_min` to `reconnect_max`, before the client reconnects. It ends when the
 /// client disconnects or is dropped.
+///
+/// **Poison messages.** A packet the client cannot read (one above `max_packet`) breaks the
+/// connection before its packet id is known, so it cannot be acknowledged, and a persistent
+/// session has the broker deliver it again at every reconnection. After [`POISON_TRIES`] such
+/// failures in a row with no message read between them, the thread connects once with a
+/// clean session, which has the broker discard the session and its queue (the poison message
+/// with it), then connects again with a persistent session: a new one, so messages queued
+/// with the poison message are lost, and the source declares a gap.
 pub(super) fn connect(
     cfg: &MqttConfig,
     i: usize,
@@ -31,9 +54,9 @@ pub(super) fn connect(
     o.set_clean_session(!cfg.persistent_session);
     o.set_keep_alive(Duration::from_secs(10));
     o.set_manual_acks(manual_acks);
-    // Packets up to 16 times the payload limit are read whole, so that an oversized payload
-    // is named and counted (a larger packet is the client's protocol error: a reconnection).
-    o.set_max_packet_size(cfg.max_payload.saturating_mul(16).max(1 << 20), 64 * 1024);
+    // Packets up to `max_packet` (by default MQTT's largest) are read whole, so that an
+    // oversized payload is named, counted and acknowledged; a larger one is a poison message.
+    o.set_max_packet_size(cfg.max_packet, 64 * 1024);
     if let Some((user, password)) = &cfg.credentials {
         o.set_credentials(user.clone(), password.0.clone());
     }
@@ -43,21 +66,62 @@ pub(super) fn connect(
     let (client, mut connection) = Client::new(o, cfg.max_unacked.max(16) * 4);
     let (tx, rx) = std::sync::mpsc::channel();
     let backoff = cfg.backoff;
+    let persistent = cfg.persistent_session;
     let driver = std::thread::spawn(move || {
         let mut wait = backoff.0;
+        // Unreadable packets in a row, and whether the connection being made discards the
+        // session to pass over one.
+        let (mut unreadable, mut purging) = (0u32, false);
         while let Ok(event) = connection.recv() {
-            let failed = event.is_err();
-            match &event {
-                Ok(Event::Incoming(Packet::ConnAck(_))) => wait = backoff.0,
-                Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => break,
-                _ => {}
-            }
-            if tx.send(event).is_err() {
+            let driven = match event {
+                Ok(Event::Incoming(Packet::ConnAck(_))) if purging => {
+                    // The clean session discarded the old one: drop this connection (the
+                    // broker forgets a clean session with it) and connect again, persistent.
+                    purging = false;
+                    connection.eventloop.mqtt_options.set_clean_session(!persistent);
+                    connection.eventloop.clean();
+                    continue;
+                }
+                Ok(event) => {
+                    match &event {
+                        Event::Incoming(Packet::ConnAck(_)) => wait = backoff.0,
+                        Event::Incoming(Packet::Publish(_)) => unreadable = 0,
+                        Event::Outgoing(rumqttc::Outgoing::Disconnect) => break,
+                        _ => {}
+                    }
+                    Driven::Event(event)
+                }
+                Err(e) => {
+                    let poison =
+                        matches!(e, ConnectionError::MqttState(StateError::Deserialization(_)));
+                    unreadable = if poison { unreadable + 1 } else { 0 };
+                    let what = e.to_string();
+                    if tx.send(Driven::Lost(e)).is_err() {
+                        break;
+                    }
+                    if unreadable >= POISON_TRIES {
+                        unreadable = 0;
+                        // A clean session's queue goes with its connection: only a
+                        // persistent one is discarded.
+                        if persistent {
+                            purging = true;
+                            connection.eventloop.mqtt_options.set_clean_session(true);
+                        }
+                        let why = format!(
+                            "a packet the client cannot read broke the connection \
+                             {POISON_TRIES} times in a row ({what})"
+                        );
+                        if tx.send(Driven::Poison(why)).is_err() {
+                            break;
+                        }
+                    }
+                    std::thread::sleep(wait);
+                    wait = (wait * 2).min(backoff.1);
+                    continue;
+                }
+            };
+            if tx.send(driven).is_err() {
                 break;
-            }
-            if failed {
-                std::thread::sleep(wait);
-                wait = (wait * 2).min(backoff.1);
             }
         }
     });

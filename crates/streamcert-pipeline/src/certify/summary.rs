@@ -2,7 +2,7 @@
 //! first line is the calibrated verdict.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRange};
+use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, SampleTime, Sig, SigRange};
 
 use crate::reasons::reason_words;
 
@@ -157,14 +157,42 @@ impl Summary {
     }
 }
 
-/// `t = …` or `never`.
-fn when(t: Option<f64>) -> String {
-    t.map_or_else(|| "never".into(), |t| format!("t = {}", Sig(t)))
+/// A time as the summary writes it: `t = 20` in the data's own seconds (the decimals its
+/// step resolves), or the instant in ISO 8601 UTC where the time reads as Unix seconds
+/// ([`SampleTime`]).
+pub(crate) fn at_time(t: f64, step: Option<f64>) -> String {
+    if SampleTime::is_unix(t) {
+        SampleTime::new(t, step).to_string()
+    } else {
+        format!("t = {}", SampleTime::new(t, step))
+    }
 }
 
-/// `first at t = …`, or `never opened`: a gate's first opening.
-fn first(t: Option<f64>) -> String {
-    t.map_or_else(|| "never opened".into(), |t| format!("first at t = {}", Sig(t)))
+impl Summary {
+    /// The time column's median step over its first steps (positive steps only; `None`
+    /// before two rows).
+    #[must_use]
+    pub fn median_step(&self) -> Option<f64> {
+        let mut steps: Vec<f64> = self.first_steps.iter().copied().filter(|d| *d > 0.0).collect();
+        if steps.is_empty() {
+            return None;
+        }
+        steps.sort_by(f64::total_cmp);
+        Some(steps[steps.len() / 2])
+    }
+
+    /// `t = …` (or the instant in UTC), or `never`.
+    fn when(&self, t: Option<f64>) -> String {
+        t.map_or_else(|| "never".into(), |t| at_time(t, self.median_step()))
+    }
+
+    /// `first at t = …`, or `never opened`: a gate's first opening.
+    fn first(&self, t: Option<f64>) -> String {
+        t.map_or_else(
+            || "never opened".into(),
+            |t| format!("first at {}", at_time(t, self.median_step())),
+        )
+    }
 }
 
 impl Summary {
@@ -238,12 +266,7 @@ impl Summary {
     /// rates would read 1000 times too small against a margin per second).
     #[must_use]
     pub fn time_unit_hint(&self) -> Option<String> {
-        let mut steps: Vec<f64> = self.first_steps.iter().copied().filter(|d| *d > 0.0).collect();
-        if steps.is_empty() {
-            return None;
-        }
-        steps.sort_by(f64::total_cmp);
-        let median = steps[steps.len() / 2];
+        let median = self.median_step()?;
         (median >= 10.0).then(|| {
             format!(
                 "the time column's median step is {} (read as seconds, as every rate and the \
@@ -295,8 +318,10 @@ impl Summary {
                 "verdict (paper-only mode, NO STATED RISK) {candidate}: the Gaussian gate is \
                  {} at the end; the paper's gates carry no bound on the chance of a false \
                  deployment (enable [calibration] for one)",
-                self.gauss_since
-                    .map_or_else(|| "closed".into(), |t| format!("open since {}", when(Some(t))))
+                self.gauss_since.map_or_else(
+                    || "closed".into(),
+                    |t| format!("open since {}", self.when(Some(t)))
+                )
             );
         };
         let linear = self.linear_verdict(cal, cfg, outputs, &candidate);
@@ -315,7 +340,7 @@ impl Summary {
                 "region-valid verdict: CERTIFIED from {} to the end (nonlinear certificate: the \
                  rate bounded at every state of {output} in {}; its gate closes while {output} \
                  is outside)",
-                when(Some(since)),
+                self.when(Some(since)),
                 region.map_or_else(
                     || "(none recorded)".into(),
                     |(lo, hi)| SigRange(lo, hi).to_string()
@@ -359,7 +384,7 @@ impl Summary {
                     "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate{at}, \
                      risk delta = {} over the run), over the region {}; the risk assumes dynamics \
                      linear over that region ({scope})",
-                    when(Some(since)),
+                    self.when(Some(since)),
                     Sig(cal.delta),
                     if region.is_empty() { "(none recorded)".into() } else { region.join(", ") }
                 )
@@ -385,7 +410,7 @@ impl Summary {
             lines.push(format!(
                 "calibrated gate (risk delta over the run) open {:.1} % of rows ({})",
                 100.0 * self.share_calibrated(),
-                first(self.first_deploy_calibrated),
+                self.first(self.first_deploy_calibrated),
             ));
         }
         lines.extend(self.horizons_line());
@@ -394,16 +419,16 @@ impl Summary {
                 "nonlinear gate (risk delta over the run, every state of the region) open {:.1} % \
                  ({})",
                 100.0 * self.share_nonlinear(),
-                first(self.first_deploy_nonlinear),
+                self.first(self.first_deploy_nonlinear),
             ));
         }
         lines.push(format!(
             "paper's gates (no stated risk): Gaussian open {:.1} % ({}), Wasserstein \
              open {:.1} % ({})",
             100.0 * self.share_gauss(),
-            first(self.first_deploy_gauss),
+            self.first(self.first_deploy_gauss),
             100.0 * self.share_wass(),
-            first(self.first_deploy_wass),
+            self.first(self.first_deploy_wass),
         ));
         if let Some(report) = &self.source {
             lines.push(report.line());

@@ -16,6 +16,8 @@ pub(super) enum Item {
     Row(u64, f64),
     Gap(String),
     Bad(RowError),
+    /// A live source has nothing yet ([`Next::Idle`]).
+    Idle,
 }
 
 /// The input rows of either layout, as `(line, t)` with the values and, per subsystem in
@@ -150,6 +152,7 @@ impl<R: Read> Rows<R> {
                 }
                 Ok(Next::Gap(why)) => Ok(Item::Gap(why)),
                 Ok(Next::Bad(e)) => Ok(Item::Bad(e)),
+                Ok(Next::Idle) => Ok(Item::Idle),
                 Err(e) => Err(e),
             }),
         }

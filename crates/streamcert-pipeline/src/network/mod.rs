@@ -307,6 +307,7 @@ impl NetRun<'_> {
                     self.watch.net_skipped(self.summary);
                     false
                 }
+                Item::Idle => false,
             };
             if self.watch.wants_source() {
                 self.watch.source(rows.source().and_then(|s| s.report()).as_ref());

@@ -107,22 +107,24 @@ pub fn reason_words(kind: &str) -> String {
 #[must_use]
 pub fn verdict_line(cfg: &NetworkConfig, s: &NetSummary) -> String {
     let n = cfg.subsystems.len();
+    // Epochs fall on `k · epoch`: the step their times resolve.
+    let at = |t: f64| crate::certify::summary::at_time(t, Some(cfg.epoch));
     let since = s.open_since.filter(|_| s.open_at_end);
     let Some(risk) = cfg.total_risk() else {
         return format!(
             "verdict (paper-only mode, NO STATED RISK): the network gate is {} at the end; the \
              paper's local certificates carry no bound on the chance of a false deployment \
              ([network] certificate = \"calibrated\" for one)",
-            since.map_or_else(|| "closed".into(), |t| format!("open since t = {}", Sig(t)))
+            since.map_or_else(|| "closed".into(), |t| format!("open since {}", at(t)))
         );
     };
     match since {
         Some(t) => format!(
-            "verdict: network CERTIFIED from t = {} to the end (the calibrated certificates of \
+            "verdict: network CERTIFIED from {} to the end (the calibrated certificates of \
              {n} subsystems composed, risk delta = {} over the run), network rate {} at the \
              last epoch (margin {}); the risk assumes every subsystem's certificate's \
              assumptions and coupling bounds that hold",
-            Sig(t),
+            at(t),
             Sig(risk),
             s.last_rate.map_or_else(|| "none".into(), |r| Sig(r).to_string()),
             Sig(cfg.margin),
@@ -155,7 +157,9 @@ pub fn summary_text(cfg: &NetworkConfig, s: &NetSummary) -> String {
         s.epochs,
         s.certified,
         s.open,
-        s.first_open.map_or("never opened".into(), |t| format!("first at t = {}", Sig(t))),
+        s.first_open.map_or("never opened".into(), |t| {
+            format!("first at {}", crate::certify::summary::at_time(t, Some(cfg.epoch)))
+        }),
     );
     if let Some(report) = &s.source {
         text.push('\n');

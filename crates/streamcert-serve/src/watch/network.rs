@@ -57,10 +57,13 @@ impl NetworkWatch {
             open: false,
             since: None,
             t: None,
+            since_text: None,
+            t_text: None,
             value: None,
             reason: Some(super::reason("starting", "no epoch yet")),
             risk: cfg.total_risk().map(|delta| Risk { delta }),
             ended: false,
+            counters: crate::status::Counters::default(),
         };
         let subsystems = names
             .iter()
@@ -106,7 +109,7 @@ impl NetworkWatch {
             self.series.sub_certificate[i].set(sub.certificate.unwrap_or(f64::NAN));
             self.series.sub_gate[i].set(if sub.open { 1.0 } else { 0.0 });
         }
-        let c = &mut self.shown.counters;
+        let c = self.shown.counters();
         (c.samples, c.epochs, c.skipped) = (summary.rows, summary.epochs, summary.skipped);
         metrics::advance(&self.run.samples, summary.rows);
         metrics::advance(&self.run.epochs, summary.epochs);
@@ -142,13 +145,13 @@ impl Watch for NetworkWatch {
     }
 
     fn net_skipped(&mut self, summary: &NetSummary) {
-        self.shown.counters.skipped = summary.skipped;
+        self.shown.counters().skipped = summary.skipped;
         metrics::advance(&self.run.skipped, summary.skipped);
     }
 
     fn gap(&mut self, why: &str) {
-        self.shown.counters.gaps += 1;
-        metrics::advance(&self.run.gaps, self.shown.counters.gaps);
+        self.shown.counters().gaps += 1;
+        metrics::advance(&self.run.gaps, self.shown.counters().gaps);
         let closed = self.shown.gate.close("gap", why);
         self.refresh(Instant::now(), closed, None, None);
     }

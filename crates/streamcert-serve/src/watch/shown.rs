@@ -18,12 +18,13 @@ pub(crate) struct Shown {
     pub(crate) gate: Gate,
     pub(crate) chart: Chart,
     pub(crate) pending: Vec<(f64, Option<f64>, bool)>,
-    pub(crate) counters: Counters,
     verdict: String,
     refreshed: Option<Instant>,
     pub(crate) arrived: Option<Instant>,
     source_asked: Instant,
     source_line: Option<String>,
+    /// The source's line changed since it was last written into the document.
+    source_changed: bool,
 }
 
 impl Shown {
@@ -46,12 +47,12 @@ impl Shown {
             gate: Gate::new(message, sinks),
             chart: Chart::new(shared.chart_seconds),
             pending: Vec::with_capacity(64),
-            counters: Counters::default(),
             verdict: String::new(),
             refreshed: None,
             arrived: None,
             source_asked: Instant::now(),
             source_line: None,
+            source_changed: false,
         }
     }
 
@@ -73,7 +74,7 @@ impl Shown {
     ) {
         let m = &self.gate.message;
         (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
-        st.counters.clone_from(&self.counters);
+        (st.counters, st.step) = (m.counters, self.gate.step);
         st.arrived = self.arrived;
         if gate_reason {
             st.reason.clone_from(&m.reason);
@@ -82,6 +83,9 @@ impl Shown {
             self.verdict = v;
             self.refreshed = Some(now);
             st.verdict.clone_from(&self.verdict);
+        }
+        if self.source_changed {
+            self.source_changed = false;
             st.source.clone_from(&self.source_line);
         }
         if ended.is_some() {
@@ -106,13 +110,24 @@ impl Shown {
     /// them itself) and the source's line.
     pub(crate) fn source(&mut self, run: Option<&RunSeries>, report: Option<&SourceReport>) {
         let Some(r) = report else { return };
-        let c = &mut self.counters;
-        (c.bad, c.reconnects, c.late) = (r.bad_total(), r.reconnects, r.late);
+        let c = self.counters();
+        (c.bad, c.reconnects, c.reconnect_attempts, c.late) =
+            (r.bad_total(), r.reconnects, r.reconnect_attempts, r.late);
         if let Some(run) = run {
-            metrics::advance(&run.bad, c.bad);
+            metrics::advance(&run.bad, r.bad_total());
             metrics::advance(&run.reconnects, r.reconnects);
+            metrics::advance(&run.reconnect_attempts, r.reconnect_attempts);
         }
-        self.source_line = Some(r.line());
+        let line = r.line();
+        if self.source_line.as_ref() != Some(&line) {
+            self.source_line = Some(line);
+            self.source_changed = true;
+        }
+    }
+
+    /// The run's counts (those of the gate's message: every message carries them).
+    pub(crate) fn counters(&mut self) -> &mut Counters {
+        &mut self.gate.message.counters
     }
 
     /// The run ended (`error`: what stopped it): the last message sent; how, in words.

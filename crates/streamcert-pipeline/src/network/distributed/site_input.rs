@@ -102,6 +102,7 @@ impl<R: Read> Iterator for RowIter<R> {
                     eprintln!("skipped: {e}; the windows restart at the next row");
                     self.gap = true;
                 }
+                Ok(Item::Idle) => {}
                 Ok(Item::Row(line, t)) => break Ok((line, t)),
                 Err(e) => break Err(e),
             }

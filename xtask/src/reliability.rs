@@ -350,6 +350,11 @@ impl Cases {
         record(rows, "an empty file", self.certify(&[], b"")?);
         record(
             rows,
+            "a header and no data row",
+            self.certify(&[], format!("{header}\n").as_bytes())?,
+        );
+        record(
+            rows,
             "a header without the configured columns",
             self.certify(&[], b"time,a,b\n0,0,0\n")?,
         );

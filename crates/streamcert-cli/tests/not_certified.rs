@@ -1,6 +1,6 @@
 //! A NOT CERTIFIED that explains itself: a candidate the data refuse is explained by the bound
 //! the data give (in the row's words), its picture keeps the estimate and the bounds inside
-//! the axis, a header-only file says it held no data, a time column in milliseconds gets a
+//! the axis, a header-only file exits 3 as an empty file does, a time column in milliseconds gets a
 //! hint, and the gates a skipped row closes reopen at the `consecutive`-th sample after it,
 //! as the command line's text says.
 
@@ -81,14 +81,31 @@ fn a_refused_candidate_is_explained_by_the_bound_the_data_give() {
 }
 
 #[test]
-fn a_header_only_file_says_it_held_no_data() {
+fn a_header_only_file_has_no_data_as_an_empty_file_and_exits_3() {
     let cfg = config("header", -0.5);
-    let (code, out, err) = certify(&cfg, b"t,y,u\n", &[]);
-    assert_eq!(code, Some(0));
-    assert_eq!(out.lines().count(), 1, "the header alone");
-    assert!(err.contains("NOT CERTIFIED") && err.contains("the input held no data row"), "{err}");
-    let (code, _, _) = certify(&cfg, b"t,y,u\n", &["--require-certified"]);
-    assert_eq!(code, Some(6));
+    // From a file (buffered output) and from a pipe (each row flushed), as from a live feed.
+    let file = tmp("header-only.csv");
+    std::fs::write(&file, b"t,y,u\n").unwrap();
+    let from_file = ["--input", file.to_str().unwrap()];
+    let (code, _, err) = certify(&cfg, b"", &from_file);
+    assert_eq!(code, Some(3), "{err}");
+    assert!(err.contains("no data row"), "{err}");
+    for flags in [&[][..], &["--require-certified"]] {
+        let (code, _, err) = certify(&cfg, b"t,y,u\n", flags);
+        assert_eq!(code, Some(3), "{flags:?}: {err}");
+        assert!(err.contains("no data row") && err.contains("header"), "{err}");
+        assert!(!err.contains("CERTIFIED"), "no verdict without data: {err}");
+        // Blank lines after the header are no rows either; an empty file exits 3 as well.
+        let (code, _, _) = certify(&cfg, b"t,y,u\n\n\n", flags);
+        assert_eq!(code, Some(3), "{flags:?}");
+        let (code, _, err) = certify(&cfg, b"", flags);
+        assert_eq!(code, Some(3), "{flags:?}");
+        assert!(err.contains("empty input"), "{err}");
+    }
+    // One malformed row skipped is a row: the run ends with its verdict, as before.
+    let (code, _, err) = certify(&cfg, b"t,y,u\n0,x,1\n", &["--on-bad-row", "skip"]);
+    assert_eq!(code, Some(0), "{err}");
+    assert!(err.contains("NOT CERTIFIED") && err.contains("[skipped_sample]"), "{err}");
 }
 
 #[test]

@@ -104,18 +104,35 @@ pub fn run_watched<R: Read + Send, W: Write>(
     watch: &mut dyn Watch,
 ) -> Result<Summary, CliError> {
     let mut reader = SampleReader::new(input, input_name, &cfg.columns)?;
-    if opts.flush == Flush::EachRow {
-        return run_source_watched(cfg, &mut reader, input_name, out, opts, watch);
-    }
-    let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
-    let mut writer = evidence_writer(out, opts, &channels)?;
-    let replay = summary.last_time;
-    let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay, watch };
-    let outcome = batched::run(step, &mut reader, &mut writer)
-        .and_then(|()| conclude(cfg, opts, &mut writer, &cert, &mut summary));
-    ended(watch, &summary, outcome.as_ref().err());
-    outcome?;
+    let summary = if opts.flush == Flush::EachRow {
+        run_source_watched(cfg, &mut reader, input_name, out, opts, watch)?
+    } else {
+        let (mut cert, mut summary, channels) = prepare(cfg, opts)?;
+        let mut writer = evidence_writer(out, opts, &channels)?;
+        let replay = summary.last_time;
+        let step = Step { cert: &mut cert, summary: &mut summary, opts, input_name, replay, watch };
+        let outcome = batched::run(step, &mut reader, &mut writer)
+            .and_then(|()| conclude(cfg, opts, &mut writer, &cert, &mut summary));
+        ended(watch, &summary, outcome.as_ref().err());
+        outcome?;
+        summary
+    };
+    no_data_row(&reader, input_name)?;
     Ok(summary)
+}
+
+/// A file with its header and no data row has no data, as an empty file has: the same
+/// [`CliError::Input`] (exit 3), never a run that ends as if it had certified nothing.
+fn no_data_row<R: Read>(reader: &SampleReader<R>, input_name: &str) -> Result<(), CliError> {
+    if reader.records() > 0 {
+        return Ok(());
+    }
+    Err(CliError::Input {
+        file: input_name.into(),
+        message: "no data row: the input has its header and no row after it, so there is \
+                  nothing to certify"
+            .into(),
+    })
 }
 
 /// Tell `watch` the run ended with `summary`, and the error that stopped it if one did.

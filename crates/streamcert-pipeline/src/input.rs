@@ -37,6 +37,8 @@ pub struct SampleReader<R> {
     outputs: Vec<usize>,
     inputs: Vec<usize>,
     last_time: Option<f64>,
+    /// Data rows read after the header, well formed or not.
+    records: u64,
 }
 
 /// A read error of the input as the CLI's error.
@@ -94,7 +96,23 @@ impl<R: Read> SampleReader<R> {
         let time = find(&columns.time)?;
         let outputs = columns.outputs.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
         let inputs = columns.inputs.iter().map(|c| find(c)).collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { reader, file: file.into(), line, header, time, outputs, inputs, last_time: None })
+        Ok(Self {
+            reader,
+            file: file.into(),
+            line,
+            header,
+            time,
+            outputs,
+            inputs,
+            last_time: None,
+            records: 0,
+        })
+    }
+
+    /// Data rows read so far after the header, well formed or not (blank lines are not rows).
+    #[must_use]
+    pub fn records(&self) -> u64 {
+        self.records
     }
 
     /// The next row into `s`: `None` at the end of the input, `Some(Err)` for a malformed row
@@ -108,6 +126,7 @@ impl<R: Read> SampleReader<R> {
         match self.reader.read_record() {
             Ok(false) => None,
             Ok(true) => {
+                self.records += 1;
                 self.line = self.reader.line();
                 Some(self.parse(s).map_err(CliError::Row))
             }

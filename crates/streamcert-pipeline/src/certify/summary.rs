@@ -283,8 +283,8 @@ impl Summary {
         let Some(i) =
             self.calibrated_reasons.iter().enumerate().max_by_key(|(_, (_, n))| *n).map(|(i, _)| i)
         else {
-            return "the input held no data row, so nothing was certified (a header only, or \
-                    every row passed over)"
+            return "the input held no data row that could be certified, so nothing was \
+                    certified (every row passed over)"
                 .into();
         };
         let (kind, n) = &self.calibrated_reasons[i];

@@ -50,3 +50,47 @@ fn an_input_that_never_moves_is_refused_as_not_identifying_the_rate() {
         }
     }
 }
+
+/// A closed loop logged with `u = K_e y` and nothing added: the inputs are a fixed function of
+/// the outputs in every window, so every look is refused and the reason names the controller
+/// and the dither; the same loop with a dither of ±1 never gives that reason, and the held
+/// input of the test above keeps its own (20 seeds each).
+#[test]
+fn a_closed_loop_without_a_dither_is_named_as_such() {
+    let plant = |dither: f64| LinearScenario {
+        dt: 0.02,
+        steps: 3000,
+        dither_hold: 0.2,
+        ..scalar(0.5, -2.0, Process::Gaussian { sigma: 0.1 }, dither)
+    };
+    // K = -4: β* = 3.5, far above the margin; only the data's identification decides.
+    let cfg = calibrated(1, vec![-4.0], 150, 1);
+    for seed in 0..20 {
+        let reasons = |dither: f64| {
+            let data = plant(dither).run(seed).expect("data");
+            let mut cert = Certifier::new(cfg.clone()).expect("valid");
+            let mut seen = Vec::new();
+            for i in 0..data.len() {
+                let v = cert.push(data.t[i], data.output(i), data.input(i)).expect("sample");
+                seen.push((v.calibrated.open, v.calibrated.reason));
+            }
+            seen
+        };
+        let undithered = reasons(0.0);
+        assert!(undithered.iter().all(|(open, _)| !open), "seed {seed}: opened");
+        let Some((_, Some(last @ NotCertified::InputFollowsOutputs { .. }))) = undithered.last()
+        else {
+            panic!("seed {seed}: reason at the end {:?}", undithered.last());
+        };
+        assert_eq!(last.kind(), "input_follows_outputs");
+        assert!(last.to_string().contains("add a dither"), "{last}");
+        let dithered = reasons(1.0);
+        assert!(
+            dithered
+                .iter()
+                .all(|(_, r)| !matches!(r, Some(NotCertified::InputFollowsOutputs { .. }))),
+            "seed {seed}: a dithered loop told to add a dither"
+        );
+        assert!(dithered.iter().any(|(open, _)| *open), "seed {seed}: the dithered loop certified");
+    }
+}

@@ -313,6 +313,11 @@ pub(crate) struct CalibratedState {
     /// rate ([`NotCertified::WeaklyIdentified`]; `None` after a look that did, or before one).
     #[serde(default)]
     weak: Vec<Option<f64>>,
+    /// Per window, whether its latest look's refused fit had inputs the outputs explain
+    /// ([`NotCertified::InputFollowsOutputs`]; empty in states written before it, whose
+    /// refusals keep their first words).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    follows: Vec<bool>,
     est: WindowEstimate,
     /// The verdict of the latest looks (`None` until computed after construction, a reset or
     /// a restore).
@@ -416,6 +421,7 @@ impl CalibratedState {
             looks: vec![0; lengths.len()],
             latest: vec![None; lengths.len()],
             weak: vec![None; lengths.len()],
+            follows: vec![false; lengths.len()],
             windows,
             tmat,
             seen: 0,
@@ -449,6 +455,7 @@ impl CalibratedState {
         self.until_look.fill(0);
         self.latest.fill(None);
         self.weak.fill(None);
+        self.follows.fill(false);
         self.regions.fill(Interval::EMPTY);
         if let Some(n) = &mut self.nonlinear {
             n.reset();

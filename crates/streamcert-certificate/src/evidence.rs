@@ -151,6 +151,16 @@ pub enum NotCertified {
         /// transient spans.
         moves: f64,
     },
+    /// Calibrated certificate: as [`WeaklyIdentified`](Self::WeaklyIdentified) with a
+    /// singular fit, where the cause is the controller: every regressor moved beyond its
+    /// level, but the inputs are a fixed linear function of the outputs over the window (a
+    /// closed loop logged with `u = K y` and nothing added). The data cannot separate the
+    /// plant from the controller, whatever their length: the input needs a part the outputs
+    /// do not explain, a dither.
+    InputFollowsOutputs {
+        /// The window length (the longest window that looked).
+        window: usize,
+    },
     /// Nonlinear certificate: the output lies outside the standing look's region, the only
     /// states that certificate speaks for (its region is trimmed to quantiles of the visited
     /// outputs, [`NonlinearConfig::region_trim`]), so the gate stays closed until it returns.
@@ -195,6 +205,7 @@ impl NotCertified {
             | N::LinearityUntested { .. }
             | N::OrderUntested { .. }
             | N::LibraryUntested { .. }
+            | N::InputFollowsOutputs { .. }
             | N::NoNonlinearModel => [0; 3],
         }
     }
@@ -209,7 +220,7 @@ impl NotCertified {
 
     /// Every reason's name (the `reason` tag of its serde form) in the order of
     /// [`code`](Self::code), from code 1.
-    pub const KINDS: [&'static str; 20] = [
+    pub const KINDS: [&'static str; 21] = [
         "warming_up",
         "insufficient_excitation",
         "weak_instruments",
@@ -230,6 +241,7 @@ impl NotCertified {
         "library_untested",
         "weakly_identified",
         "outside_region",
+        "input_follows_outputs",
     ];
 
     /// A small stable integer per kind of reason, from 1 (0 is left for "certified" in
@@ -257,6 +269,7 @@ impl NotCertified {
             Self::LibraryUntested { .. } => 18,
             Self::WeaklyIdentified { .. } => 19,
             Self::OutsideRegion { .. } => 20,
+            Self::InputFollowsOutputs { .. } => 21,
         }
     }
 

@@ -329,3 +329,45 @@ fn an_input_that_never_moves_is_named_in_the_verdict() {
     assert!(verdict.contains("[weakly_identified]"), "{verdict}");
     assert!(verdict.contains("the input moved too rarely"), "{verdict}");
 }
+
+/// `ẏ = −y + u + w` under `u = −2 y + dither`, 3000 rows at dt = 0.02, as a CSV of `t,y_b,u_b`
+/// (a deterministic, irregular disturbance; the dither a ±`dither` square wave switching on
+/// the disturbance's sign pattern, held 0.2 s).
+fn closed_loop_csv(dither: f64) -> String {
+    let mut csv = String::from("t,y_b,u_b\n");
+    let (mut y, dt) = (0.5f64, 0.02);
+    let mut level = 1.0;
+    for i in 0..3000u32 {
+        let t = f64::from(i) * dt;
+        if i % 10 == 0 && i.wrapping_mul(2_246_822_519) % 7 < 3 {
+            level = -level;
+        }
+        let u = -2.0 * y + dither * level;
+        csv.push_str(&format!("{t},{y},{u}\n"));
+        let w = (f64::from(i.wrapping_mul(2_654_435_761) % 1000) / 1000.0 - 0.5) * 0.4;
+        y += dt * (-y + u) + w * dt.sqrt();
+    }
+    csv
+}
+
+/// A closed loop logged with `u = K y` and nothing added: no data separate the plant from the
+/// controller, and the verdict says so and names the dither; the same loop with a dither gets
+/// no such words.
+#[test]
+fn a_closed_loop_without_a_dither_is_told_to_add_one() {
+    let cfg = config("no-dither");
+    let certify = |csv: &str| {
+        let out = run(&["certify", "--config", cfg.to_str().expect("utf8")], csv.as_bytes());
+        assert!(out.status.success(), "{}", text(&out.stderr));
+        let err = text(&out.stderr);
+        err.lines().find(|l| l.starts_with("verdict:")).expect("verdict line").to_string()
+    };
+    let verdict = certify(&closed_loop_csv(0.0));
+    assert!(verdict.starts_with("verdict: NOT CERTIFIED"), "{verdict}");
+    assert!(verdict.contains("[input_follows_outputs]"), "{verdict}");
+    assert!(verdict.contains("cannot separate the plant from the controller"), "{verdict}");
+    assert!(verdict.contains("add a dither"), "{verdict}");
+    assert!(!verdict.contains("has not moved"), "{verdict}");
+    let dithered = certify(&closed_loop_csv(1.0));
+    assert!(!dithered.contains("dither") && !dithered.contains("input_follows"), "{dithered}");
+}

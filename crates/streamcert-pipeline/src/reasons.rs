@@ -29,6 +29,10 @@ pub fn reason_phrase(kind: &str) -> &str {
         "weakly_identified" => {
             "the data barely identify the rate: the input moved too rarely in the windows"
         }
+        "input_follows_outputs" => {
+            "the input follows the outputs: the data cannot separate the plant from the \
+             controller (add a dither)"
+        }
         "outside_region" => "the output is outside the region the nonlinear certificate speaks for",
         "library_misfit" => "the feature library misses the drift (lack-of-fit check)",
         "library_untested" => "the lack-of-fit check has not tested the window yet",

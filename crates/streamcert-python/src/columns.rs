@@ -91,7 +91,7 @@ impl EvidenceColumns {
     }
 
     /// The reason codes of gate `g` ([`GATES`] index): 0 where the gate is open, otherwise
-    /// [`NotCertified::code`] (1 to 20; names in [`NotCertified::KINDS`]).
+    /// [`NotCertified::code`] (1 to 21; names in [`NotCertified::KINDS`]).
     #[must_use]
     pub fn reason_codes(&self, g: usize) -> &[u8] {
         &self.reasons[g].codes

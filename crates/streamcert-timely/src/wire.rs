@@ -29,6 +29,7 @@ enum ReasonDef {
     LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
     LibraryUntested { window: usize },
     WeaklyIdentified { window: usize, moves: f64 },
+    InputFollowsOutputs { window: usize },
     OutsideRegion { y: f64, lo: f64, hi: f64 },
 }
 

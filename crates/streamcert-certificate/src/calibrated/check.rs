@@ -70,6 +70,7 @@ impl CalibratedState {
             && self.looks.len() == fresh.looks.len()
             && self.latest.len() == fresh.latest.len()
             && self.weak.len() == fresh.weak.len()
+            && (self.follows.is_empty() || self.follows.len() == fresh.follows.len())
             && self.weak.iter().flatten().all(|m| *m >= 0.0)
             && self.est.matches(&fresh.est)
             && self.sym.len() == fresh.sym.len()

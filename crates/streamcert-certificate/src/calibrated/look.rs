@@ -10,6 +10,13 @@ use crate::NotCertified;
 use crate::nonlinear::LookAt;
 use streamcert_regression::{Solve, linalg};
 
+/// The share of an input's variation (beyond its level) that the outputs may leave unexplained
+/// for a refused fit to be put down to the controller (`u = K y` with nothing added, up to
+/// rounding): far below what any dither leaves (a ±1 dither on a loop whose `K y` moves by
+/// ±1 leaves a share of order 0.1) and far above rounding (about 1e-16 on exact data, 1e-12
+/// on data written with six significant digits).
+pub(super) const FOLLOWS_SHARE: f64 = 1e-6;
+
 /// What a look's radius needs besides its estimate: the risk it spends, the margin (for the
 /// upper bound of a rate below it) and whether it carries the second covariance.
 pub(super) struct Bound {
@@ -69,6 +76,13 @@ impl CalibratedState {
             Some((_, _, nu)) if !(nu > 0.0) => Some(self.est.effective_blocks.max(0.0)),
             _ => None,
         };
+        // A refused fit whose inputs the outputs explain: a closed loop with nothing added to
+        // `u = K y`, which no data separate from the plant (the reason names the dither).
+        let refused = rate.is_none() && self.weak[w] == Some(0.0);
+        let follows = refused && self.inputs_follow_outputs();
+        if let Some(f) = self.follows.get_mut(w) {
+            *f = follows;
+        }
         let Some((beta_hat, variance, nu)) = rate else {
             self.latest[w] = None;
             if let Some(c) = &mut self.coupling {
@@ -232,6 +246,39 @@ impl CalibratedState {
         Some((beta_hat, variance, nu))
     }
 
+    /// After a refused fit (its sums in `self.est`): whether an input is a fixed linear
+    /// function of the outputs (and the intercept) over the window while every regressor
+    /// moved beyond its level. Each input's share of variation the outputs do not explain
+    /// ([`WindowEstimate::unexplained_share`](streamcert_regression::WindowEstimate::unexplained_share))
+    /// is at most [`FOLLOWS_SHARE`] of its share beyond the intercept, and no regressor's share
+    /// beyond the intercept is that small (a held signal is the other reason for a refused
+    /// fit, named as such). Words only: the look is refused either way.
+    fn inputs_follow_outputs(&self) -> bool {
+        let p = self.sym.len().isqrt();
+        let d = self.tmat.len() / p;
+        let level = usize::from(self.affine);
+        let mut by = [0usize; 16];
+        if d > by.len() {
+            return false;
+        }
+        for (i, b) in by.iter_mut().enumerate().take(p) {
+            *b = i;
+        }
+        let intercept = [d - 1];
+        let level_rows: &[usize] = if self.affine {
+            by[p] = d - 1;
+            &intercept
+        } else {
+            &[]
+        };
+        let beyond_level = |x: usize| self.est.unexplained_share(x, level_rows);
+        let moved = (0..d - level).all(|x| beyond_level(x).is_some_and(|s| s > FOLLOWS_SHARE));
+        moved && (p..d - level).any(|j| {
+            let by_outputs = self.est.unexplained_share(j, &by[..p + level]);
+            matches!((by_outputs, beyond_level(j)), (Some(u), Some(b)) if u <= FOLLOWS_SHARE * b)
+        })
+    }
+
     /// The largest standing certificate, and why the gate must stay closed if none stands.
     pub(super) fn verdict(&self, margin: f64) -> CalibratedVerdict {
         let mut varying = None;
@@ -302,9 +349,13 @@ impl CalibratedState {
         let columns = self.windows.columns(0);
         // The longest window whose latest look the data did not identify names the reason.
         let weak = (0..self.weak.len()).rev().find_map(|w| {
-            self.weak[w].map(|moves| NotCertified::WeaklyIdentified {
-                window: self.windows.window(w),
-                moves,
+            self.weak[w].map(|moves| {
+                let window = self.windows.window(w);
+                if self.follows.get(w) == Some(&true) {
+                    NotCertified::InputFollowsOutputs { window }
+                } else {
+                    NotCertified::WeaklyIdentified { window, moves }
+                }
             })
         });
         let warming = if columns < w0 {

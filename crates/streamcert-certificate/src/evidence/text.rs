@@ -65,6 +65,13 @@ impl std::fmt::Display for NotCertified {
             | Self::LibraryMisfit { .. }
             | Self::LibraryUntested { .. }
             | Self::OutsideRegion { .. } => self.fmt_nonlinear(f),
+            Self::InputFollowsOutputs { window } => write!(
+                f,
+                "the data cannot separate the plant from the controller: the input is a fixed \
+                 linear function of the outputs in window {window} (u = K y with nothing added); \
+                 add a dither, a small signal on the input that the outputs do not explain \
+                 (VALIDITY.md's cells add a PRBS of ±1 held 0.2 s)"
+            ),
             Self::WeaklyIdentified { window, moves } if *moves <= 0.0 => write!(
                 f,
                 "the data do not identify the rate: an input or output has not moved beyond \

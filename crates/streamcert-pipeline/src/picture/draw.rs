@@ -161,6 +161,7 @@ fn reason_color(kind: &str) -> RGBColor {
         "order_untested" | "linearity_untested" => RGBColor(210, 210, 150),
         "plant_changed" => RGBColor(90, 60, 160),
         "weakly_identified" => RGBColor(188, 189, 34),
+        "input_follows_outputs" => RGBColor(0, 150, 100),
         "outside_region" => RGBColor(31, 119, 180),
         "library_misfit" => RGBColor(44, 160, 44),
         "library_untested" => RGBColor(152, 223, 138),

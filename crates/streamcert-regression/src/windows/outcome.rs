@@ -180,4 +180,122 @@ impl WindowEstimate {
             && self.gj.len() == other.gj.len()
             && self.diag.len() == other.diag.len()
     }
+
+    /// The share of regressor `target`'s variation that the regressors `by` do not explain,
+    /// in the window of the latest estimate (read after a call on more than `d` batches, a
+    /// refused one too: its sums are formed before the solve). With `N = Σ_q z_q w_qᵀ` the
+    /// regressors' cross moments with the instruments (`d × k`) and `G = N Nᵀ`,
+    ///
+    /// ```text
+    /// share = (G_tt − g_btᵀ G_bb⁺ g_bt) / G_tt   ∈ [0, 1]
+    /// ```
+    ///
+    /// (`1 − R²` of row `t` of `N` on the rows `by`, a row that the earlier ones of `by`
+    /// already span is left out), in no unit: a regressor in other units scales its row.
+    /// `0` when `target` is a fixed linear combination of `by` over the window: an input
+    /// held at its level is one of the intercept (`by` the intercept's row), an input
+    /// `u = K y` with nothing added is one of the outputs' and the intercept's. `None` when
+    /// an index is out of range, `target` is among `by`, `by` holds more than 15 rows, or
+    /// `G_tt` is not positive and finite. `O(|by|² k)`, no allocation.
+    #[must_use]
+    pub fn unexplained_share(&self, target: usize, by: &[usize]) -> Option<f64> {
+        const MAX: usize = 15;
+        let k = self.hfac.len().isqrt();
+        let d = self.lu.len().isqrt();
+        if target >= d || by.len() > MAX || by.iter().any(|&b| b >= d || b == target) {
+            return None;
+        }
+        let n = self.sums.get(..d * k)?;
+        let dot = |i: usize, j: usize| -> f64 {
+            n[i * k..(i + 1) * k].iter().zip(&n[j * k..(j + 1) * k]).map(|(a, b)| a * b).sum()
+        };
+        let gtt = dot(target, target);
+        if !(gtt > 0.0 && gtt.is_finite()) {
+            return None;
+        }
+        // Cholesky of G_bb row by row (a row whose remaining pivot is at most 1e-12 of its
+        // diagonal lies in the span of the earlier ones and is left out), and c = L⁻¹ g_bt:
+        // the explained part is ‖c‖².
+        let mut l = [[0.0f64; MAX]; MAX];
+        let mut c = [0.0f64; MAX];
+        let mut kept = [false; MAX];
+        let mut explained = 0.0;
+        for i in 0..by.len() {
+            let gii = dot(by[i], by[i]);
+            let mut pivot = gii;
+            for j in (0..i).filter(|&j| kept[j]) {
+                let earlier: f64 = (0..j).filter(|&q| kept[q]).map(|q| l[i][q] * l[j][q]).sum();
+                l[i][j] = (dot(by[i], by[j]) - earlier) / l[j][j];
+                pivot -= l[i][j] * l[i][j];
+            }
+            if !(pivot > 1e-12 * gii) {
+                continue;
+            }
+            kept[i] = true;
+            l[i][i] = pivot.sqrt();
+            let earlier: f64 = (0..i).filter(|&j| kept[j]).map(|j| l[i][j] * c[j]).sum();
+            c[i] = (dot(by[i], target) - earlier) / l[i][i];
+            explained += c[i] * c[i];
+        }
+        let share = (gtt - explained) / gtt;
+        share.is_finite().then(|| share.clamp(0.0, 1.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::WindowEstimate;
+    use nalgebra::{DMatrix, DVector};
+    use proptest::prelude::*;
+
+    /// An estimate of `p = 1`, `m = 3` (`d = 4`), two instrument intervals (`k = 8`) whose
+    /// `N` is `n` (row-major, `d × k`).
+    fn with_n(n: &[f64]) -> WindowEstimate {
+        let mut est = WindowEstimate::new(1, 3, 2);
+        est.sums[..n.len()].copy_from_slice(n);
+        est
+    }
+
+    /// The oracle: `1 − g_btᵀ G_bb⁻¹ g_bt / G_tt` from a dense solve.
+    fn dense_share(n: &[f64], t: usize, by: &[usize]) -> f64 {
+        let k = 8;
+        let row = |i: usize| DVector::from_column_slice(&n[i * k..(i + 1) * k]);
+        let gtt = row(t).dot(&row(t));
+        if by.is_empty() {
+            return 1.0;
+        }
+        let gbb = DMatrix::from_fn(by.len(), by.len(), |a, b| row(by[a]).dot(&row(by[b])));
+        let gbt = DVector::from_fn(by.len(), |a, _| row(by[a]).dot(&row(t)));
+        let x = gbb.lu().solve(&gbt).expect("independent rows");
+        1.0 - gbt.dot(&x) / gtt
+    }
+
+    proptest! {
+        /// The share agrees with a dense solve on independent rows, and is 0 for a row that
+        /// is a combination of the others, also when `by` holds a row twice over.
+        #[test]
+        fn the_share_is_one_minus_r_squared(
+            n in prop::collection::vec(-3.0f64..3.0, 32),
+            a in 0.5f64..2.0,
+            b in -2.0f64..2.0,
+        ) {
+            let est = with_n(&n);
+            for (t, by) in [(0, &[1, 2][..]), (3, &[0, 1, 2][..]), (2, &[3][..]), (1, &[][..])] {
+                let got = est.unexplained_share(t, by).expect("a share");
+                let want = dense_share(&n, t, by);
+                prop_assert!((got - want).abs() <= 1e-9, "{} {}", got, want);
+            }
+            // Row 3 = a · row 0 + b · row 1; `by` with row 2 a copy of row 0.
+            let mut dep = n.clone();
+            for j in 0..8 {
+                dep[16 + j] = dep[j];
+                dep[24 + j] = a * dep[j] + b * dep[8 + j];
+            }
+            let est = with_n(&dep);
+            let share = est.unexplained_share(3, &[0, 2, 1]).expect("a share");
+            prop_assert!(share <= 1e-12, "{}", share);
+            prop_assert!(est.unexplained_share(3, &[3]).is_none());
+            prop_assert!(est.unexplained_share(4, &[0]).is_none());
+        }
+    }
 }

@@ -7,6 +7,7 @@ use super::{
     rank_one_variance_bound, standing,
 };
 use crate::NotCertified;
+use crate::guard::ModelGuard;
 use crate::nonlinear::LookAt;
 use streamcert_regression::{Solve, linalg};
 
@@ -279,6 +280,19 @@ impl CalibratedState {
         })
     }
 
+    /// The words for a look the change guard refused (`reason`): "the plant changed" only
+    /// where the data still fit the model ([`ModelGuard::fits`]). A model of the wrong order
+    /// fitted to a plant that never changed gives rates that depend on the window, which the
+    /// change guard reads as a change; where a hidden-dynamics test rejects, its rejection
+    /// names the cause instead. Words only: the looks stand or not as before.
+    fn blame_change(&self, reason: NotCertified) -> NotCertified {
+        if self.model.iter().all(ModelGuard::fits) {
+            return reason;
+        }
+        let w0 = self.windows.window(0);
+        self.model.iter().find_map(|g| g.admits(0, w0).err()).unwrap_or(reason)
+    }
+
     /// The largest standing certificate, and why the gate must stay closed if none stands.
     pub(super) fn verdict(&self, margin: f64) -> CalibratedVerdict {
         let mut varying = None;
@@ -363,6 +377,7 @@ impl CalibratedState {
         } else {
             weak.unwrap_or(NotCertified::WeakInstruments)
         };
+        let changed = changed.map(|reason| self.blame_change(reason));
         let blocked = if best.is_some() {
             None
         } else {

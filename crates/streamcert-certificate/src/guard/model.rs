@@ -307,6 +307,18 @@ impl ModelGuard {
         Ok(())
     }
 
+    /// Whether the data fit the first-order model as far as this guard has tested them: no
+    /// window's latest hidden-dynamics test rejects (always, without the order group). A
+    /// model of the wrong order leaves a rejection in the windows with the power to see it,
+    /// and then a rate that depends on the window is the model's misfit, not a change (the
+    /// verdict's words: `NotCertified::PlantChanged` only where this holds, `admits(0, _)`'s
+    /// rejection otherwise). The curvature test is left out: a window that straddles a
+    /// real change holds two slopes, which it reads as curvature (measured on the
+    /// plant-change cells, `crates/streamcert-cli/tests/blame.rs`).
+    pub(crate) fn fits(&self) -> bool {
+        !self.tests().iter().flatten().any(NonlinearityTest::significant)
+    }
+
     /// Whether a deserialised guard matches a fresh one of the same configuration.
     pub(crate) fn matches(&self, fresh: &Self) -> bool {
         (self.p, self.d, self.horizon) == (fresh.p, fresh.d, fresh.horizon)

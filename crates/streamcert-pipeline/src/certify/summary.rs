@@ -297,6 +297,13 @@ impl Summary {
             Some(last) if Some(last) != example => text.push_str(&format!("; at the end: {last}")),
             _ => {}
         }
+        // A plant change is named wherever the change guard closed the gate, also when
+        // another reason held more rows (after a change the newest windows soon bound the
+        // new plant's rate below the margin, and that reason then holds the most rows).
+        let changed = self.calibrated_reasons.iter().find(|(k, _)| k == "plant_changed");
+        if let Some((_, rows)) = changed.filter(|(k, _)| k != kind) {
+            text.push_str(&format!("; {} in {rows} rows", reason_words("plant_changed")));
+        }
         text
     }
 

@@ -321,3 +321,33 @@ fn a_node_that_delivers_nothing_is_named() {
     assert_eq!(report.rows, 0);
     assert_eq!(report.silent, vec![server.node_ids()[1].clone()]);
 }
+
+/// A server's source timestamps are Unix seconds: the verdict line reads the gate's opening
+/// as an instant in ISO 8601 UTC to the millisecond (the summary's JSON keeps the seconds),
+/// never as `t = 1.79648e+9`.
+#[test]
+fn a_verdict_on_unix_source_times_reads_its_opening_in_utc() {
+    // 2026-12-05T14:13:20Z.
+    const START: f64 = 1_796_480_000.0;
+    let server =
+        PlantServer::start(loopback(), &["y_b".into(), "u_b".into()], &scratch("utc")).unwrap();
+    let cfg = config(&server, "idle_timeout = 2.0");
+    let samples: Vec<[f64; 3]> = g5(1500).into_iter().map(|s| [START + s[0], s[1], s[2]]).collect();
+    let mut src = source(&cfg);
+    let (_, summary) = std::thread::scope(|scope| {
+        scope.spawn(|| publish(&server, &samples));
+        live_run(&cfg, &mut src)
+    });
+    let since = summary.calibrated_since.expect("G5's node b certifies within 30 s");
+    let verdict = summary.verdict_line(&cfg.certifier, &cfg.columns.outputs);
+    // The instant by hand: the run's 30 s fall within the hour that starts 13 min 20 s before.
+    let ms = ((since - START) * 1000.0).round() as u64 + 20_000;
+    assert!(ms < 46 * 60_000, "opened {} s into the run", since - START);
+    let instant =
+        format!("2026-12-05T14:{:02}:{:02}.{:03}Z", 13 + ms / 60_000, ms / 1000 % 60, ms % 1000);
+    assert!(verdict.contains(&format!("from {instant} to the end")), "{instant}: {verdict}");
+    assert!(!verdict.contains("e+9") && !verdict.contains("t = 1"), "{verdict}");
+    let json = summary.json(&cfg.certifier, &cfg.columns.outputs);
+    let seconds = json["calibrated_since"].as_f64().or_else(|| json["since"].as_f64());
+    assert_eq!(seconds, Some(since), "the JSON keeps the seconds: {json}");
+}

@@ -48,7 +48,7 @@ mod verify;
 
 use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;
-use streamcert_regression::{EstimateStatus, ResidualSource, SlidingRegression, linalg};
+use streamcert_regression::{EstimateStatus, FastPath, ResidualSource, SlidingRegression, linalg};
 
 use crate::calibrated::CalibratedState;
 use crate::gap::{Gap, GapDetector};
@@ -384,7 +384,8 @@ impl Certifier {
             return (None, self.regression.columns(), None, None);
         }
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the kernels.
-        if self.cfg.regression.outputs == 1 && self.cfg.regression.inputs == 1 {
+        let reg = &self.cfg.regression;
+        if reg.order.fast_path(reg.outputs, reg.inputs) == FastPath::Scalar {
             self.evaluate_dims(1, 1, scale)
         } else {
             self.evaluate_dims(self.cfg.regression.outputs, self.cfg.regression.inputs, scale)
@@ -394,7 +395,7 @@ impl Certifier {
     /// [`evaluate`](Self::evaluate) with the configured dimensions passed in.
     #[inline(always)]
     fn evaluate_dims(&mut self, p: usize, m: usize, scale: f64) -> Evaluated {
-        let d = p + m;
+        let order = self.cfg.regression.order;
         let residual_source = self.cfg.residuals;
         // From p = 10 the regression forms sym Ĵ_cl itself, after its solve, so the two
         // eigenvalue problems run side by side (the same numbers as one after the other).
@@ -430,7 +431,8 @@ impl Certifier {
         }
         // Residuals for ε: ΔY − Θ̂ Z of the newest interval or column.
         let mut fused = None;
-        let scalar_theta = (d == 2).then(|| [est.theta[0], est.theta[1]]);
+        let scalar_theta =
+            (order.fast_path(p, m) == FastPath::Scalar).then(|| [est.theta[0], est.theta[1]]);
         let intercept = est.intercept.first().copied();
         if let ([amb], ResidualSource::OneStep, Some(th), Some((z1, dy1))) = (
             &mut self.ambiguity[..],

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::RegressionError;
+use crate::{LoopModel, RegressionError};
 
 /// How `∫ u dτ` is computed over each sample interval `[t_j, t_{j+1}]`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -80,6 +80,12 @@ pub struct RegressionConfig {
     /// The model: [`Model::Affine`] (default) or [`Model::ThroughOrigin`] (the paper).
     #[serde(default)]
     pub model: Model,
+    /// The loop model the columns are built for ([`LoopModel`]): the width of a column, the
+    /// samples it spans, the hidden-dynamics guard's regressors and the fast paths. Default
+    /// [`LoopModel::FirstOrder`], the paper's (left out of the serialised form, so that states
+    /// and fingerprints read and compare as before).
+    #[serde(default, skip_serializing_if = "LoopModel::is_first_order")]
+    pub order: LoopModel,
     /// Window length `M` in columns (`M >= p + m`, one more for the affine model).
     pub window: usize,
     /// Horizon `h >= 1` in samples: each column spans `h` sample intervals.
@@ -110,6 +116,7 @@ impl RegressionConfig {
             outputs,
             inputs,
             model: Model::Affine,
+            order: LoopModel::FirstOrder,
             window,
             horizon,
             ridge,

@@ -68,6 +68,7 @@ mod config;
 mod error;
 mod estimate;
 pub mod linalg;
+mod loop_model;
 mod range;
 mod sliding;
 mod windows;
@@ -75,6 +76,7 @@ mod windows;
 pub use config::{Estimator, InputIntegral, Model, RegressionConfig, ResidualSource};
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
+pub use loop_model::{FastPath, LoopModel};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{

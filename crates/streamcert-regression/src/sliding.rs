@@ -24,7 +24,7 @@ mod update;
 
 use serde::{Deserialize, Serialize};
 
-use crate::{Interval, RegressionConfig, RegressionError, SlidingRange, linalg};
+use crate::{FastPath, Interval, RegressionConfig, RegressionError, SlidingRange, linalg};
 
 /// Element-wise copy; for the short slices of the hot path a plain loop beats a `memcpy` call.
 #[inline]
@@ -312,7 +312,13 @@ impl SlidingRegression {
     }
 
     fn d(&self) -> usize {
-        self.cfg.outputs + self.cfg.inputs
+        self.cfg.order.width(self.cfg.outputs, self.cfg.inputs)
+    }
+
+    /// The code path of this regression's shape ([`LoopModel::fast_path`]).
+    #[inline(always)]
+    fn fast_path(&self) -> FastPath {
+        self.cfg.order.fast_path(self.cfg.outputs, self.cfg.inputs)
     }
 
     /// Forget every sample and column (the configuration is kept).

@@ -8,7 +8,7 @@ use super::SlidingRegression;
 /// row-by-row solve and the quadratic-form `RSS` are kept, so the paper's and the validity
 /// study's small regressions give what they gave bit for bit.
 const WIDE_FROM: usize = 8;
-use crate::{Estimate, EstimateStatus, Estimator, ResidualSource, linalg};
+use crate::{Estimate, EstimateStatus, Estimator, FastPath, ResidualSource, linalg};
 
 impl SlidingRegression {
     /// Residual `out ← ΔY − Θ̂ Z` (length `p`) over the chosen interval, with the `Θ̂` of the
@@ -18,7 +18,7 @@ impl SlidingRegression {
     #[inline(always)]
     pub fn residual(&self, source: ResidualSource, out: &mut [f64]) -> bool {
         // Literal dimensions for the paper's p = m = 1 let the compiler unroll the products.
-        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+        if self.fast_path() == FastPath::Scalar {
             self.residual_dims(source, out, 1, 2)
         } else {
             self.residual_dims(source, out, self.cfg.outputs, self.d())
@@ -71,7 +71,7 @@ impl SlidingRegression {
     /// place).
     #[inline(always)]
     fn estimate_raw(&mut self) -> Estimate<'static> {
-        if self.cfg.outputs == 1 && self.cfg.inputs == 1 {
+        if self.fast_path() == FastPath::Scalar {
             self.estimate_dims(1, 1)
         } else {
             self.estimate_dims(self.cfg.outputs, self.cfg.inputs)
@@ -95,10 +95,7 @@ impl SlidingRegression {
     /// column) the sums are left as they are (the estimate is then warming up).
     #[inline(always)]
     fn enter_centred(&mut self) {
-        if self.cfg.outputs == 1
-            && self.cfg.inputs == 1
-            && self.cfg.estimator == Estimator::Ordinary
-        {
+        if self.fast_path() == FastPath::Scalar && self.cfg.estimator == Estimator::Ordinary {
             // p = m = 1, ordinary: the same arithmetic as the general loops below, in
             // registers (the paper's case, every sample).
             let inv = if self.tt > 0.0 { 1.0 / self.tt } else { 0.0 };

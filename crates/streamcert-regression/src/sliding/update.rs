@@ -2,7 +2,7 @@
 //! add-and-evict update of the sufficient statistics, and their exact periodic refresh.
 
 use super::{SlidingRegression, copy, finite3, next};
-use crate::{Estimator, InputIntegral, RegressionError, linalg};
+use crate::{Estimator, FastPath, InputIntegral, RegressionError, linalg};
 
 impl SlidingRegression {
     /// Absorb one sample `(t, y, u)`: `O(h d + d²)`, no allocation.
@@ -12,9 +12,7 @@ impl SlidingRegression {
     /// [`RegressionError::Overflow`] means finite samples overflowed a column or the window's
     /// sums; the window was cleared so no estimate is built on it.
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<(), RegressionError> {
-        if let (&[y], &[u]) = (y, u)
-            && self.cfg.outputs == 1
-            && self.cfg.inputs == 1
+        if let (FastPath::Scalar, &[y], &[u]) = (self.fast_path(), y, u)
             && self.cfg.estimator == Estimator::Ordinary
         {
             return self.push_scalar(t, y, u);
@@ -367,7 +365,7 @@ impl SlidingRegression {
         let first = (mm - start).min(self.col_len);
         if self.cfg.estimator == Estimator::Ordinary {
             let (p, d) = (self.cfg.outputs, self.d());
-            if p == 1 && d == 2 {
+            if self.fast_path() == FastPath::Scalar {
                 self.sum_scalar_columns(start, first);
                 self.sum_scalar_columns(0, self.col_len - first);
             } else {

@@ -123,28 +123,7 @@ fn bad_payload_run(format: &str, bad: &[(&str, Vec<u8>)]) {
 
 /// A publisher of raw payloads on `g5/rows` (QoS 1, all acknowledged before it returns).
 fn rumqttc_client(port: u16) -> impl FnOnce(Vec<Vec<u8>>) + Send {
-    move |payloads| {
-        let mut o = rumqttc::MqttOptions::new("raw", "127.0.0.1", port);
-        o.set_max_packet_size(1 << 21, 1 << 21);
-        let (client, mut connection) = rumqttc::Client::new(o, 64);
-        let n = payloads.len();
-        let feeder = std::thread::spawn(move || {
-            for p in payloads {
-                client.publish("g5/rows", rumqttc::QoS::AtLeastOnce, false, p).unwrap();
-            }
-            client
-        });
-        let mut acked = 0;
-        for event in connection.iter() {
-            if let Ok(rumqttc::Event::Incoming(rumqttc::Packet::PubAck(_))) = event {
-                acked += 1;
-                if acked == n {
-                    break;
-                }
-            }
-        }
-        drop(feeder.join());
-    }
+    move |payloads| support::publish_acked(port, "raw", "g5/rows", payloads, Duration::ZERO)
 }
 
 #[test]

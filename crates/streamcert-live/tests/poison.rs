@@ -33,28 +33,8 @@ fn source(cfg: &Config) -> MqttSource {
 /// Publish `first` on `topic` (QoS 1), wait `pause`, then every row of `rows` as JSON; each
 /// acknowledged by the broker before this returns.
 fn publish(port: u16, topic: &'static str, first: Vec<u8>, pause: Duration, rows: Vec<Vec<u8>>) {
-    let mut o = rumqttc::MqttOptions::new("poison-publisher", "127.0.0.1", port);
-    o.set_max_packet_size(1 << 21, 1 << 21);
-    let (client, mut connection) = rumqttc::Client::new(o, 64);
-    let n = rows.len() + 1;
-    let feeder = std::thread::spawn(move || {
-        client.publish(topic, rumqttc::QoS::AtLeastOnce, false, first).unwrap();
-        std::thread::sleep(pause);
-        for p in rows {
-            client.publish(topic, rumqttc::QoS::AtLeastOnce, false, p).unwrap();
-        }
-        client
-    });
-    let mut acked = 0;
-    for event in connection.iter() {
-        if let Ok(rumqttc::Event::Incoming(rumqttc::Packet::PubAck(_))) = event {
-            acked += 1;
-            if acked == n {
-                break;
-            }
-        }
-    }
-    drop(feeder.join());
+    let payloads = std::iter::once(first).chain(rows).collect();
+    support::publish_acked(port, "poison-publisher", topic, payloads, pause);
 }
 
 /// The G5 rows as JSON payloads, the file's certify output and summary.

@@ -38,6 +38,35 @@ pub fn broker() -> u16 {
     addr.port()
 }
 
+/// Publish `payloads` on `topic` of the broker on `port` (QoS 1, client `id`, packets up to
+/// 2 MiB), waiting `pause` after the first; returns once the broker acknowledged each.
+pub fn publish_acked(port: u16, id: &str, topic: &str, payloads: Vec<Vec<u8>>, pause: Duration) {
+    let mut o = rumqttc::MqttOptions::new(id, "127.0.0.1", port);
+    o.set_max_packet_size(1 << 21, 1 << 21);
+    let (client, mut connection) = rumqttc::Client::new(o, 64);
+    let n = payloads.len();
+    let topic = topic.to_string();
+    let feeder = std::thread::spawn(move || {
+        for (k, p) in payloads.into_iter().enumerate() {
+            client.publish(topic.as_str(), rumqttc::QoS::AtLeastOnce, false, p).unwrap();
+            if k == 0 {
+                std::thread::sleep(pause);
+            }
+        }
+        client
+    });
+    let mut acked = 0;
+    for event in connection.iter() {
+        if let Ok(rumqttc::Event::Incoming(rumqttc::Packet::PubAck(_))) = event {
+            acked += 1;
+            if acked == n {
+                break;
+            }
+        }
+    }
+    drop(feeder.join());
+}
+
 /// A TCP relay on loopback to `target`: [`Relay::cut`] closes every connection through it and
 /// refuses new ones for a while (a broker that went away, as its clients see it).
 pub struct Relay {

@@ -2,7 +2,7 @@
 //! first line is the calibrated verdict.
 
 use serde::{Deserialize, Serialize};
-use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, SampleTime, Sig, SigRange};
+use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRange};
 
 use crate::reasons::reason_words;
 
@@ -157,44 +157,6 @@ impl Summary {
     }
 }
 
-/// A time as the summary writes it: `t = 20` in the data's own seconds (the decimals its
-/// step resolves), or the instant in ISO 8601 UTC where the time reads as Unix seconds
-/// ([`SampleTime`]).
-pub(crate) fn at_time(t: f64, step: Option<f64>) -> String {
-    if SampleTime::is_unix(t) {
-        SampleTime::new(t, step).to_string()
-    } else {
-        format!("t = {}", SampleTime::new(t, step))
-    }
-}
-
-impl Summary {
-    /// The time column's median step over its first steps (positive steps only; `None`
-    /// before two rows).
-    #[must_use]
-    pub fn median_step(&self) -> Option<f64> {
-        let mut steps: Vec<f64> = self.first_steps.iter().copied().filter(|d| *d > 0.0).collect();
-        if steps.is_empty() {
-            return None;
-        }
-        steps.sort_by(f64::total_cmp);
-        Some(steps[steps.len() / 2])
-    }
-
-    /// `t = …` (or the instant in UTC), or `never`.
-    fn when(&self, t: Option<f64>) -> String {
-        t.map_or_else(|| "never".into(), |t| at_time(t, self.median_step()))
-    }
-
-    /// `first at t = …`, or `never opened`: a gate's first opening.
-    fn first(&self, t: Option<f64>) -> String {
-        t.map_or_else(
-            || "never opened".into(),
-            |t| format!("first at {}", at_time(t, self.median_step())),
-        )
-    }
-}
-
 impl Summary {
     /// Count the calibrated verdict of one accepted row at time `t`.
     pub(crate) fn count_calibrated(&mut self, t: f64, ev: &Evidence) {
@@ -259,21 +221,6 @@ impl Summary {
         if let Some(last) = self.last_time.filter(|_| self.first_steps.len() < STEPS_KEPT) {
             self.first_steps.push(t - last);
         }
-    }
-
-    /// A hint when the time column's median step (over its first steps) is 10 or more: a
-    /// control loop sampled that slowly is rare, a time column in milliseconds is not (its
-    /// rates would read 1000 times too small against a margin per second).
-    #[must_use]
-    pub fn time_unit_hint(&self) -> Option<String> {
-        let median = self.median_step()?;
-        (median >= 10.0).then(|| {
-            format!(
-                "the time column's median step is {} (read as seconds, as every rate and the \
-                 margin are per second): if the times are in milliseconds, divide them by 1000",
-                Sig(median)
-            )
-        })
     }
 
     /// Why the calibrated gate was closed, for the verdict line: the kind that held longest
@@ -518,6 +465,9 @@ fn candidate(cfg: &CertifierConfig) -> String {
         .collect();
     format!("for K = [{}] at the margin {} /s", rows.join(", "), Sig(cfg.margin))
 }
+
+mod time;
+pub(crate) use time::at_time;
 
 #[cfg(test)]
 mod tests;

@@ -141,6 +141,16 @@ impl RegressionConfig {
         if self.outputs == 0 {
             return bad("outputs", "must be at least 1".into());
         }
+        if !self.order.is_first_order() {
+            return bad(
+                "order",
+                format!(
+                    "is {}: the sliding regression fits the first-order model (order = 1); a \
+                     model of order 2 or 3 is fitted by OrderNRegression or OrderNFit",
+                    self.order.order()
+                ),
+            );
+        }
         if self.inputs == 0 {
             return bad("inputs", "must be at least 1".into());
         }

@@ -45,6 +45,17 @@ pub enum RegressionError {
     /// Finite samples produced a non-finite column (overflow). The window was cleared.
     #[error("column overflowed to a non-finite value; the window was cleared")]
     Overflow,
+    /// A record too short for the fit: it needs more rows than coefficients.
+    #[error("the record has {got} samples; the fit needs at least {needed}")]
+    InsufficientData {
+        /// Samples needed.
+        needed: usize,
+        /// Samples given.
+        got: usize,
+    },
+    /// The data do not identify the coefficients (the regressors are collinear or zero).
+    #[error("the coefficients are not identified: {0}")]
+    NotIdentified(String),
     /// A restored state is inconsistent with its configuration.
     #[error("corrupt regression state: {0}")]
     CorruptState(String),

@@ -69,6 +69,7 @@ mod error;
 mod estimate;
 pub mod linalg;
 mod loop_model;
+mod order_n;
 mod range;
 mod sliding;
 mod windows;
@@ -77,6 +78,7 @@ pub use config::{Estimator, InputIntegral, Model, RegressionConfig, ResidualSour
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
 pub use loop_model::{FastPath, LoopModel};
+pub use order_n::{ClosedLoop, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{

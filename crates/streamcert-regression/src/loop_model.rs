@@ -12,20 +12,31 @@
 //! this type for the width of a column and for the specialised code path its shape takes:
 //! the fast paths are chosen here, by the model's width, never by counting signals, so that a
 //! wider model with one output and one input cannot run code written for two regressors.
+//!
+//! [`LoopModel::Order`] is the model of order `n = 2, 3` with one output,
+//! `y⁽ⁿ⁾ + a_1 y⁽ⁿ⁻¹⁾ + … + a_n y = b_1 u⁽ⁿ⁻¹⁾ + … + b_n u + c`: its rows span `n h` sample
+//! intervals and carry `n` regressors per signal ([`crate::OrderNRegression`], where the
+//! rows are derived). The first-order sliding regression ([`crate::SlidingRegression`])
+//! refuses it.
+//!
+//! In a configuration the model is written as its order, `order = 1 | 2 | 3`.
 
-use serde::{Deserialize, Serialize};
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 /// The loop model the regression's columns are built for (see the module docs). The first
 /// order is the paper's and the default; its columns, and every number derived from them, are
 /// the regression's as it always was.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 #[non_exhaustive]
 pub enum LoopModel {
     /// `ẏ = J y + B u + c`: a column `Z_q = [∫y; ∫u]` over `h` sample intervals, `p + m`
     /// regressors (and the intercept's `τ_q` beside them with the affine model).
     #[default]
     FirstOrder,
+    /// Order `n` (2 or 3; build it with [`LoopModel::of_order`]) with one output: a row
+    /// spans `n h` sample intervals and has `n` regressors per signal, `n (1 + m)` in all (and
+    /// the intercept's).
+    Order(u8),
 }
 
 /// The code a regression of a given shape takes for its per-sample update and its solve
@@ -42,15 +53,43 @@ pub enum FastPath {
 
 impl LoopModel {
     /// Every loop model, for the tests that must hold for each.
-    pub const ALL: [Self; 1] = [Self::FirstOrder];
+    pub const ALL: [Self; 3] = [Self::FirstOrder, Self::Order(2), Self::Order(3)];
+
+    /// The model of order `n`: [`LoopModel::FirstOrder`] for `1`, [`LoopModel::Order`] for
+    /// `2` and `3`, `None` otherwise.
+    #[must_use]
+    pub fn of_order(n: usize) -> Option<Self> {
+        match n {
+            1 => Some(Self::FirstOrder),
+            2 | 3 => Some(Self::Order(n as u8)),
+            _ => None,
+        }
+    }
+
+    /// The order `n`: `1` for the first order.
+    #[must_use]
+    pub fn order(self) -> usize {
+        match self {
+            Self::FirstOrder => 1,
+            Self::Order(n) => usize::from(n),
+        }
+    }
 
     /// The number of regressors of a column, `d` (without the intercept's `τ`): `p + m` for
-    /// the first order.
+    /// the first order, `n (p + m)` for order `n` (which has `p = 1`).
     #[must_use]
     pub fn width(self, outputs: usize, inputs: usize) -> usize {
         match self {
             Self::FirstOrder => outputs + inputs,
+            Self::Order(n) => usize::from(n) * (outputs + inputs),
         }
+    }
+
+    /// The sample intervals one column spans for a horizon of `h` samples: `h` for the first
+    /// order, `n h` for order `n` (its knots are `h` samples apart).
+    #[must_use]
+    pub fn span(self, horizon: usize) -> usize {
+        self.order() * horizon
     }
 
     /// The code path for `outputs` outputs and `inputs` inputs: [`FastPath::Scalar`] for one
@@ -61,7 +100,7 @@ impl LoopModel {
         // one input is its width of two).
         match self {
             Self::FirstOrder if outputs == 1 && inputs == 1 => FastPath::Scalar,
-            Self::FirstOrder => FastPath::General,
+            Self::FirstOrder | Self::Order(_) => FastPath::General,
         }
     }
 
@@ -71,6 +110,33 @@ impl LoopModel {
     #[must_use]
     pub fn is_first_order(&self) -> bool {
         *self == Self::FirstOrder
+    }
+}
+
+/// Written as the order, `1 | 2 | 3`.
+impl Serialize for LoopModel {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_u64(self.order() as u64)
+    }
+}
+
+/// Read from the order, `1 | 2 | 3` (and `"first_order"`, the first order's earlier name).
+impl<'de> Deserialize<'de> for LoopModel {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        #[derive(Deserialize)]
+        #[serde(untagged)]
+        enum Written {
+            Order(u64),
+            Name(String),
+        }
+        let bad = || serde::de::Error::custom("order must be 1, 2 or 3");
+        match Written::deserialize(deserializer)? {
+            Written::Order(n) => {
+                Self::of_order(usize::try_from(n).map_err(|_| bad())?).ok_or_else(bad)
+            }
+            Written::Name(name) if name == "first_order" => Ok(Self::FirstOrder),
+            Written::Name(_) => Err(bad()),
+        }
     }
 }
 
@@ -89,5 +155,30 @@ mod tests {
             let scalar = (p, i) == (1, 1);
             assert_eq!(m.fast_path(p, i) == FastPath::Scalar, scalar, "{p} {i}");
         }
+    }
+
+    /// Order `n` is wider and longer, never takes the scalar path, and is written as its
+    /// order; anything else is refused.
+    #[test]
+    fn higher_orders_are_wider_longer_and_written_as_numbers() {
+        for n in 1..=3 {
+            let model = LoopModel::of_order(n).unwrap();
+            assert_eq!(model.order(), n);
+            assert_eq!(model.width(1, 2), n * 3);
+            assert_eq!(model.span(7), 7 * n);
+            assert_eq!(model.fast_path(1, 1) == FastPath::Scalar, n == 1);
+            let json = serde_json::to_string(&model).unwrap();
+            assert_eq!(json, n.to_string());
+            assert_eq!(serde_json::from_str::<LoopModel>(&json).unwrap(), model);
+        }
+        assert_eq!(
+            serde_json::from_str::<LoopModel>("\"first_order\"").unwrap(),
+            LoopModel::FirstOrder
+        );
+        for bad in ["0", "4", "\"second\"", "-1", "2.5"] {
+            assert!(serde_json::from_str::<LoopModel>(bad).is_err(), "{bad}");
+        }
+        assert_eq!(LoopModel::of_order(0), None);
+        assert_eq!(LoopModel::of_order(4), None);
     }
 }

@@ -59,14 +59,16 @@ fn the_scalar_push_is_the_general_push_bit_for_bit() {
 }
 
 proptest::proptest! {
-    /// For every loop model: the per-sample path its shape selects (`push`) leaves the
+    /// For every loop model the sliding regression takes: the per-sample path its shape selects (`push`) leaves the
     /// general path's state bit for bit after every sample, on random irregular samples.
     #[test]
     fn every_models_fast_path_is_its_general_path(
         steps in proptest::collection::vec((0.001f64..0.05, -5.0f64..5.0, -5.0f64..5.0), 30..120),
         affine in proptest::bool::ANY,
     ) {
-        for order in LoopModel::ALL {
+        // The sliding regression's models (order n has its own streaming path, checked
+        // against its direct rows in `order_n`).
+        for order in LoopModel::ALL.into_iter().filter(|o| o.is_first_order()) {
             let mut cfg = RegressionConfig::new(1, 1, 12, 2, 1e-4);
             cfg.order = order;
             cfg.model = if affine { Model::Affine } else { Model::ThroughOrigin };

@@ -1,0 +1,548 @@
+//! [`OrderNFit`]: the batch estimator of order `n`, with the coefficients' covariance from the
+//! residual's known structure.
+
+use super::rows::RowWeights;
+use super::{OrderNConfig, check_sample};
+use crate::RegressionError;
+use crate::linalg::{cholesky_in_place, cholesky_solve_in_place, eig_work_len, psd_eig_extremes};
+
+/// The order-`n` coefficients of one record, fitted by least squares over every row, and their
+/// covariance.
+///
+/// ## Why not `s² (ΦᵀΦ)⁻¹`
+///
+/// Consecutive rows share `n h` of their `n h + 1` samples, so their residuals are correlated:
+/// white sensor noise `e` on `y` leaves the row residual `ε_k = Σ_j w_{k,j} e_j`, with
+/// `w_k = wz_k − Σ_i a_i wy_{k,i}` (the regressand's and the output regressors' weights on the
+/// span's samples). That residual is over-differenced (`Σ_j w_{k,j} = a_n L̄ⁿ`, near zero): its
+/// autocorrelation is strongly negative at lags up to `n h`. Given the rows, the estimation
+/// error is exactly `θ̂ − θ = G⁻¹ Σ_j e_j Ψ_j` with `G = ΦᵀΦ` and `Ψ_j = Σ_k w_{k,j} φ_k`, so
+/// `Var θ̂ = σ_e² G⁻¹ ΨᵀΨ G⁻¹`. The covariance that uses only the residual's variance ignores
+/// this structure and is 1.5–4× too wide here; a HAC estimate from the few independent spans
+/// of a window is too noisy in the tail a split risk asks for.
+///
+/// ## The model-structured covariance
+///
+/// The fit allows two white noises: `e` on the sensor (variance `σ_e²` per sample) and `v`
+/// entering the plant where `c` enters (intensity `σ_v²`; the row's response is
+/// `L̄ⁿ ∫ M v`, discretised per sample interval). The two variances are fitted, non-negative,
+/// by least squares of the residuals' autocovariances `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the
+/// lags `ℓ = 0..n h` on the two shapes the noises give, `s(ℓ) = Σ_o w̄_o w̄_{o+ℓ}` (`w̄` the
+/// rows' mean kernel; the rows' own kernels on equal spacing). Then
+///
+/// ```text
+/// V = G⁻¹ (σ_e² Ψ_eᵀΨ_e + σ_v² Ψ_vᵀΨ_v) G⁻¹ · N / (N − d).
+/// ```
+///
+/// It is valid for white sensor noise and white noise at the intercept's position; other noise
+/// (coloured sensor noise, process noise entering elsewhere) would need its own kernel. With
+/// `u` the input applied (known exactly), the sensor noise that re-enters the loop through `u`
+/// biases least squares by `O(σ² dt / L^{2n−1})`, which a long horizon keeps small.
+///
+/// ```
+/// use streamcert_regression::{LoopModel, OrderNConfig, OrderNFit};
+/// // ÿ + 3 ẏ + 2 y = u: y = x₀ − x₁ with the modes e^{−t}, e^{−2t}, at 100 Hz.
+/// let (dt, mut x) = (0.01f64, [0.0f64, 0.0]);
+/// let (mut t, mut y, mut u) = (vec![], vec![], vec![]);
+/// for k in 0..2000 {
+///     let uk = if (k / 37) % 2 == 0 { 1.0 } else { -1.0 };
+///     (t.push(k as f64 * dt), y.push(x[0] - x[1]), u.push(uk));
+///     x[0] = (-dt).exp() * x[0] + (1.0 - (-dt).exp()) * uk;
+///     x[1] = (-2.0 * dt).exp() * x[1] + (1.0 - (-2.0 * dt).exp()) / 2.0 * uk;
+/// }
+/// let cfg = OrderNConfig::new(LoopModel::of_order(2).unwrap(), 1, 400, 20);
+/// let fit = OrderNFit::fit(&cfg, &t, &y, &u)?;
+/// // θ = (a₁, a₂, b₁, b₂, c) = (3, 2, 0, 1, 0).
+/// assert!((fit.theta()[0] - 3.0).abs() < 1e-3 && (fit.theta()[3] - 1.0).abs() < 1e-3);
+/// // The closed loop under u = −y: s² + 3 s + 3.
+/// let closed = fit.closed_loop(&[-1.0])?;
+/// assert!((closed.beta[1] - 3.0).abs() < 1e-3);
+/// # Ok::<(), streamcert_regression::RegressionError>(())
+/// ```
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderNFit {
+    n: usize,
+    m: usize,
+    rows: usize,
+    theta: Vec<f64>,
+    covariance: Vec<f64>,
+    sensor_variance: f64,
+    equation_variance: f64,
+    residual_rms: f64,
+}
+
+/// The closed loop's characteristic coefficients under `u = K y` and their covariance: the
+/// polynomial `p(s) = sⁿ + β_1 sⁿ⁻¹ + … + β_n` with `β = a − Σ_inputs K_j b_j = T θ`,
+/// `Σ_β = T V Tᵀ`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ClosedLoop {
+    /// `β_1..β_n`.
+    pub beta: Vec<f64>,
+    /// `Σ_β`, `n × n` row-major.
+    pub covariance: Vec<f64>,
+}
+
+impl ClosedLoop {
+    /// `(β − β̂)ᵀ Σ_β⁻¹ (β − β̂)`: the squared distance of `beta` from the estimate in the
+    /// covariance's metric (`χ²_n`-distributed at the truth for Gaussian errors). `None` when
+    /// `Σ_β` is not positive definite.
+    #[must_use]
+    pub fn mahalanobis(&self, beta: &[f64]) -> Option<f64> {
+        let n = self.beta.len();
+        let mut l = self.covariance.clone();
+        if beta.len() != n || !cholesky_in_place(&mut l, n) {
+            return None;
+        }
+        let mut x: Vec<f64> = beta.iter().zip(&self.beta).map(|(b, e)| b - e).collect();
+        let diff = x.clone();
+        cholesky_solve_in_place(&l, n, &mut x);
+        Some(x.iter().zip(&diff).map(|(a, b)| a * b).sum())
+    }
+}
+
+/// The rows of one record, built once, for fits over any run of consecutive rows (a look's
+/// window): one row ends at every sample from the `n h + 1`-th; row `r` ends at sample
+/// `r + n h`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderNRecord {
+    n: usize,
+    m: usize,
+    span: usize,
+    min_excitation_ratio: f64,
+    origin: Vec<f64>,
+    phi: Vec<f64>,
+    z: Vec<f64>,
+    wz: Vec<f64>,
+    wy: Vec<f64>,
+    wv: Vec<f64>,
+}
+
+impl OrderNRecord {
+    /// The rows of the record `t` (increasing), `y` (one output), `u` (`t.len() × m`,
+    /// row-major), relative to its first sample. `cfg.window`, `min_rows` and
+    /// `refresh_period` belong to the streaming estimator and are not used.
+    ///
+    /// # Errors
+    /// - [`RegressionError::InvalidConfig`] for a bad configuration;
+    /// - [`RegressionError::DimensionMismatch`], [`RegressionError::NonFinite`],
+    ///   [`RegressionError::NonIncreasingTime`] for a bad record.
+    pub fn new(
+        cfg: &OrderNConfig,
+        t: &[f64],
+        y: &[f64],
+        u: &[f64],
+    ) -> Result<Self, RegressionError> {
+        let mut probe = *cfg;
+        probe.window = probe.window.max(cfg.width());
+        probe.min_rows = probe.min_rows.clamp(cfg.width(), probe.window);
+        probe.refresh_period = probe.refresh_period.clamp(1, probe.window);
+        probe.validate()?;
+        let shape = cfg.shape();
+        let (n, m, span, d) = (shape.n, shape.m, shape.span(), shape.width());
+        if y.len() != t.len() {
+            return Err(RegressionError::DimensionMismatch {
+                field: "y",
+                expected: t.len(),
+                got: y.len(),
+            });
+        }
+        if u.len() != t.len() * m {
+            return Err(RegressionError::DimensionMismatch {
+                field: "u",
+                expected: t.len() * m,
+                got: u.len(),
+            });
+        }
+        for k in 0..t.len() {
+            let previous = k.checked_sub(1).map(|p| t[p]);
+            check_sample(previous, t[k], y[k], &u[k * m..(k + 1) * m], m)?;
+        }
+        let rows = t.len().saturating_sub(span);
+        // Relative to the first sample: only the intercept sees the origin.
+        let mut origin = vec![0.0; 1 + m];
+        if let (Some(&y0), Some(u0)) = (y.first(), u.get(..m)) {
+            origin[0] = y0;
+            origin[1..].copy_from_slice(u0);
+        }
+        let ys: Vec<f64> = y.iter().map(|v| v - origin[0]).collect();
+        let us: Vec<f64> = u.iter().enumerate().map(|(i, v)| v - origin[1 + i % m]).collect();
+        let mut weights = RowWeights::new(shape);
+        let mut record = Self {
+            n,
+            m,
+            span,
+            min_excitation_ratio: cfg.min_excitation_ratio,
+            origin,
+            phi: vec![0.0; rows * d],
+            z: vec![0.0; rows],
+            wz: vec![0.0; rows * (span + 1)],
+            wy: vec![0.0; rows * n * (span + 1)],
+            wv: vec![0.0; rows * span],
+        };
+        for r in 0..rows {
+            let s = r..r + span + 1;
+            weights.fill(shape, &t[s.clone()]);
+            let row = &mut record.phi[r * d..(r + 1) * d];
+            record.z[r] = weights.apply(shape, &ys[s], &us[r * m..(r + span + 1) * m], row);
+            record.wz[r * (span + 1)..(r + 1) * (span + 1)].copy_from_slice(&weights.wz);
+            record.wy[r * n * (span + 1)..(r + 1) * n * (span + 1)].copy_from_slice(&weights.wy);
+            record.wv[r * span..(r + 1) * span].copy_from_slice(&weights.wv);
+        }
+        Ok(record)
+    }
+
+    /// The number of rows.
+    #[must_use]
+    pub fn rows(&self) -> usize {
+        self.z.len()
+    }
+
+    /// Fit the consecutive rows `rows` (row `r` ends at sample `r + n h`).
+    ///
+    /// # Errors
+    /// - [`RegressionError::InsufficientData`] when the range has no more than `d` rows (or
+    ///   reaches past the record);
+    /// - [`RegressionError::NotIdentified`] when the column-scaled Gram matrix has
+    ///   `λ_min <= min_excitation_ratio · λ_max` (the inputs do not excite every coefficient).
+    pub fn fit(&self, rows: std::ops::Range<usize>) -> Result<OrderNFit, RegressionError> {
+        let (n, m, span) = (self.n, self.m, self.span);
+        let d = n * (1 + m) + 1;
+        let count = rows.end.saturating_sub(rows.start);
+        if rows.end > self.rows() || count <= d {
+            return Err(RegressionError::InsufficientData {
+                needed: d + 1 + span,
+                got: count.min(self.rows().saturating_sub(rows.start)) + span,
+            });
+        }
+        let first = rows.start;
+        let phi = &self.phi[first * d..rows.end * d];
+        let z = &self.z[rows.clone()];
+
+        let (theta, ginv) = self.solve(phi, z, d)?;
+        let resid: Vec<f64> = phi
+            .chunks_exact(d)
+            .zip(z)
+            .map(|(row, zr)| zr - row.iter().zip(&theta).map(|(x, t)| x * t).sum::<f64>())
+            .collect();
+        let residual_rms = (resid.iter().map(|r| r * r).sum::<f64>() / count as f64).sqrt();
+
+        let (covariance, sensor_variance, equation_variance) =
+            self.structured_covariance(first, phi, &theta, &resid, &ginv);
+        let (theta, covariance) = self.in_plant_coordinates(theta, &covariance);
+        Ok(OrderNFit {
+            n,
+            m,
+            rows: count,
+            theta,
+            covariance,
+            sensor_variance,
+            equation_variance,
+            residual_rms,
+        })
+    }
+
+    /// `θ̂` and `G⁻¹` by least squares on the column-scaled Gram matrix, after the
+    /// identification test.
+    fn solve(
+        &self,
+        phi: &[f64],
+        z: &[f64],
+        d: usize,
+    ) -> Result<(Vec<f64>, Vec<f64>), RegressionError> {
+        let n = self.n;
+
+        let mut g = vec![0.0; d * d];
+        let mut rhs = vec![0.0; d];
+        for (row, zr) in phi.chunks_exact(d).zip(z) {
+            for a in 0..d {
+                rhs[a] += row[a] * zr;
+                for b in 0..d {
+                    g[a * d + b] += row[a] * row[b];
+                }
+            }
+        }
+        let scale: Vec<f64> = (0..d).map(|a| g[a * d + a].sqrt()).collect();
+        if scale.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
+            return Err(RegressionError::NotIdentified("a regressor is zero over the rows".into()));
+        }
+        let gs: Vec<f64> = (0..d * d).map(|i| g[i] / (scale[i / d] * scale[i % d])).collect();
+        let mut work = vec![0.0; eig_work_len(d)];
+        let (lo, hi) = psd_eig_extremes(&gs, d, &mut work);
+        if !(lo > self.min_excitation_ratio * hi) {
+            return Err(RegressionError::NotIdentified(format!(
+                "the column-scaled Gram matrix has λ_min/λ_max = {:.3e}, at most {:.1e}: the inputs do not excite every coefficient of order {n}",
+                lo / hi,
+                self.min_excitation_ratio
+            )));
+        }
+        let mut l = gs.clone();
+        if !cholesky_in_place(&mut l, d) {
+            return Err(RegressionError::NotIdentified(
+                "the Gram matrix is not positive definite".into(),
+            ));
+        }
+        let mut theta: Vec<f64> = (0..d).map(|a| rhs[a] / scale[a]).collect();
+        cholesky_solve_in_place(&l, d, &mut theta);
+        for (th, s) in theta.iter_mut().zip(&scale) {
+            *th /= s;
+        }
+        // G⁻¹ as columns, through the scaled factor: G⁻¹ = D⁻¹ Gs⁻¹ D⁻¹.
+        let mut ginv = vec![0.0; d * d];
+        for c in 0..d {
+            let mut e = vec![0.0; d];
+            e[c] = 1.0;
+            cholesky_solve_in_place(&l, d, &mut e);
+            for a in 0..d {
+                ginv[a * d + c] = e[a] / (scale[a] * scale[c]);
+            }
+        }
+
+        Ok((theta, ginv))
+    }
+
+    /// The model-structured covariance of the rows from `first` (see [`OrderNFit`]), in the
+    /// origin's coordinates, with the fitted `(σ_e², σ_v²)`.
+    fn structured_covariance(
+        &self,
+        first: usize,
+        phi: &[f64],
+        theta: &[f64],
+        resid: &[f64],
+        ginv: &[f64],
+    ) -> (Vec<f64>, f64, f64) {
+        let (n, span, d, count) = (self.n, self.span, theta.len(), resid.len());
+        // The residual's kernel on the sensor noise (with â) and on the equation noise; their
+        // filtered rows Ψ (indexed from the range's first sample) and the rows' mean kernels.
+        let mut psi_e = vec![0.0; (count + span) * d];
+        let mut psi_v = vec![0.0; (count + span) * d];
+        let mut mean_e = vec![0.0; span + 1];
+        let mut mean_v = vec![0.0; span];
+        let mut w = vec![0.0; span + 1];
+        for (i, row) in phi.chunks_exact(d).enumerate() {
+            let r = first + i;
+            w.copy_from_slice(&self.wz[r * (span + 1)..(r + 1) * (span + 1)]);
+            for (k, th) in theta.iter().enumerate().take(n) {
+                let wyk = &self.wy[(r * n + k) * (span + 1)..(r * n + k + 1) * (span + 1)];
+                for (wo, wi) in w.iter_mut().zip(wyk) {
+                    *wo -= th * wi;
+                }
+            }
+            for (o, wo) in w.iter().enumerate() {
+                mean_e[o] += wo / count as f64;
+                let psi = &mut psi_e[(i + o) * d..(i + o + 1) * d];
+                for (p, x) in psi.iter_mut().zip(row) {
+                    *p += wo * x;
+                }
+            }
+            for (o, wo) in self.wv[r * span..(r + 1) * span].iter().enumerate() {
+                mean_v[o] += wo / count as f64;
+                let psi = &mut psi_v[(i + o) * d..(i + o + 1) * d];
+                for (p, x) in psi.iter_mut().zip(row) {
+                    *p += wo * x;
+                }
+            }
+        }
+        let (sensor_variance, equation_variance) = fit_variances(resid, &mean_e, &mean_v);
+        let he = gram(&psi_e, d);
+        let hv = gram(&psi_v, d);
+        let middle: Vec<f64> =
+            he.iter().zip(&hv).map(|(e, v)| sensor_variance * e + equation_variance * v).collect();
+        let dof = count as f64 / (count - d) as f64;
+        let mut covariance = sandwich(ginv, &middle, d);
+        for c in &mut covariance {
+            *c *= dof;
+        }
+        (covariance, sensor_variance, equation_variance)
+    }
+
+    /// `θ` and its covariance moved from the origin's coordinates to the plant's.
+    fn in_plant_coordinates(
+        &self,
+        mut theta: Vec<f64>,
+        covariance: &[f64],
+    ) -> (Vec<f64>, Vec<f64>) {
+        let (n, m, d) = (self.n, self.m, theta.len());
+        // Back to the plant's coordinates: c = c' + a_n y₀ − Σ_j b_{j,n} u₀_j.
+        let mut map = vec![0.0; d * d];
+        for a in 0..d {
+            map[a * d + a] = 1.0;
+        }
+        map[(d - 1) * d + (n - 1)] = self.origin[0];
+        for j in 0..m {
+            map[(d - 1) * d + n + j * n + n - 1] = -self.origin[1 + j];
+        }
+        let shifted = theta.clone();
+        for (a, th) in theta.iter_mut().enumerate() {
+            *th = (0..d).map(|b| map[a * d + b] * shifted[b]).sum();
+        }
+        let covariance = sandwich(&map, covariance, d);
+        (theta, covariance)
+    }
+}
+
+impl OrderNFit {
+    /// Fit every row of the record `t` (increasing), `y` (one output), `u` (`t.len() × m`,
+    /// row-major): [`OrderNRecord::new`] then [`OrderNRecord::fit`] over all its rows.
+    ///
+    /// # Errors
+    /// As [`OrderNRecord::new`] and [`OrderNRecord::fit`].
+    pub fn fit(
+        cfg: &OrderNConfig,
+        t: &[f64],
+        y: &[f64],
+        u: &[f64],
+    ) -> Result<Self, RegressionError> {
+        let record = OrderNRecord::new(cfg, t, y, u)?;
+        record.fit(0..record.rows())
+    }
+
+    /// `θ̂ = (a_1..a_n, b_{1,1}..b_{1,n}, …, c)`.
+    #[must_use]
+    pub fn theta(&self) -> &[f64] {
+        &self.theta
+    }
+
+    /// The covariance of [`theta`](Self::theta), `d × d` row-major (model-structured; see the
+    /// type's docs).
+    #[must_use]
+    pub fn covariance(&self) -> &[f64] {
+        &self.covariance
+    }
+
+    /// The order `n`.
+    #[must_use]
+    pub fn order(&self) -> usize {
+        self.n
+    }
+
+    /// The rows fitted.
+    #[must_use]
+    pub fn rows(&self) -> usize {
+        self.rows
+    }
+
+    /// The fitted sensor-noise variance `σ_e²` (per sample, in the output's units squared).
+    #[must_use]
+    pub fn sensor_variance(&self) -> f64 {
+        self.sensor_variance
+    }
+
+    /// The fitted intensity `σ_v²` of white noise at the intercept's position.
+    #[must_use]
+    pub fn equation_variance(&self) -> f64 {
+        self.equation_variance
+    }
+
+    /// `√(Σ r_k² / N)` of the rows' residuals.
+    #[must_use]
+    pub fn residual_rms(&self) -> f64 {
+        self.residual_rms
+    }
+
+    /// The closed loop under `u = K y` (`gain`: `m` values).
+    ///
+    /// # Errors
+    /// [`RegressionError::DimensionMismatch`] when `gain` does not have `m` values.
+    pub fn closed_loop(&self, gain: &[f64]) -> Result<ClosedLoop, RegressionError> {
+        let (n, m) = (self.n, self.m);
+        if gain.len() != m {
+            return Err(RegressionError::DimensionMismatch {
+                field: "gain",
+                expected: m,
+                got: gain.len(),
+            });
+        }
+        let d = self.theta.len();
+        let mut tmat = vec![0.0; n * d];
+        for i in 0..n {
+            tmat[i * d + i] = 1.0;
+            for (j, k) in gain.iter().enumerate() {
+                tmat[i * d + n + j * n + i] = -k;
+            }
+        }
+        let beta = (0..n).map(|i| (0..d).map(|a| tmat[i * d + a] * self.theta[a]).sum()).collect();
+        let mut tv = vec![0.0; n * d];
+        for i in 0..n {
+            for b in 0..d {
+                tv[i * d + b] = (0..d).map(|a| tmat[i * d + a] * self.covariance[a * d + b]).sum();
+            }
+        }
+        let mut covariance = vec![0.0; n * n];
+        for i in 0..n {
+            for j in 0..n {
+                covariance[i * n + j] = (0..d).map(|b| tv[i * d + b] * tmat[j * d + b]).sum();
+            }
+        }
+        Ok(ClosedLoop { beta, covariance })
+    }
+}
+
+/// `Σ_j x_j x_jᵀ` over the rows of `x` (`d` wide).
+fn gram(x: &[f64], d: usize) -> Vec<f64> {
+    let mut g = vec![0.0; d * d];
+    for row in x.chunks_exact(d) {
+        for a in 0..d {
+            for b in 0..d {
+                g[a * d + b] += row[a] * row[b];
+            }
+        }
+    }
+    g
+}
+
+/// `A B Aᵀ` for `d × d` matrices.
+fn sandwich(a: &[f64], b: &[f64], d: usize) -> Vec<f64> {
+    let mut ab = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..d {
+            ab[i * d + j] = (0..d).map(|k| a[i * d + k] * b[k * d + j]).sum();
+        }
+    }
+    let mut out = vec![0.0; d * d];
+    for i in 0..d {
+        for j in 0..d {
+            out[i * d + j] = (0..d).map(|k| ab[i * d + k] * a[j * d + k]).sum();
+        }
+    }
+    out
+}
+
+/// The autocorrelation `s(ℓ) = Σ_o w_o w_{o+ℓ}` of a kernel at the lags `0..len`.
+fn shape_of(w: &[f64], lags: usize) -> Vec<f64> {
+    (0..lags).map(|l| w.iter().zip(w.iter().skip(l)).map(|(a, b)| a * b).sum()).collect()
+}
+
+/// `(σ_e², σ_v²) >= 0` minimising `Σ_ℓ (γ̂(ℓ) − σ_e² s_e(ℓ) − σ_v² s_v(ℓ))²` over the lags
+/// `0..=n h` (two-variable non-negative least squares: the unconstrained solution when both
+/// are positive, else the better of the two one-variable fits, else zero).
+fn fit_variances(resid: &[f64], kernel_e: &[f64], kernel_v: &[f64]) -> (f64, f64) {
+    let lags = kernel_e.len().min(resid.len());
+    let gamma: Vec<f64> = (0..lags)
+        .map(|l| {
+            resid.iter().zip(&resid[l..]).map(|(a, b)| a * b).sum::<f64>()
+                / (resid.len() - l) as f64
+        })
+        .collect();
+    let (se, sv) = (shape_of(kernel_e, lags), shape_of(kernel_v, lags));
+    let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
+    let (ee, vv, ev, eg, vg) =
+        (dot(&se, &se), dot(&sv, &sv), dot(&se, &sv), dot(&se, &gamma), dot(&sv, &gamma));
+    let sse = |a: f64, b: f64| {
+        gamma
+            .iter()
+            .zip(se.iter().zip(&sv))
+            .map(|(g, (e, v))| (g - a * e - b * v).powi(2))
+            .sum::<f64>()
+    };
+    let det = ee * vv - ev * ev;
+    if det > 0.0 {
+        let a = (eg * vv - vg * ev) / det;
+        let b = (vg * ee - eg * ev) / det;
+        if a >= 0.0 && b >= 0.0 {
+            return (a, b);
+        }
+    }
+    let only_e = if ee > 0.0 { (eg / ee).max(0.0) } else { 0.0 };
+    let only_v = if vv > 0.0 { (vg / vv).max(0.0) } else { 0.0 };
+    if sse(only_e, 0.0) <= sse(0.0, only_v) { (only_e, 0.0) } else { (0.0, only_v) }
+}

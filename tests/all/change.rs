@@ -8,7 +8,8 @@
 use streamcert::certificate::{Calibration, Certifier, CertifierConfig, NotCertified};
 use streamcert::dynamics::{LinearScenario, PlantSwitch, Process, ScalarDrift, ScalarScenario};
 use streamcert::regression::{
-    InputIntegral, InstrumentedWindows, RegressionConfig, SlidingRegression, Solve, WindowEstimate,
+    InputIntegral, InstrumentedWindows, RateMap, RegressionConfig, SlidingRegression, Solve,
+    WindowEstimate,
 };
 
 use crate::calibrated::{calibrated, clopper_pearson, first_opening, short_window_plant};
@@ -65,10 +66,14 @@ fn the_older_part_of_a_window_equals_a_window_without_the_newest_columns() {
             both.estimate_older(
                 1,
                 skip,
-                Solve { ridge: 1e-6, t: &t, min_pivot_ratio: 1e-12 },
+                Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
                 &mut got,
             );
-            older.estimate(0, Solve { ridge: 1e-6, t: &t, min_pivot_ratio: 1e-12 }, &mut want);
+            older.estimate(
+                0,
+                Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
+                &mut want,
+            );
             assert_eq!(got.ready, want.ready);
             assert_eq!((got.columns, got.batches), (want.columns, want.batches));
             if !got.ready {

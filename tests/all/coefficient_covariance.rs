@@ -3,7 +3,7 @@
 //! and over batches of blocks.
 
 use nalgebra::{DMatrix, DVector};
-use streamcert::regression::{InstrumentedWindows, Solve, WindowEstimate};
+use streamcert::regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
 /// 200 columns with p = 1, d = 3 (two features and one input) from a logistic map:
 /// `(z, Δy)` with `Δy = 0.8 z₀ − 0.3 z₁ + 0.5 z₂ + noise`.
@@ -31,7 +31,11 @@ fn the_coefficient_covariance_equals_a_batch_recompute() {
     }
     let mut est = WindowEstimate::with_regressors(1, 3, 2);
     let t = [1.0, 0.4, -1.2];
-    w.estimate(1, Solve { ridge: 1e-9, t: &t, min_pivot_ratio: 1e-12 }, &mut est);
+    w.estimate(
+        1,
+        Solve { ridge: 1e-9, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
+        &mut est,
+    );
     assert!(est.ready);
     let mut cov = vec![0.0; 9];
     assert!(w.coefficient_covariance(1, &mut est, &mut cov));
@@ -110,7 +114,11 @@ fn the_coefficient_covariance_follows_the_batches_of_the_score_covariance() {
     let mut scores = Vec::new();
     for w in [&w1, &w3] {
         let mut est = WindowEstimate::with_regressors(1, 3, 2);
-        w.estimate(1, Solve { ridge: 1e-9, t: &t, min_pivot_ratio: 1e-12 }, &mut est);
+        w.estimate(
+            1,
+            Solve { ridge: 1e-9, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
+            &mut est,
+        );
         assert!(est.ready);
         assert_eq!(est.batches, 20usize.div_ceil(w.batch()));
         let mut cov = vec![0.0; 9];

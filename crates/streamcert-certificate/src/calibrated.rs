@@ -259,9 +259,10 @@ use streamcert_regression::{
 
 use crate::guard::{ChangeGuard, ModelGuard};
 use crate::nonlinear::{NonlinearLook, NonlinearState};
+use crate::rate::first_order::closed_loop_map;
 use crate::{CertifyError, NonlinearConfig, NotCertified};
 use anchor::AnchoredState;
-use build::{change_guard, closed_loop_map, model_guards};
+use build::{change_guard, model_guards};
 use streamcert_regression::Model;
 use trail::SampleTrail;
 

@@ -52,6 +52,7 @@ use streamcert_regression::{EstimateStatus, FastPath, ResidualSource, SlidingReg
 
 use crate::calibrated::CalibratedState;
 use crate::gap::{Gap, GapDetector};
+use crate::rate::first_order::{self, form_sym_jcl};
 use crate::{
     AmbiguityLevel, BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Fit, Gate,
     NotCertified, Verdict, certificate_value,
@@ -467,28 +468,16 @@ impl Certifier {
                 let _ = amb.push(r);
             }
         }
-        let lambda_max =
-            if p >= 10 { wide_top } else { linalg::sym_eig_max(&self.work, p, &mut self.eig_work) };
-        let beta_hat = -lambda_max;
+        let beta_hat = if p >= 10 {
+            -wide_top
+        } else {
+            first_order::rate_of_upper(&self.work, p, &mut self.eig_work)
+        };
         let rho = self.cfg.conservatism * (1.0 + self.gain_norm) * rms
             / (lambda_min + self.cfg.regression.ridge).sqrt();
         if !(beta_hat.is_finite() && rho.is_finite()) {
             return (None, columns, Some(NotCertified::InsufficientExcitation), fused);
         }
         (Some(Ready { beta_hat, rho, rms, lambda_min }), columns, None, fused)
-    }
-}
-
-/// `Ĵ_cl = Ĵ_obs + B̂_obs K` into `jcl` (`p × p`, [`linalg::closed_loop_jacobian`]) from
-/// `Θ̂ = [Ĵ_obs B̂_obs]` and the gain `K`, then the upper triangle of
-/// `sym Ĵ_cl = (Ĵ_cl + Ĵ_clᵀ)/2` into `sym`.
-#[inline(always)]
-fn form_sym_jcl(theta: &[f64], k: &[f64], jcl: &mut [f64], sym: &mut [f64], p: usize, m: usize) {
-    let (jcl, sym) = (&mut jcl[..p * p], &mut sym[..p * p]);
-    linalg::closed_loop_jacobian(theta, k, jcl, p, m);
-    for i in 0..p {
-        for j in i..p {
-            sym[i * p + j] = 0.5 * (jcl[i * p + j] + jcl[j * p + i]);
-        }
     }
 }

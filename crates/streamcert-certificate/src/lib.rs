@@ -78,6 +78,7 @@ mod ladder;
 mod look;
 pub mod nonlinear;
 mod radius;
+mod rate;
 mod row;
 
 pub use calibrated::{

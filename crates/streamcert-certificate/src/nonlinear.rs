@@ -124,7 +124,7 @@ pub use features::{Feature, FeatureSet};
 
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{
-    InstrumentedWindows, Interval, RegressionConfig, Solve, WindowEstimate,
+    InstrumentedWindows, Interval, RateMap, RegressionConfig, Solve, WindowEstimate,
 };
 
 use crate::look::hotelling::wald_entries;
@@ -405,7 +405,7 @@ impl NonlinearState {
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
         if !windows.estimate_coefficients(
             w,
-            Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot },
+            Solve { ridge, rate: RateMap::SymmetricPart(&self.dir), min_pivot_ratio: min_pivot },
             est,
             cov,
         ) {

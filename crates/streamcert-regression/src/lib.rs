@@ -83,5 +83,5 @@ pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{
     AnchoredWindow, BatchedCovariance, InstrumentedWindows, MAX_MOMENT_ENTRIES, MAX_TAIL,
-    MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, Solve, WindowEstimate,
+    MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE, RateMap, Solve, WindowEstimate,
 };

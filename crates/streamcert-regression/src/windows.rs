@@ -56,7 +56,7 @@ mod tail;
 pub use anchored::AnchoredWindow;
 pub use jackknife::{MIN_LEVERAGE_PIVOT, MIN_RESIDUAL_SHARE};
 pub use moments::MAX_MOMENT_ENTRIES;
-pub use outcome::{BatchedCovariance, Solve, WindowEstimate};
+pub use outcome::{BatchedCovariance, RateMap, Solve, WindowEstimate};
 pub use tail::MAX_TAIL;
 
 use crate::{Interval, RegressionError};

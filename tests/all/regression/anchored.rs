@@ -6,7 +6,7 @@ use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::regression::{
-    AnchoredWindow, InstrumentedWindows, RegressionError, Solve, WindowEstimate,
+    AnchoredWindow, InstrumentedWindows, RateMap, RegressionError, Solve, WindowEstimate,
 };
 
 /// `c_{b,h} = 3bh² / (3bh² − h² + 1)`.
@@ -68,7 +68,10 @@ fn the_anchored_estimate_is_the_delete_a_record_jackknife_of_every_block_since_t
             continue;
         }
         let (theta, omega) = delete_a_record(&cols, (c, h, lag), recs, &t_vec);
-        anchored.estimate(Solve { ridge: 0.0, t: &t, min_pivot_ratio: 0.0 }, &mut est);
+        anchored.estimate(
+            Solve { ridge: 0.0, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 0.0 },
+            &mut est,
+        );
         assert!(est.ready, "step {step}");
         assert_eq!((est.batches, est.columns), (recs, recs * c * h));
         let rel = |x: f64, y: f64| (x - y).abs() / x.abs().max(y.abs()).max(1e-300);

@@ -4,7 +4,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::regression::{InstrumentedWindows, Solve, WindowEstimate};
+use streamcert::regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
 /// Every window's fused estimate equals the two calls' `Θ̂`, `Ω_θ`, effective number of
 /// blocks and batch count exactly, at every block boundary of a stream that wraps the block
@@ -47,11 +47,15 @@ fn the_fused_pass_equals_the_estimate_and_the_coefficient_covariance_bit_for_bit
                 continue;
             }
             for w in 0..windows.len() {
-                win.estimate(w, Solve { ridge: 1e-9, t: &t, min_pivot_ratio: 1e-12 }, &mut two);
+                win.estimate(
+                    w,
+                    Solve { ridge: 1e-9, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
+                    &mut two,
+                );
                 let two_ready = two.ready && win.coefficient_covariance(w, &mut two, &mut cov_two);
                 let ready = win.estimate_coefficients(
                     w,
-                    Solve { ridge: 1e-9, t: &t, min_pivot_ratio: 1e-12 },
+                    Solve { ridge: 1e-9, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
                     &mut fused,
                     &mut cov_fused,
                 );
@@ -109,7 +113,11 @@ fn the_score_variance_is_the_delete_one_block_jackknife() {
             continue;
         }
         assert_eq!(usable % h, 0);
-        win.estimate(0, Solve { ridge: 0.0, t: &t, min_pivot_ratio: 1e-12 }, &mut est);
+        win.estimate(
+            0,
+            Solve { ridge: 0.0, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
+            &mut est,
+        );
         if !est.ready {
             continue;
         }

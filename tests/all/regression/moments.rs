@@ -5,7 +5,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::regression::{InstrumentedWindows, Solve, WindowEstimate};
+use streamcert::regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
 /// A loop-like column stream for `p` outputs and `m` inputs, the inputs AR(1) so that the
 /// lagged regressors are relevant instruments.
@@ -116,12 +116,12 @@ fn the_fresh_estimate_equals_the_first_order_pass() {
             win.fresh_estimate(
                 w,
                 0,
-                Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                Solve { ridge: 1e-12, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
                 &mut fresh,
             );
             let ready = win.estimate_coefficients_first_order(
                 w,
-                Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                Solve { ridge: 1e-12, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-12 },
                 &mut pass,
                 &mut cov,
             );
@@ -176,13 +176,21 @@ fn rebuilt_epoch_sums_are_the_same_bits() {
                 kept.fresh_estimate(
                     w,
                     skip,
-                    Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                    Solve {
+                        ridge: 1e-12,
+                        rate: RateMap::SymmetricPart(&t),
+                        min_pivot_ratio: 1e-12,
+                    },
                     &mut a,
                 );
                 restored.fresh_estimate(
                     w,
                     skip,
-                    Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                    Solve {
+                        ridge: 1e-12,
+                        rate: RateMap::SymmetricPart(&t),
+                        min_pivot_ratio: 1e-12,
+                    },
                     &mut b,
                 );
                 assert_eq!(a, b);
@@ -218,18 +226,30 @@ fn the_batched_covariance_of_the_fused_pass_equals_a_second_estimate() {
                     win.estimate_batched(
                         w,
                         b,
-                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        Solve {
+                            ridge: 1e-12,
+                            rate: RateMap::SymmetricPart(&t),
+                            min_pivot_ratio: 1e-12,
+                        },
                         &mut fused,
                     );
                     win.estimate(
                         w,
-                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        Solve {
+                            ridge: 1e-12,
+                            rate: RateMap::SymmetricPart(&t),
+                            min_pivot_ratio: 1e-12,
+                        },
                         &mut one,
                     );
                     win.set_batch(b);
                     win.estimate(
                         w,
-                        Solve { ridge: 1e-12, t: &t, min_pivot_ratio: 1e-12 },
+                        Solve {
+                            ridge: 1e-12,
+                            rate: RateMap::SymmetricPart(&t),
+                            min_pivot_ratio: 1e-12,
+                        },
                         &mut two,
                     );
                     win.set_batch(1);

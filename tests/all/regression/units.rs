@@ -5,7 +5,7 @@
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use streamcert::regression::{InstrumentedWindows, Solve, WindowEstimate};
+use streamcert::regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
 /// Oracle: the same data in other units. Without a ridge the two-stage least-squares
 /// estimate transforms exactly with a regressor's unit (`θ_i` scales by the inverse factor)
@@ -35,9 +35,17 @@ fn a_regressor_in_other_units_changes_neither_the_strength_nor_the_estimate() {
                 continue;
             }
             for w in 0..windows.len() {
-                base.estimate(w, Solve { ridge: 0.0, t: &t, min_pivot_ratio: 1e-9 }, &mut a);
+                base.estimate(
+                    w,
+                    Solve { ridge: 0.0, rate: RateMap::SymmetricPart(&t), min_pivot_ratio: 1e-9 },
+                    &mut a,
+                );
                 let tt = [t[0], t[1], t[2] / scale];
-                scaled.estimate(w, Solve { ridge: 0.0, t: &tt, min_pivot_ratio: 1e-9 }, &mut b);
+                scaled.estimate(
+                    w,
+                    Solve { ridge: 0.0, rate: RateMap::SymmetricPart(&tt), min_pivot_ratio: 1e-9 },
+                    &mut b,
+                );
                 assert_eq!(a.ready, b.ready, "scale {scale}, window {w}");
                 if !a.ready {
                     continue;

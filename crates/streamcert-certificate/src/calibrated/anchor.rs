@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{
-    AnchoredWindow, InstrumentedWindows, Interval, RegressionError, Solve,
+    AnchoredWindow, InstrumentedWindows, Interval, RateMap, RegressionError, Solve,
 };
 
 use super::{CalibratedState, WindowLook, anchored_look_risk};
@@ -110,7 +110,11 @@ impl CalibratedState {
         let records = a.window.records();
         let b = self.cal.auto_batch_blocks(records, d);
         let auto = self.cal.batch_blocks == 1 && b >= 2;
-        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+        let solve = Solve {
+            ridge: self.ridge,
+            rate: RateMap::SymmetricPart(&self.tmat),
+            min_pivot_ratio: self.min_pivot,
+        };
         if auto {
             a.window.estimate_batched(b, solve, &mut self.est);
         } else {

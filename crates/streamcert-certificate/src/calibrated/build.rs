@@ -5,23 +5,6 @@ use super::Calibration;
 use crate::CertifyError;
 use crate::guard::{ChangeGuard, Groups, ModelGuard};
 
-/// The map `T` (`d × p`, row-major) with `J_cl = Θ T`: the identity on the outputs' rows, the
-/// gain `K` on the inputs' rows, zero on the intercept's.
-pub(super) fn closed_loop_map(p: usize, m: usize, d: usize, gain: &[f64]) -> Vec<f64> {
-    (0..d * p)
-        .map(|idx| {
-            let (r, c) = (idx / p, idx % p);
-            if r < p {
-                f64::from(u8::from(r == c))
-            } else if r < p + m {
-                gain[(r - p) * p + c]
-            } else {
-                0.0
-            }
-        })
-        .collect()
-}
-
 /// The model guards on the windows' columns: hidden dynamics and nonlinearity, each its own
 /// larger fit when configured.
 pub(super) fn model_guards(

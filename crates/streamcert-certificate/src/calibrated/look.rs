@@ -4,12 +4,13 @@
 
 use super::{
     CalibratedState, CalibratedVerdict, CouplingLook, WindowLook, calibrated_radius, look_risk,
-    rank_one_variance_bound, standing,
+    standing,
 };
 use crate::NotCertified;
 use crate::guard::ModelGuard;
 use crate::nonlinear::LookAt;
-use streamcert_regression::{Solve, linalg};
+use crate::rate::first_order;
+use streamcert_regression::{RateMap, Solve};
 
 /// The share of an input's variation (beyond its level) that the outputs may leave unexplained
 /// for a refused fit to be put down to the controller (`u = K y` with nothing added, up to
@@ -58,7 +59,11 @@ impl CalibratedState {
         // solve and one pass over the blocks.
         let (rate, batched) = if self.auto_applies(w) {
             let b = self.auto_blocks(w);
-            let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+            let solve = Solve {
+                ridge: self.ridge,
+                rate: RateMap::SymmetricPart(&self.tmat),
+                min_pivot_ratio: self.min_pivot,
+            };
             self.windows.estimate_batched(w, b, solve, &mut self.est);
             let batched = self.batched_rate();
             (self.rate_of_estimate(), batched)
@@ -191,10 +196,7 @@ impl CalibratedState {
         }
         let p = self.sym.len().isqrt();
         let d = self.tmat.len() / p;
-        let mut variance = linalg::sym_eig_extremes(&b.score_cov, p * p, &mut self.eig_work).1;
-        if p == 2 {
-            variance = variance.min(rank_one_variance_bound(&b.score_cov));
-        }
+        let variance = first_order::direction_variance(&b.score_cov, p, &mut self.eig_work);
         let nu = b.effective_blocks.min(b.batches as f64) - d as f64;
         Some((variance, nu))
     }
@@ -202,7 +204,11 @@ impl CalibratedState {
     /// Window `w`'s instrumented estimate (into `self.est`) on its blocks less the newest
     /// `skip`: `(β̂_w, σ²_max, ν)` of the module docs, `None` when the fit is not ready.
     pub(super) fn rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+        let solve = Solve {
+            ridge: self.ridge,
+            rate: RateMap::SymmetricPart(&self.tmat),
+            min_pivot_ratio: self.min_pivot,
+        };
         self.windows.estimate_older(w, skip, solve, &mut self.est);
         self.rate_of_estimate()
     }
@@ -213,7 +219,11 @@ impl CalibratedState {
     /// `O(1)` in the window's length). A fresh estimate spends no risk and only closes looks,
     /// so its variance need not carry the jackknife's leverage.
     pub(super) fn fresh_rate(&mut self, w: usize, skip: usize) -> Option<(f64, f64, f64)> {
-        let solve = Solve { ridge: self.ridge, t: &self.tmat, min_pivot_ratio: self.min_pivot };
+        let solve = Solve {
+            ridge: self.ridge,
+            rate: RateMap::SymmetricPart(&self.tmat),
+            min_pivot_ratio: self.min_pivot,
+        };
         self.windows.fresh_estimate(w, skip, solve, &mut self.est);
         self.rate_of_estimate()
     }
@@ -225,24 +235,9 @@ impl CalibratedState {
         if !self.est.ready {
             return None;
         }
-        // sym(Θ̂ T).
-        let (th, tm) = (&self.est.theta, &self.tmat);
-        for i in 0..p {
-            for j in 0..p {
-                let (mut a, mut b) = (0.0, 0.0);
-                for l in 0..d {
-                    a += th[i * d + l] * tm[l * p + j];
-                    b += th[j * d + l] * tm[l * p + i];
-                }
-                self.sym[i * p + j] = 0.5 * (a + b);
-            }
-        }
-        let beta_hat = -linalg::sym_eig_extremes(&self.sym, p, &mut self.eig_work).1;
-        let mut variance =
-            linalg::sym_eig_extremes(&self.est.score_cov, p * p, &mut self.eig_work).1;
-        if p == 2 {
-            variance = variance.min(rank_one_variance_bound(&self.est.score_cov));
-        }
+        first_order::sym_theta_t(&self.est.theta, &self.tmat, &mut self.sym, p, d);
+        let beta_hat = first_order::rate_of_sym(&self.sym, p, &mut self.eig_work);
+        let variance = first_order::direction_variance(&self.est.score_cov, p, &mut self.eig_work);
         let nu = self.est.effective_blocks.min(self.est.batches as f64) - d as f64;
         Some((beta_hat, variance, nu))
     }

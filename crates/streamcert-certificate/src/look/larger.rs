@@ -3,7 +3,7 @@
 //! dynamics, nonlinearity) and the nonlinear certificate's lack-of-fit check are each one.
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{InstrumentedWindows, Solve, WindowEstimate};
+use streamcert_regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
 use super::hotelling::{NonlinearityTest, hotelling_wald, wald_entries};
 use super::same_windows;
@@ -125,7 +125,8 @@ impl LargerFit {
         tested: usize,
     ) -> Option<f64> {
         let (windows, est, cov) = (&self.windows, &mut self.est, &mut self.cov);
-        let solve = Solve { ridge, t: &self.dir, min_pivot_ratio: min_pivot };
+        let solve =
+            Solve { ridge, rate: RateMap::SymmetricPart(&self.dir), min_pivot_ratio: min_pivot };
         self.tail = None;
         let ready = match variance {
             GuardVariance::FirstOrder => {

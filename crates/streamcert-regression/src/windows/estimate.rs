@@ -48,7 +48,7 @@ pub(super) fn q_ainv(
 
 impl InstrumentedWindows {
     /// Solve window `w` with the ridge `λ = solve.ridge` *relative to each diagonal entry*
-    /// for the candidate directions `solve.t` (`d × p` row-major, `T = [I_p; K]`) into `out`
+    /// for the candidate directions `solve.rate`'s `T` (`d × p` row-major, `T = [I_p; K]`) into `out`
     /// (built with this structure's `p`, `m`, `J`):
     ///
     /// ```text
@@ -164,12 +164,22 @@ impl InstrumentedWindows {
         let lay = self.layout();
         let (p, d, k) = (lay.p, lay.d, lay.k);
         let (sum_w, sum_w2) = match (p, d, k) {
-            (1, 2, 2) => self.block_scores(span, solve.t, out, (1, 2, 2), second),
-            (1, 3, 3) => self.block_scores(span, solve.t, out, (1, 3, 3), second),
-            (1, 4, 4) => self.block_scores(span, solve.t, out, (1, 4, 4), second),
-            (1, 5, 5) => self.block_scores(span, solve.t, out, (1, 5, 5), second),
-            (1, 6, 6) => self.block_scores(span, solve.t, out, (1, 6, 6), second),
-            _ => self.block_scores(span, solve.t, out, (p, d, k), second),
+            (1, 2, 2) => {
+                self.block_scores(span, solve.rate.symmetric_part(), out, (1, 2, 2), second)
+            }
+            (1, 3, 3) => {
+                self.block_scores(span, solve.rate.symmetric_part(), out, (1, 3, 3), second)
+            }
+            (1, 4, 4) => {
+                self.block_scores(span, solve.rate.symmetric_part(), out, (1, 4, 4), second)
+            }
+            (1, 5, 5) => {
+                self.block_scores(span, solve.rate.symmetric_part(), out, (1, 5, 5), second)
+            }
+            (1, 6, 6) => {
+                self.block_scores(span, solve.rate.symmetric_part(), out, (1, 6, 6), second)
+            }
+            _ => self.block_scores(span, solve.rate.symmetric_part(), out, (p, d, k), second),
         };
         out.effective_blocks =
             if sum_w2 > 0.0 && out.leverage_pivot > 0.0 { sum_w * sum_w / sum_w2 } else { 0.0 };
@@ -240,7 +250,8 @@ impl InstrumentedWindows {
         out: &mut WindowEstimate,
         (p, d, k): (usize, usize, usize),
     ) -> bool {
-        let Solve { ridge, t, min_pivot_ratio } = solve;
+        let Solve { ridge, rate, min_pivot_ratio } = solve;
+        let t = rate.symmetric_part();
         out.ready = false;
         (out.pivot_ratio, out.effective_blocks, out.leverage_pivot) = (0.0, 0.0, 0.0);
         out.columns = blocks * self.coarse * self.horizon;

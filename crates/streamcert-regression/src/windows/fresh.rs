@@ -75,7 +75,7 @@ impl InstrumentedWindows {
         out.sums.copy_from_slice(&mo.span[..stride]);
         let blocks = span.0.saturating_sub(span.1);
         let solved = self.solve_sums(blocks, solve, out);
-        let exact = solved && !self.first_order(&mut mo, blocks, solve.t, out);
+        let exact = solved && !self.first_order(&mut mo, blocks, solve.rate.symmetric_part(), out);
         self.moments = Some(mo);
         if exact {
             self.estimate_older(w, skip, solve, out);

@@ -15,12 +15,34 @@ pub struct Solve<'a> {
     /// The ridge `λ`, relative to each diagonal entry: the first stage solves
     /// `H + λ diag H`, so the estimate is the same in any units of the regressors.
     pub ridge: f64,
-    /// `T` (`d × p`, row-major): the rate's matrix is `sym(Θ̂ T)` (for the closed loop
-    /// `T = [I; K]`, with a zero row for the affine model's intercept).
-    pub t: &'a [f64],
+    /// What the rate is read through, and so which covariance the estimate carries.
+    pub rate: RateMap<'a>,
     /// The smallest accepted pivot ratio of `A` equilibrated to a unit diagonal: at or below
     /// it the window is singular to working precision and not ready.
     pub min_pivot_ratio: f64,
+}
+
+/// What a window's rate is read through ([`Solve::rate`]): it decides which covariance an
+/// estimate carries in [`WindowEstimate::score_cov`].
+#[derive(Debug, Clone, Copy)]
+#[non_exhaustive]
+pub enum RateMap<'a> {
+    /// The first-order rate (paper eq. beta), `−λ_max(sym(Θ̂ T))`, with `T` (`d × p`,
+    /// row-major; for the closed loop `T = [I; K]`, with a zero row for the affine model's
+    /// intercept). The estimate carries the long-run covariance of the direction of the
+    /// symmetric part, `vec(sym((Θ̂ − Θ) T))`, `p² × p²`, not the coefficients' own.
+    SymmetricPart(&'a [f64]),
+}
+
+impl<'a> RateMap<'a> {
+    /// `T` of [`RateMap::SymmetricPart`].
+    #[must_use]
+    #[inline(always)]
+    pub fn symmetric_part(self) -> &'a [f64] {
+        match self {
+            Self::SymmetricPart(t) => t,
+        }
+    }
 }
 
 /// The outcome of [`InstrumentedWindows::estimate`](super::InstrumentedWindows::estimate) for one window, in buffers the caller owns

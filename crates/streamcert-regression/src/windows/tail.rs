@@ -132,6 +132,7 @@ impl InstrumentedWindows {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::RateMap;
     use proptest::prelude::*;
 
     proptest! {
@@ -168,9 +169,9 @@ mod tests {
                 let dy = [0.3 * z[0] - 0.2 * z[1] + 0.05 * next()];
                 windows.push_column(&z, &dy);
                 for w in 0..2 {
-                    let solve = Solve { ridge: 1e-6, t: &dir, min_pivot_ratio: 1e-9 };
+                    let solve = Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&dir), min_pivot_ratio: 1e-9 };
                     let a = windows.estimate_coefficients_first_order(w, solve, &mut full, &mut cov);
-                    let solve = Solve { ridge: 1e-6, t: &dir, min_pivot_ratio: 1e-9 };
+                    let solve = Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&dir), min_pivot_ratio: 1e-9 };
                     let b = windows.estimate_tail_first_order(w, solve, first, &mut tail, &mut corner);
                     prop_assert_eq!(Some(a), b);
                     if !a {
@@ -195,10 +196,12 @@ mod tests {
         let mut windows = InstrumentedWindows::with_regressors(2, 4, 2, 0, 1, &[24]).unwrap();
         let mut est = WindowEstimate::with_regressors(2, 4, 1);
         let dir = vec![1.0; 8];
-        let solve = Solve { ridge: 1e-6, t: &dir, min_pivot_ratio: 1e-9 };
+        let solve =
+            Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&dir), min_pivot_ratio: 1e-9 };
         assert!(windows.estimate_tail_first_order(0, solve, 3, &mut est, &mut [0.0; 1]).is_none());
         windows = InstrumentedWindows::with_regressors(1, 4, 2, 0, 1, &[24]).unwrap();
-        let solve = Solve { ridge: 1e-6, t: &dir[..4], min_pivot_ratio: 1e-9 };
+        let solve =
+            Solve { ridge: 1e-6, rate: RateMap::SymmetricPart(&dir[..4]), min_pivot_ratio: 1e-9 };
         assert!(windows.estimate_tail_first_order(0, solve, 4, &mut est, &mut [0.0; 1]).is_none());
     }
 }

@@ -14,6 +14,7 @@ mod crate_graph;
 mod dynamics;
 mod identification;
 mod ladder;
+mod module_graph;
 mod network;
 mod network_coupling;
 mod nonlinear;

@@ -113,7 +113,8 @@ pub use streamcert_regression::ResidualSource;
 
 /// The module layering ARCHITECTURE.md states, checked on the source: `look` depends on no
 /// certificate, the guards only on `look` (never on the calibrated or nonlinear certificate),
-/// and the nonlinear certificate not on the calibrated one (which owns it).
+/// the nonlinear certificate not on the calibrated one (which owns it), and `rate` on no
+/// certificate; by path or by a name the crate's root re-exports.
 #[cfg(test)]
 mod layering {
     /// The code lines of `source` (doc and line comments dropped) that name `module`.
@@ -127,15 +128,60 @@ mod layering {
             .collect()
     }
 
+    /// The names `source` takes from the crate's root (`use crate::Name;`,
+    /// `use crate::{A, B};`), each item's last segment.
+    fn root_names(source: &str) -> Vec<String> {
+        let code: String = source
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.starts_with("//"))
+            .collect::<Vec<_>>()
+            .join(" ");
+        let mut names = Vec::new();
+        for stmt in code.split("use crate::").skip(1) {
+            let stmt = stmt.split(';').next().unwrap_or("");
+            let items = stmt.strip_prefix('{').and_then(|s| s.strip_suffix('}'));
+            match items {
+                Some(items) => names.extend(
+                    items
+                        .split(',')
+                        .map(|i| i.trim().rsplit("::").next().unwrap_or("").to_string())
+                        .filter(|i| !i.is_empty() && i != "self" && !i.contains('{')),
+                ),
+                None if !stmt.contains("::") => names.push(stmt.trim().to_string()),
+                None => {}
+            }
+        }
+        names
+    }
+
+    /// Whether one of `sources` defines `name` (a public enum, struct, function, constant,
+    /// type or trait).
+    fn defines(sources: &[&str], name: &str) -> bool {
+        ["enum", "struct", "fn", "const", "type", "trait"].iter().any(|kind| {
+            sources.iter().any(|s| {
+                s.contains(&format!("pub {kind} {name}"))
+                    || s.contains(&format!("pub(crate) {kind} {name}"))
+            })
+        })
+    }
+
     #[test]
     fn each_module_uses_only_the_modules_beneath_it() {
         let look = [
             include_str!("look.rs"),
+            include_str!("look/guard_variance.rs"),
             include_str!("look/hotelling.rs"),
+            include_str!("look/larger.rs"),
             include_str!("look/quantile.rs"),
+            include_str!("look/split.rs"),
             include_str!("look/standing.rs"),
         ];
-        let guards = [include_str!("guard/change.rs"), include_str!("guard/model.rs")];
+        let guards = [
+            include_str!("guard/change.rs"),
+            include_str!("guard/curvature.rs"),
+            include_str!("guard/model.rs"),
+        ];
         let nonlinear = [
             include_str!("nonlinear.rs"),
             include_str!("nonlinear/bounds.rs"),
@@ -144,21 +190,55 @@ mod layering {
             include_str!("nonlinear/config.rs"),
             include_str!("nonlinear/features.rs"),
         ];
+        let rate = [include_str!("rate.rs"), include_str!("rate/first_order.rs")];
+        let calibrated = [
+            include_str!("calibrated.rs"),
+            include_str!("calibrated/access.rs"),
+            include_str!("calibrated/anchor.rs"),
+            include_str!("calibrated/build.rs"),
+            include_str!("calibrated/check.rs"),
+            include_str!("calibrated/config.rs"),
+            include_str!("calibrated/coupling.rs"),
+            include_str!("calibrated/look.rs"),
+            include_str!("calibrated/options.rs"),
+            include_str!("calibrated/replay.rs"),
+            include_str!("calibrated/trail.rs"),
+            include_str!("calibrated/update.rs"),
+            include_str!("calibrated/validate.rs"),
+            include_str!("calibrated/window_look.rs"),
+        ];
         for source in look {
-            for module in ["calibrated", "nonlinear", "guard", "certifier"] {
+            for module in ["calibrated", "nonlinear", "guard", "certifier", "rate"] {
                 assert_eq!(uses(source, module), Vec::<String>::new(), "look uses {module}");
             }
         }
         for source in guards {
-            for module in ["calibrated", "nonlinear", "certifier"] {
+            for module in ["calibrated", "nonlinear", "certifier", "rate"] {
                 assert_eq!(uses(source, module), Vec::<String>::new(), "a guard uses {module}");
             }
         }
         for source in nonlinear {
-            for module in ["calibrated", "guard", "certifier"] {
+            for module in ["calibrated", "guard", "certifier", "rate"] {
                 assert_eq!(uses(source, module), Vec::<String>::new(), "nonlinear uses {module}");
             }
         }
+        for source in rate {
+            for module in ["calibrated", "nonlinear", "guard", "certifier"] {
+                assert_eq!(uses(source, module), Vec::<String>::new(), "rate uses {module}");
+            }
+        }
+        // Nor through the crate's root: no name these modules take from it is defined in
+        // the calibrated certificate.
+        for source in look.iter().chain(&guards).chain(&nonlinear).chain(&rate) {
+            for name in root_names(source) {
+                assert!(!defines(&calibrated, &name), "`{name}` is the calibrated certificate's");
+            }
+        }
+        assert_eq!(
+            root_names("use crate::{a::B, C};\nuse crate::D;\nuse crate::e::F;"),
+            ["B", "C", "D"]
+        );
+        assert!(defines(&calibrated, "Calibration"));
         // The check sees a use where there is one.
         assert_eq!(uses("use crate::calibrated::X;\n// crate::calibrated", "calibrated").len(), 1);
     }

@@ -8,6 +8,7 @@
 //! of a windowed state ([`same_windows`]). It depends on no certificate; the certificates
 //! and the guards depend on it.
 
+pub(crate) mod guard_variance;
 pub(crate) mod hotelling;
 pub(crate) mod larger;
 pub(crate) mod quantile;

@@ -21,17 +21,14 @@ use crate::config::Config;
 use crate::input::{Sample, SampleReader};
 pub use crate::output::{Flush, Format, Header};
 pub use crate::reasons::{reason_phrase, reason_words};
+use crate::resume::write_atomic;
 use crate::source::{Next, Source};
+pub use crate::summary::{HorizonCount, Summary};
 use crate::watch::{NoWatch, Watch};
-pub use horizons::HorizonCount;
-pub use summary::Summary;
 
 mod batched;
 mod checkpoint;
-mod horizons;
-pub(crate) mod summary;
 use crate::output::{EvidenceWriter, region_columns};
-pub(crate) use checkpoint::write_atomic;
 use checkpoint::{checkpoint_bytes, load, save};
 pub use checkpoint::{open_checkpoint, seal_checkpoint, seal_checkpoint_as};
 

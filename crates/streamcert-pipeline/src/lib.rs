@@ -21,6 +21,7 @@ mod reasons;
 mod resume;
 pub mod simulate;
 pub mod source;
+mod summary;
 pub mod watch;
 
 use std::fmt;

@@ -1,11 +1,17 @@
-//! Opening a sealed checkpoint for `--resume`: the envelope, the checksum and the
-//! configuration are checked, and a checkpoint written with another configuration is refused
-//! naming the settings that differ.
+//! What `certify` and `network` share for checkpoints: writing one atomically, and opening a
+//! sealed one for `--resume` (the envelope, the checksum and the configuration are checked,
+//! and a checkpoint written with another configuration is refused naming the settings that
+//! differ).
+
+use std::io::Write;
+use std::path::Path;
 
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 use streamcert_certificate::CertifyError;
+
+use crate::CliError;
 
 /// Settings named in a refusal at most.
 const SHOWN: usize = 3;
@@ -86,6 +92,37 @@ fn walk(path: &str, a: &Value, b: &Value, found: &mut Vec<(String, Value, Value)
         _ if a != b => found.push((path.to_string(), a.clone(), b.clone())),
         _ => {}
     }
+}
+
+/// Write `bytes` to `path` atomically: a unique temporary file beside the target, flushed to
+/// disk, then renamed over it, so a crash leaves either the old file or the new one, never a
+/// torn one.
+///
+/// # Errors
+/// [`CliError::Io`] naming the checkpoint.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
+    let nanos = std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| d.as_nanos());
+    let name = path.file_name().map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy());
+    let tmp = path.with_file_name(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
+    let write = || -> std::io::Result<()> {
+        let mut f = std::fs::File::create(&tmp)?;
+        f.write_all(bytes)?;
+        f.sync_all()?;
+        std::fs::rename(&tmp, path)?;
+        // Make the rename itself durable where the platform allows opening a directory.
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
+            && let Ok(d) = std::fs::File::open(dir)
+        {
+            let _ = d.sync_all();
+        }
+        Ok(())
+    };
+    write().map_err(|e| {
+        let _ = std::fs::remove_file(&tmp);
+        CliError::io(format!("writing the checkpoint {}", path.display()), e)
+    })
 }
 
 #[cfg(test)]

@@ -10,9 +10,8 @@
 use streamcert_certificate::{Certifier, Evidence};
 use streamcert_network::EpochReport;
 
-use crate::certify::Summary;
-use crate::network::NetSummary;
 use crate::source::SourceReport;
+use crate::summary::{NetSummary, Summary};
 
 /// Receives a run's events in input order (module docs). Every method has an empty default,
 /// so a watcher implements what it uses.

@@ -59,8 +59,8 @@ use streamcert_network::NetworkConfig;
 
 pub use http::{Routes, Server};
 pub use metrics::to_text_format;
-pub use status::{Counters, STATUS_SCHEMA, Status, Subsystem};
-pub use verdict::{Candidate, Reason, Risk, VERDICT_SCHEMA, VerdictMessage, VerdictSink};
+pub use status::{STATUS_SCHEMA, Status, Subsystem};
+pub use verdict::{Candidate, Counters, Reason, Risk, VERDICT_SCHEMA, VerdictMessage, VerdictSink};
 pub use watch::network::NetworkWatch;
 pub use watch::{CertifyWatch, REFRESH};
 

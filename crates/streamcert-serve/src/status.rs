@@ -10,7 +10,7 @@ use serde::Serialize;
 
 use streamcert_certificate::{NotCertified, SampleTime};
 
-use crate::verdict::Reason;
+use crate::verdict::{Counters, Reason};
 
 /// The status document's schema and version.
 pub const STATUS_SCHEMA: &str = "streamcert.status/1";
@@ -84,28 +84,6 @@ pub struct Status {
     pub(crate) evidence: Option<streamcert_certificate::Evidence>,
 }
 
-/// Counts of a run.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
-pub struct Counters {
-    /// Rows certified.
-    pub samples: u64,
-    /// Network epochs composed.
-    pub epochs: u64,
-    /// Gaps.
-    pub gaps: u64,
-    /// Rows passed over as bad.
-    pub skipped: u64,
-    /// A live source's bad payloads.
-    pub bad: u64,
-    /// A live source's reconnections: connections made again after one was lost.
-    pub reconnects: u64,
-    /// A live source's reconnection attempts: every connection lost or refused, each followed
-    /// by another attempt (at least `reconnects`, more while the broker or server is away).
-    pub reconnect_attempts: u64,
-    /// A live source's late messages.
-    pub late: u64,
-}
-
 /// One subsystem of a network.
 #[derive(Debug, Clone, Serialize)]
 pub struct Subsystem {
@@ -157,7 +135,7 @@ impl Status {
     pub(crate) fn at(&self, now: Instant) -> Self {
         let mut s = self.clone();
         if let Some(r) = self.sample_reason {
-            s.reason = r.map(|r| crate::watch::reason(r.kind(), &r.to_string()));
+            s.reason = r.map(|r| Reason::new(r.kind(), &r.to_string()));
         }
         let text = |t: Option<f64>| t.map(|t| SampleTime::new(t, self.step).to_string());
         (s.since_text, s.t_text) = (text(self.since), text(self.t));

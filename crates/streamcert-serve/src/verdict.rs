@@ -25,6 +25,7 @@
 //! for nothing after its last sample.
 
 use serde::Serialize;
+use streamcert_pipeline::certify::reason_words;
 
 /// The schema's name and version, the first field of every message.
 pub const VERDICT_SCHEMA: &str = "streamcert.verdict/1";
@@ -64,7 +65,7 @@ pub struct VerdictMessage {
     /// The run ended: the last message, the gate closed.
     pub ended: bool,
     /// The run's counts when the message was sent.
-    pub counters: crate::status::Counters,
+    pub counters: Counters,
 }
 
 /// A candidate: its gain (rows of `K`, one per input; empty for a network) and the margin the
@@ -77,6 +78,28 @@ pub struct Candidate {
     pub margin: f64,
 }
 
+/// Counts of a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct Counters {
+    /// Rows certified.
+    pub samples: u64,
+    /// Network epochs composed.
+    pub epochs: u64,
+    /// Gaps.
+    pub gaps: u64,
+    /// Rows passed over as bad.
+    pub skipped: u64,
+    /// A live source's bad payloads.
+    pub bad: u64,
+    /// A live source's reconnections: connections made again after one was lost.
+    pub reconnects: u64,
+    /// A live source's reconnection attempts: every connection lost or refused, each followed
+    /// by another attempt (at least `reconnects`, more while the broker or server is away).
+    pub reconnect_attempts: u64,
+    /// A live source's late messages.
+    pub late: u64,
+}
+
 /// Why a gate is closed.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Reason {
@@ -86,6 +109,14 @@ pub struct Reason {
     pub words: String,
     /// The row's own words (the window, the bound, the numbers).
     pub detail: String,
+}
+
+impl Reason {
+    /// A reason of `kind` (its words from the shared reason table) with the row's `detail`.
+    #[must_use]
+    pub fn new(kind: &str, detail: &str) -> Self {
+        Self { kind: kind.into(), words: reason_words(kind), detail: detail.into() }
+    }
 }
 
 /// The risk a verdict is stated at.

@@ -51,8 +51,7 @@ impl LoopSeries {
         }
     }
 }
-use crate::status::Counters;
-use crate::verdict::{Candidate, Reason, Risk, VerdictMessage, VerdictSink};
+use crate::verdict::{Candidate, Counters, Reason, Risk, VerdictMessage, VerdictSink};
 
 pub(crate) mod network;
 mod shown;
@@ -125,7 +124,7 @@ impl Gate {
     /// more; `true` when it was open.
     pub(crate) fn close(&mut self, kind: &str, detail: &str) -> bool {
         let was_open = self.message.open;
-        self.message.reason = Some(reason(kind, detail));
+        self.message.reason = Some(Reason::new(kind, detail));
         if was_open {
             self.message.open = false;
             self.message.since = self.message.t;
@@ -161,11 +160,6 @@ impl Gate {
         let m = &self.message;
         self.sinks.iter_mut().for_each(|s| s.publish(m));
     }
-}
-
-/// A reason of `kind` with the row's `detail`.
-pub(crate) fn reason(kind: &str, detail: &str) -> Reason {
-    Reason { kind: kind.into(), words: reason_words(kind), detail: detail.into() }
 }
 
 /// The wall clock in Unix seconds.
@@ -229,7 +223,7 @@ impl CertifyWatch {
             since_text: None,
             t_text: None,
             value: None,
-            reason: Some(reason("starting", "no sample yet")),
+            reason: Some(Reason::new("starting", "no sample yet")),
             risk: cfg.calibration.as_ref().map(|c| Risk { delta: c.delta }),
             ended: false,
             counters: Counters::default(),

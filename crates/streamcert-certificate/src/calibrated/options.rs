@@ -1,41 +1,8 @@
-//! The calibrated certificate's two option enums: the model guards' covariance
-//! ([`GuardVariance`]) and the split of `δ` across windows ([`RiskSplit`], defined beneath
-//! the certificates in `look/split.rs`, since the nonlinear certificate splits its own `δ`
-//! by the same rules).
+//! The calibrated certificate's two option enums, both defined beneath the certificates: the
+//! model guards' covariance ([`GuardVariance`], in `look/guard_variance.rs`, since the guards
+//! and the nonlinear certificate's check read it) and the split of `δ` across windows
+//! ([`RiskSplit`], in `look/split.rs`, since the nonlinear certificate splits its own `δ` by
+//! the same rules).
 
-use serde::{Deserialize, Serialize};
-
-/// The covariance behind the model guards' Wald tests
-/// ([`Calibration::hidden_dynamics`](crate::Calibration::hidden_dynamics),
-/// [`Calibration::nonlinearity`](crate::Calibration::nonlinearity)).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum GuardVariance {
-    /// Each block's first-order influence `r_j Q A⁻¹` with the factor `B/(B − d)` for the
-    /// fitted directions
-    /// ([`estimate_coefficients_first_order`](streamcert_regression::InstrumentedWindows::estimate_coefficients_first_order)):
-    /// one pass over the blocks without a factorisation per block, about a fifth of the
-    /// jackknife's operations for the nonlinearity guard's five regressors (the default
-    /// step's model guards about 0.3 µs against 0.8 µs, BENCHMARKS.md). It differs from the
-    /// jackknife where a few blocks carry a direction (no leverage factor there, so the
-    /// test rejects more often), and by `B/(B − d)` against about `1 + 2d/B` elsewhere.
-    /// Closing never costs validity, so this moves the guards' false-closing rate and their
-    /// protection, not the certificate's risk: VALIDITY.md, rerun with it, has every
-    /// near-margin cell within 2δ, the hidden-state cells closed in 95 % of samples as
-    /// before, and the `guard closed` column on linear loops up by 0.0 to 0.2 points.
-    #[default]
-    FirstOrder,
-    /// Each block's delete-one-block change, as the certificate's own variance
-    /// ([`estimate_coefficients`](streamcert_regression::InstrumentedWindows::estimate_coefficients)).
-    Jackknife,
-}
-
-impl GuardVariance {
-    /// Whether this is the default, [`GuardVariance::FirstOrder`].
-    #[must_use]
-    pub fn is_first_order(&self) -> bool {
-        *self == Self::FirstOrder
-    }
-}
-
+pub use crate::look::guard_variance::GuardVariance;
 pub use crate::look::split::RiskSplit;

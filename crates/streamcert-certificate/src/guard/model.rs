@@ -82,9 +82,10 @@ use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, SlidingRegression};
 
 use super::curvature::CurvatureTerms;
+use crate::look::guard_variance::GuardVariance;
 use crate::look::hotelling::NonlinearityTest;
 use crate::look::larger::LargerFit;
-use crate::{CertifyError, GuardVariance, NotCertified};
+use crate::{CertifyError, NotCertified};
 
 /// Which groups of extra regressors the guard fits and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

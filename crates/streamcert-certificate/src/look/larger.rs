@@ -5,9 +5,10 @@
 use serde::{Deserialize, Serialize};
 use streamcert_regression::{InstrumentedWindows, RateMap, Solve, WindowEstimate};
 
+use super::guard_variance::GuardVariance;
 use super::hotelling::{NonlinearityTest, hotelling_wald, wald_entries};
 use super::same_windows;
-use crate::{CertifyError, GuardVariance};
+use crate::CertifyError;
 
 /// A larger fit of `p` outputs on `d` regressors (the extra terms among them), its ring of
 /// past increments (the hidden-dynamics test's regressor `ΔY_{q−h}`), and the scratch of its

@@ -27,9 +27,10 @@
 
 use serde::{Deserialize, Serialize};
 
+use crate::look::guard_variance::GuardVariance;
 use crate::look::hotelling::NonlinearityTest;
 use crate::look::larger::LargerFit;
-use crate::{CertifyError, GuardVariance, NotCertified};
+use crate::{CertifyError, NotCertified};
 
 /// The larger fit and what its terms are.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

@@ -1,7 +1,6 @@
 //! The `certify` checkpoint: the certifier's state and the run's summary, sealed
 //! ([`seal_checkpoint`]), opened for `--resume` ([`open_checkpoint`]) and written atomically.
 
-use std::io::Write;
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
@@ -10,6 +9,7 @@ use streamcert_certificate::{Certifier, Encoding};
 use super::Summary;
 use crate::CliError;
 use crate::config::Config;
+use crate::resume::write_atomic;
 
 #[derive(Serialize, Deserialize)]
 struct Checkpoint {
@@ -93,37 +93,6 @@ pub fn open_checkpoint(
 
 pub(super) fn save(path: &Path, cert: &Certifier, summary: &Summary) -> Result<(), CliError> {
     write_atomic(path, &checkpoint_bytes(path, cert, summary)?)
-}
-
-/// Write `bytes` to `path` atomically: a unique temporary file beside the target, flushed to
-/// disk, then renamed over it, so a crash leaves either the old file or the new one, never a
-/// torn one.
-///
-/// # Errors
-/// [`CliError::Io`] naming the checkpoint.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), CliError> {
-    let nanos = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| d.as_nanos());
-    let name = path.file_name().map_or_else(|| "checkpoint".into(), |n| n.to_string_lossy());
-    let tmp = path.with_file_name(format!(".{name}.{}.{nanos}.tmp", std::process::id()));
-    let write = || -> std::io::Result<()> {
-        let mut f = std::fs::File::create(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_all()?;
-        std::fs::rename(&tmp, path)?;
-        // Make the rename itself durable where the platform allows opening a directory.
-        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty())
-            && let Ok(d) = std::fs::File::open(dir)
-        {
-            let _ = d.sync_all();
-        }
-        Ok(())
-    };
-    write().map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        CliError::io(format!("writing the checkpoint {}", path.display()), e)
-    })
 }
 
 pub(super) fn load(path: &Path, cfg: &Config) -> Result<(Certifier, Summary), CliError> {

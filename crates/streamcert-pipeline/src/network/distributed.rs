@@ -123,7 +123,7 @@ fn save(path: &Path, cfg: &NetConfig, place: &Placement, file: &SiteFile) -> Res
         &sealed_config(cfg, place),
     )
     .map_err(|e| e.to_string())?;
-    crate::certify::write_atomic(path, &bytes).map_err(|e| e.to_string())
+    crate::resume::write_atomic(path, &bytes).map_err(|e| e.to_string())
 }
 
 fn load(path: &Path, cfg: &NetConfig, place: &Placement) -> Result<SiteFile, CliError> {

@@ -32,50 +32,8 @@ pub use verdict::{
 
 use crate::CliError;
 use crate::output::{Flush, Format, Header};
+pub use crate::summary::NetSummary;
 use crate::watch::{NoWatch, Watch};
-
-/// Counts over a run (continued across checkpoint and resume).
-#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct NetSummary {
-    /// Input rows.
-    pub rows: u64,
-    /// Rows passed over at the start of a resumed input (the checkpoint holds them).
-    pub replayed: u64,
-    /// Time of the last input row.
-    pub last_time: Option<f64>,
-    /// Epochs composed.
-    pub epochs: u64,
-    /// Epochs certified.
-    pub certified: u64,
-    /// Epochs with the network gate open.
-    pub open: u64,
-    /// First time the network gate opened.
-    pub first_open: Option<f64>,
-    /// Whether the network gate was open at the last epoch (for `--require-certified`).
-    #[serde(default)]
-    pub open_at_end: bool,
-    /// Since when the network gate has been open without a break (`None`: closed).
-    #[serde(default)]
-    pub open_since: Option<f64>,
-    /// The network rate at the last epoch.
-    #[serde(default)]
-    pub last_rate: Option<f64>,
-    /// Epochs with the gate closed, by kind of reason (a kind counted once per epoch).
-    #[serde(default)]
-    pub reasons: Vec<(String, u64)>,
-    /// Why the gate was closed at the last epoch, in words (`None`: open).
-    #[serde(default)]
-    pub last_reason: Option<String>,
-    /// Bad payloads of a live source, skipped.
-    #[serde(default)]
-    pub skipped: u64,
-    /// A live source's counts ([`crate::source::SourceReport`]); `None` for a file or a pipe.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub source: Option<crate::source::SourceReport>,
-    /// The epochs of the picture (`--plot`), not checkpointed.
-    #[serde(skip)]
-    pub trace: Option<crate::picture::Trace>,
-}
 
 /// Options of a `network` run.
 #[derive(Debug, Clone)]
@@ -119,7 +77,7 @@ fn save(path: &Path, net: &NetworkCertifier, summary: &NetSummary) -> Result<(),
         net.config(),
     )
     .map_err(|e| bad(crate::resume::inner(e)))?;
-    crate::certify::write_atomic(path, &bytes)
+    crate::resume::write_atomic(path, &bytes)
 }
 
 fn load(path: &Path, cfg: &NetConfig) -> Result<(NetworkCertifier, NetSummary), CliError> {

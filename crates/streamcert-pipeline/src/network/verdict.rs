@@ -108,7 +108,7 @@ pub fn reason_words(kind: &str) -> String {
 pub fn verdict_line(cfg: &NetworkConfig, s: &NetSummary) -> String {
     let n = cfg.subsystems.len();
     // Epochs fall on `k · epoch`: the step their times resolve.
-    let at = |t: f64| crate::certify::summary::at_time(t, Some(cfg.epoch));
+    let at = |t: f64| crate::summary::at_time(t, Some(cfg.epoch));
     let since = s.open_since.filter(|_| s.open_at_end);
     let Some(risk) = cfg.total_risk() else {
         return format!(
@@ -158,7 +158,7 @@ pub fn summary_text(cfg: &NetworkConfig, s: &NetSummary) -> String {
         s.certified,
         s.open,
         s.first_open.map_or("never opened".into(), |t| {
-            format!("first at {}", crate::certify::summary::at_time(t, Some(cfg.epoch)))
+            format!("first at {}", crate::summary::at_time(t, Some(cfg.epoch)))
         }),
     );
     if let Some(report) = &s.source {

@@ -13,7 +13,7 @@ use super::{Shown, lag};
 use crate::Shared;
 use crate::metrics::{self, NetworkSeries, RunSeries};
 use crate::status::Subsystem;
-use crate::verdict::{Candidate, Risk, VerdictMessage, VerdictSink};
+use crate::verdict::{Candidate, Counters, Reason, Risk, VerdictMessage, VerdictSink};
 
 /// Every reason kind a network gate reports (the network's own and the local gates').
 fn reason_kinds() -> Vec<&'static str> {
@@ -60,10 +60,10 @@ impl NetworkWatch {
             since_text: None,
             t_text: None,
             value: None,
-            reason: Some(super::reason("starting", "no epoch yet")),
+            reason: Some(Reason::new("starting", "no epoch yet")),
             risk: cfg.total_risk().map(|delta| Risk { delta }),
             ended: false,
-            counters: crate::status::Counters::default(),
+            counters: Counters::default(),
         };
         let subsystems = names
             .iter()

@@ -8,7 +8,8 @@ use streamcert_pipeline::source::SourceReport;
 use super::{Gate, REFRESH, SOURCE_EVERY};
 use crate::Shared;
 use crate::metrics::{self, RunSeries};
-use crate::status::{Chart, Counters, Status};
+use crate::status::{Chart, Status};
+use crate::verdict::Counters;
 use crate::verdict::{VerdictMessage, VerdictSink};
 
 /// The deciding gate and its messages, the chart's points not yet in the document, the

@@ -1,5 +1,6 @@
 //! [`Summary`]: the counts over a `certify` run, and the text and JSON a person reads, whose
-//! first line is the calibrated verdict.
+//! first line is the calibrated verdict; [`NetSummary`], the same for a `network` run. They sit
+//! beneath the runs and their watchers (`certify`, `network` and `watch` all read them).
 
 use serde::{Deserialize, Serialize};
 use streamcert_certificate::{CertifierConfig, Evidence, NotCertified, Sig, SigRange};
@@ -107,7 +108,7 @@ pub struct Summary {
     pub trace: Option<crate::picture::Trace>,
     /// With a horizon ladder, each horizon's counts (empty without one).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub horizons: Vec<super::horizons::HorizonCount>,
+    pub horizons: Vec<HorizonCount>,
     /// With a horizon ladder, the horizon `h` whose look the open calibrated verdict was at
     /// the last row.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -468,6 +469,11 @@ fn candidate(cfg: &CertifierConfig) -> String {
 
 mod time;
 pub(crate) use time::at_time;
+
+mod horizons;
+mod net;
+pub use horizons::HorizonCount;
+pub use net::NetSummary;
 
 #[cfg(test)]
 mod tests;

@@ -436,7 +436,7 @@ impl CalibratedState {
             affine,
             zaug: vec![0.0; d],
             nl_origin: 0.0,
-            model: model_guards(&cal, (p, d, reg.horizon), &lengths)?,
+            model: model_guards(&cal, reg.order, (p, d, reg.horizon), &lengths)?,
             change: change_guard(&cal, reg.horizon, &lengths),
             trail: Some(trail),
             rings_replayed: false,

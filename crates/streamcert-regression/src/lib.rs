@@ -77,7 +77,7 @@ mod windows;
 pub use config::{Estimator, InputIntegral, Model, RegressionConfig, ResidualSource};
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
-pub use loop_model::{FastPath, LoopModel};
+pub use loop_model::{FastPath, HiddenDynamicsTest, LoopModel};
 pub use order_n::{ClosedLoop, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;

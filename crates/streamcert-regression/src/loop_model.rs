@@ -51,6 +51,42 @@ pub enum FastPath {
     General,
 }
 
+/// What the hidden-dynamics guard adds to a model's regression to test whether the model holds
+/// ([`LoopModel::hidden_dynamics_test`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HiddenDynamicsTest {
+    /// The outputs' increment over the `h` samples before the column, `ΔY_{q−h}`: one extra
+    /// regressor per output, whose coefficients are zero when the first-order model holds
+    /// with white noise (the first order's test).
+    PastIncrement,
+    /// The regression of the next order: its coefficients beyond the model's own are zero
+    /// when the model holds.
+    NextOrder(LoopModel),
+    /// No larger model is fitted (order 3, the largest): the model cannot be tested, and a
+    /// certificate that needs the test refuses, naming this.
+    Unavailable,
+}
+
+impl HiddenDynamicsTest {
+    /// The regressors the test adds to `model`'s, for `outputs` outputs and `inputs` inputs
+    /// (`None` for [`HiddenDynamicsTest::Unavailable`]).
+    #[must_use]
+    pub fn extra_regressors(
+        self,
+        model: LoopModel,
+        outputs: usize,
+        inputs: usize,
+    ) -> Option<usize> {
+        match self {
+            Self::PastIncrement => Some(outputs),
+            Self::NextOrder(next) => {
+                Some(next.width(outputs, inputs) - model.width(outputs, inputs))
+            }
+            Self::Unavailable => None,
+        }
+    }
+}
+
 impl LoopModel {
     /// Every loop model, for the tests that must hold for each.
     pub const ALL: [Self; 3] = [Self::FirstOrder, Self::Order(2), Self::Order(3)];
@@ -101,6 +137,19 @@ impl LoopModel {
         match self {
             Self::FirstOrder if outputs == 1 && inputs == 1 => FastPath::Scalar,
             Self::FirstOrder | Self::Order(_) => FastPath::General,
+        }
+    }
+
+    /// The hidden-dynamics guard's test of this model: the past increment for the first order
+    /// (the calibrated certificate's guard), the next order for order 2, none for order 3.
+    #[must_use]
+    pub fn hidden_dynamics_test(self) -> HiddenDynamicsTest {
+        match self {
+            Self::FirstOrder => HiddenDynamicsTest::PastIncrement,
+            Self::Order(n) => match Self::of_order(usize::from(n) + 1) {
+                Some(next) => HiddenDynamicsTest::NextOrder(next),
+                None => HiddenDynamicsTest::Unavailable,
+            },
         }
     }
 
@@ -180,5 +229,21 @@ mod tests {
         }
         assert_eq!(LoopModel::of_order(0), None);
         assert_eq!(LoopModel::of_order(4), None);
+    }
+
+    /// Each model's hidden-dynamics test: the first order's past increment (one regressor per
+    /// output), order 2 tested by order 3 (one more of each signal's regressors), order 3
+    /// untestable.
+    #[test]
+    fn each_model_names_its_hidden_dynamics_test() {
+        let first = LoopModel::FirstOrder;
+        assert_eq!(first.hidden_dynamics_test(), HiddenDynamicsTest::PastIncrement);
+        assert_eq!(first.hidden_dynamics_test().extra_regressors(first, 2, 3), Some(2));
+        let two = LoopModel::of_order(2).unwrap();
+        let three = LoopModel::of_order(3).unwrap();
+        assert_eq!(two.hidden_dynamics_test(), HiddenDynamicsTest::NextOrder(three));
+        assert_eq!(two.hidden_dynamics_test().extra_regressors(two, 1, 2), Some(3));
+        assert_eq!(three.hidden_dynamics_test(), HiddenDynamicsTest::Unavailable);
+        assert_eq!(three.hidden_dynamics_test().extra_regressors(three, 1, 1), None);
     }
 }

@@ -90,7 +90,9 @@ use crate::{CertifyError, NotCertified};
 /// Which groups of extra regressors the guard fits and tests.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub(crate) struct Groups {
-    /// The past increment `ΔY_{q−h}` (`p` regressors): hidden dynamics.
+    /// The past increment `ΔY_{q−h}` (`p` regressors): hidden dynamics, the first-order
+    /// model's test of itself
+    /// ([`HiddenDynamicsTest::PastIncrement`](streamcert_regression::HiddenDynamicsTest::PastIncrement)).
     pub order: bool,
     /// `∫(y_i − o_i)²`, `∫(y_i − o_i)³` per output (`2p` regressors): nonlinearity.
     pub curvature: bool,

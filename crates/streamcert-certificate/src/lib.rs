@@ -104,6 +104,7 @@ pub use nonlinear::{
     Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest, RegionBound,
 };
 pub use radius::{certificate_surface, certificate_value};
+pub use rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
 pub use row::{
     ColumnKind, EVIDENCE_COLUMN_KINDS, EVIDENCE_COLUMNS, EvidenceRow, NUMBER_COLUMNS, ReasonText,
     WINDOW_COLUMNS,

@@ -13,6 +13,7 @@
 //! `λ_max` of the score's covariance. A plant of order `n`
 //! ([`streamcert_regression::LoopModel::Order`]) has no symmetric part to read: its rate is
 //! the margin of its characteristic polynomial over the coefficients' confidence ellipsoid,
-//! and it will sit beside this one as its own module.
+//! [`order_n`] (the exact test and its bisection).
 
 pub(crate) mod first_order;
+pub(crate) mod order_n;

@@ -155,6 +155,9 @@ fn at_second_order_the_test_is_the_closed_form() {
         }
         let got = robust_margin(&e, 1e-12).expect("a margin");
         assert!((got - lo).abs() < 1e-9, "{got} {lo}");
+        // The margin passes the exact test and a step above it does not, whatever the
+        // floating-point guide of the bisection said.
+        assert!(robustly_stable(&e, got) && !robustly_stable(&e, got + 2e-12), "{got}");
     }
     assert!(compared > 500, "{compared}");
 }

@@ -29,6 +29,18 @@ use crate::{LoopModel, RegressionError};
 /// `C(p, q)` for `p, q < MAX_ORDER`.
 const BINOMIAL: [[f64; MAX_ORDER]; MAX_ORDER] = [[1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [1.0, 2.0, 1.0]];
 
+/// `Σ_q C(p, q) off^{p−q} m_q`: the `p`-th moment `∫ (x − x₁)^p f` of an interval from its
+/// moments `m_q = ∫ (x − x₀)^q f` about `x₀`, with `off = x₀ − x₁`.
+#[inline(always)]
+fn moment_about(m: &[f64], off: f64, p: usize) -> f64 {
+    let (mut v, mut sp) = (0.0, 1.0);
+    for q in (0..=p).rev() {
+        v += BINOMIAL[p][q] * sp * m[q];
+        sp *= off;
+    }
+    v
+}
+
 /// The streaming order-`n` regression (see the module docs of `order_n`): push samples, read
 /// the window's least-squares coefficients `θ̂ = (a_1..a_n, b.., c)`.
 ///
@@ -249,15 +261,10 @@ impl OrderNRegression {
         let shift = tp - t;
         for s in 0..signals {
             let (run, add) = (&mut self.run[s * n..(s + 1) * n], &self.moments[s * n..(s + 1) * n]);
-            let old: [f64; MAX_ORDER] = std::array::from_fn(|q| if q < n { run[q] } else { 0.0 });
-            for p in (0..n).rev() {
-                let mut v = 0.0;
-                let mut sp = 1.0;
-                for q in (0..=p).rev() {
-                    v += BINOMIAL[p][q] * sp * (old[q] + add[q]);
-                    sp *= shift;
-                }
-                run[p] = v;
+            let both: [f64; MAX_ORDER] =
+                std::array::from_fn(|q| if q < n { run[q] + add[q] } else { 0.0 });
+            for (p, r) in run.iter_mut().enumerate() {
+                *r = moment_about(&both, shift, p);
             }
         }
         // The departing interval (when the ring is full) leaves R.
@@ -265,15 +272,9 @@ impl OrderNRegression {
         if self.intervals >= h {
             let out = self.starts[slot] - t;
             for s in 0..signals {
-                let base = (slot * signals + s) * n;
+                let local = &self.local[(slot * signals + s) * n..(slot * signals + s + 1) * n];
                 for p in 0..n {
-                    let mut v = 0.0;
-                    let mut sp = 1.0;
-                    for q in (0..=p).rev() {
-                        v += BINOMIAL[p][q] * sp * self.local[base + q];
-                        sp *= out;
-                    }
-                    self.run[s * n + p] -= v;
+                    self.run[s * n + p] -= moment_about(local, out, p);
                 }
             }
         }
@@ -296,15 +297,9 @@ impl OrderNRegression {
             let slot = (self.local_head + h - 1 - k) % h;
             let off = self.starts[slot] - t;
             for s in 0..signals {
-                let base = (slot * signals + s) * n;
+                let local = &self.local[(slot * signals + s) * n..(slot * signals + s + 1) * n];
                 for p in 0..n {
-                    let mut v = 0.0;
-                    let mut sp = 1.0;
-                    for q in (0..=p).rev() {
-                        v += BINOMIAL[p][q] * sp * self.local[base + q];
-                        sp *= off;
-                    }
-                    self.run[s * n + p] += v;
+                    self.run[s * n + p] += moment_about(local, off, p);
                 }
             }
         }
@@ -321,13 +316,7 @@ impl OrderNRegression {
         let base = self.mu_head * signals * n;
         for s in 0..signals {
             for p in 0..n {
-                let mut v = 0.0;
-                let mut sp = 1.0;
-                for q in (0..=p).rev() {
-                    v += BINOMIAL[p][q] * sp * self.run[s * n + q];
-                    sp *= off;
-                }
-                self.mu[base + s * n + p] = v;
+                self.mu[base + s * n + p] = moment_about(&self.run[s * n..(s + 1) * n], off, p);
             }
         }
         self.mu_len = (self.mu_len + 1).min(cap);

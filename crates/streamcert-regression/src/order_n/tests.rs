@@ -2,41 +2,30 @@
 //! first-order sliding regression, exact simulation, and the batch fit for the streaming one.
 
 use nalgebra::DMatrix;
+use rand::{Rng as _, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 
 use super::rows::RowWeights;
 use super::*;
 use crate::{InputIntegral, Model, RegressionConfig, SlidingRegression};
 
-/// SplitMix64: a seeded, portable stream of uniforms in `[0, 1)`.
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
 /// Sample times from `0` with mean step `dt`, each step jittered by up to `±jitter · dt`.
-fn times(len: usize, dt: f64, jitter: f64, rng: &mut Rng) -> Vec<f64> {
+fn times(len: usize, dt: f64, jitter: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let mut t = vec![0.0; len];
     for k in 1..len {
-        t[k] = t[k - 1] + dt * (1.0 + jitter * (2.0 * rng.uniform() - 1.0));
+        t[k] = t[k - 1] + dt * (1.0 + jitter * (2.0 * rng.random::<f64>() - 1.0));
     }
     t
 }
 
 /// A held ±1 input redrawn every `hold` seconds on average (random durations).
-fn prbs(t: &[f64], hold: f64, rng: &mut Rng) -> Vec<f64> {
+fn prbs(t: &[f64], hold: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let (mut next, mut level) = (0.0, 1.0);
     t.iter()
         .map(|&tk| {
             if tk >= next {
-                level = if rng.uniform() < 0.5 { -1.0 } else { 1.0 };
-                next = tk + hold * (0.5 + rng.uniform());
+                level = if rng.random::<f64>() < 0.5 { -1.0 } else { 1.0 };
+                next = tk + hold * (0.5 + rng.random::<f64>());
             }
             level
         })
@@ -90,15 +79,16 @@ fn kernel(n: usize, k: usize, l: f64, v: f64) -> f64 {
 /// sample interval (exact for the cubic integrands, and never evaluated at a knot).
 #[test]
 fn rows_on_equal_spacing_are_the_sliding_integrals() {
-    let mut rng = Rng(7);
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
     for n in 1..=3 {
         for h in [1usize, 3, 5] {
             let shape = Shape { n, m: 2, h };
             let (span, d, dt) = (shape.span(), shape.width(), 0.05);
             let l = h as f64 * dt;
             let t: Vec<f64> = (0..=span).map(|i| 3.0 + i as f64 * dt).collect();
-            let y: Vec<f64> = (0..=span).map(|_| rng.uniform() - 0.5).collect();
-            let u: Vec<f64> = (0..(span + 1) * 2).map(|_| 2.0 * rng.uniform() - 1.0).collect();
+            let y: Vec<f64> = (0..=span).map(|_| rng.random::<f64>() - 0.5).collect();
+            let u: Vec<f64> =
+                (0..(span + 1) * 2).map(|_| 2.0 * rng.random::<f64>() - 1.0).collect();
             let mut w = RowWeights::new(shape);
             w.fill(shape, &t);
             let mut row = vec![0.0; d];
@@ -135,7 +125,7 @@ fn rows_on_equal_spacing_are_the_sliding_integrals() {
 /// `z = ΔY`, `φ^y = −∫y`, `φ^u = ∫u` (zero-order hold), the intercept `τ`.
 #[test]
 fn the_first_order_row_is_the_sliding_regressions_column() {
-    let mut rng = Rng(11);
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
     let h = 4;
     let mut cfg = RegressionConfig::new(1, 1, 30, h, 0.0);
     (cfg.model, cfg.input_integral) = (Model::Affine, InputIntegral::ZeroOrderHold);
@@ -144,7 +134,7 @@ fn the_first_order_row_is_the_sliding_regressions_column() {
         OrderNRegression::new(OrderNConfig::new(LoopModel::FirstOrder, 1, 30, h)).unwrap();
     let t = times(300, 0.02, 0.5, &mut rng);
     for (k, &tk) in t.iter().enumerate() {
-        let (y, u) = (40.0 + rng.uniform(), [3.0 * rng.uniform() - 7.0]);
+        let (y, u) = (40.0 + rng.random::<f64>(), [3.0 * rng.random::<f64>() - 7.0]);
         first.push(tk, &[y], &u).unwrap();
         order1.push(tk, y, &u).unwrap();
         assert_eq!(first.newest_column().is_some(), order1.newest_row().is_some(), "{k}");
@@ -162,7 +152,7 @@ fn the_first_order_row_is_the_sliding_regressions_column() {
 /// the batch fit's largest relative coefficient error.
 fn recovery_error(a: &[f64], b: &[f64], dt: f64, jitter: f64, hold: f64, seed: u64) -> f64 {
     let (n, c, duration, l) = (a.len(), 0.1, 60.0, 0.2);
-    let mut rng = Rng(seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let t = times((duration / dt) as usize, dt, jitter, &mut rng);
     let u = prbs(&t, hold, &mut rng);
     let y = simulate(a, b, c, &t, &u);
@@ -202,12 +192,12 @@ fn noise_free_fits_recover_the_plant_at_second_order_in_the_step() {
 fn noisy_record(n: usize, len: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let a: &[f64] = if n == 2 { &[1.2, 1.0] } else { &[3.5, 3.5, 1.0] };
     let b: &[f64] = if n == 2 { &[0.0, 1.0] } else { &[0.0, 0.5, 2.0] };
-    let mut rng = Rng(seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let t = times(len, 0.01, 0.3, &mut rng);
     let u = prbs(&t, 0.7, &mut rng);
     let mut y = simulate(a, b, 0.1, &t, &u);
     for v in &mut y {
-        *v += 0.01 * (rng.uniform() - 0.5) + 5.0;
+        *v += 0.01 * (rng.random::<f64>() - 0.5) + 5.0;
     }
     (t, y, u)
 }

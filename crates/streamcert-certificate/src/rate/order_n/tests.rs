@@ -2,30 +2,15 @@
 //! and brute force (members of the ellipsoid, their roots by a dense eigensolver).
 
 use nalgebra::DMatrix;
+use rand::{Rng as _, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 
 use super::*;
 
-/// SplitMix64 uniforms in `[0, 1)` and Box–Muller normals: seeded and portable.
-struct Rng(u64);
-
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let u1 = 1.0 - self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * self.uniform()).cos()
-    }
-}
-
 /// A random stable centre (the polynomial of random stable roots) and a random positive
 /// definite covariance of scale `size`, `n × n`.
-fn random_ellipsoid(n: usize, size: f64, rng: &mut Rng) -> (Vec<f64>, Vec<f64>) {
+fn random_ellipsoid(n: usize, size: f64, rng: &mut ChaCha8Rng) -> (Vec<f64>, Vec<f64>) {
     // Roots: a real one and, for n >= 2, a complex pair or two reals.
     let mut poly = vec![1.0];
     let push_real = |poly: &mut Vec<f64>, r: f64| {
@@ -38,8 +23,8 @@ fn random_ellipsoid(n: usize, size: f64, rng: &mut Rng) -> (Vec<f64>, Vec<f64>) 
     };
     let mut k = 0;
     while k < n {
-        if n - k >= 2 && rng.uniform() < 0.5 {
-            let (re, im) = (0.2 + 2.0 * rng.uniform(), 0.1 + 2.0 * rng.uniform());
+        if n - k >= 2 && rng.random::<f64>() < 0.5 {
+            let (re, im) = (0.2 + 2.0 * rng.random::<f64>(), 0.1 + 2.0 * rng.random::<f64>());
             // s² + 2 re s + re² + im².
             let quad = [1.0, 2.0 * re, re * re + im * im];
             let mut next = vec![0.0; poly.len() + 2];
@@ -51,12 +36,14 @@ fn random_ellipsoid(n: usize, size: f64, rng: &mut Rng) -> (Vec<f64>, Vec<f64>) 
             poly = next;
             k += 2;
         } else {
-            push_real(&mut poly, 0.1 + 2.0 * rng.uniform());
+            push_real(&mut poly, 0.1 + 2.0 * rng.random::<f64>());
             k += 1;
         }
     }
     let centre = poly[1..].to_vec();
-    let l: Vec<f64> = (0..n * n).map(|_| size * rng.normal()).collect();
+    let l: Vec<f64> = (0..n * n)
+        .map(|_| size * Distribution::<f64>::sample(&StandardNormal, &mut *rng))
+        .collect();
     let mut cov = vec![0.0; n * n];
     for i in 0..n {
         for j in 0..n {
@@ -81,14 +68,21 @@ fn margin_of(beta: &[f64]) -> f64 {
 }
 
 /// The smallest margin over sampled members: the boundary (and inside) of the ellipsoid.
-fn sampled_margin(centre: &[f64], cov: &[f64], r2: f64, samples: usize, rng: &mut Rng) -> f64 {
+fn sampled_margin(
+    centre: &[f64],
+    cov: &[f64],
+    r2: f64,
+    samples: usize,
+    rng: &mut ChaCha8Rng,
+) -> f64 {
     let n = centre.len();
     let l = DMatrix::from_row_slice(n, n, cov).cholesky().expect("positive definite").l();
     let mut worst = margin_of(centre);
     for k in 0..samples {
-        let u: Vec<f64> = (0..n).map(|_| rng.normal()).collect();
+        let u: Vec<f64> =
+            (0..n).map(|_| Distribution::<f64>::sample(&StandardNormal, &mut *rng)).collect();
         let norm = u.iter().map(|x| x * x).sum::<f64>().sqrt();
-        let depth = if k % 5 == 0 { rng.uniform() } else { 1.0 };
+        let depth = if k % 5 == 0 { rng.random::<f64>() } else { 1.0 };
         let beta: Vec<f64> = (0..n)
             .map(|i| {
                 centre[i] + r2.sqrt() * depth * (0..n).map(|j| l[(i, j)] * u[j] / norm).sum::<f64>()
@@ -129,14 +123,14 @@ fn closed_form_2(beta: &[f64], cov: &[f64], r2: f64, alpha: f64) -> (bool, f64) 
 /// ellipsoids.
 #[test]
 fn at_second_order_the_test_is_the_closed_form() {
-    let mut rng = Rng(17);
+    let mut rng = ChaCha8Rng::seed_from_u64(17);
     let mut compared = 0;
     for _ in 0..150 {
-        let (centre, cov) = random_ellipsoid(2, 0.05 + 0.3 * rng.uniform(), &mut rng);
-        let r2 = 1.0 + 14.0 * rng.uniform();
+        let (centre, cov) = random_ellipsoid(2, 0.05 + 0.3 * rng.random::<f64>(), &mut rng);
+        let r2 = 1.0 + 14.0 * rng.random::<f64>();
         let e = Ellipsoid { centre: &centre, covariance: &cov, radius2: r2 };
         for _ in 0..5 {
-            let alpha = -1.0 + 3.0 * rng.uniform();
+            let alpha = -1.0 + 3.0 * rng.random::<f64>();
             let (want, slack) = closed_form_2(&centre, &cov, r2, alpha);
             if slack.abs() > 1e-9 {
                 assert_eq!(robustly_stable(&e, alpha), want, "{centre:?} {cov:?} {r2} {alpha}");
@@ -166,11 +160,11 @@ fn at_second_order_the_test_is_the_closed_form() {
 /// certified one (validity), and the smallest sampled margin is close above it (tightness).
 #[test]
 fn no_member_of_the_ellipsoid_is_slower_than_the_certified_margin() {
-    let mut rng = Rng(29);
+    let mut rng = ChaCha8Rng::seed_from_u64(29);
     for n in [2usize, 3] {
         for case in 0..12 {
-            let (centre, cov) = random_ellipsoid(n, 0.02 + 0.1 * rng.uniform(), &mut rng);
-            let r2 = 2.0 + 10.0 * rng.uniform();
+            let (centre, cov) = random_ellipsoid(n, 0.02 + 0.1 * rng.random::<f64>(), &mut rng);
+            let r2 = 2.0 + 10.0 * rng.random::<f64>();
             let e = Ellipsoid { centre: &centre, covariance: &cov, radius2: r2 };
             let Some(certified) = robust_margin(&e, 1e-12) else {
                 continue;
@@ -186,10 +180,10 @@ fn no_member_of_the_ellipsoid_is_slower_than_the_certified_margin() {
 /// every certified one.
 #[test]
 fn the_test_is_monotone_and_below_the_centres_margin() {
-    let mut rng = Rng(41);
+    let mut rng = ChaCha8Rng::seed_from_u64(41);
     for n in 1..=3 {
         for _ in 0..15 {
-            let (centre, cov) = random_ellipsoid(n, 0.1 * rng.uniform() + 1e-3, &mut rng);
+            let (centre, cov) = random_ellipsoid(n, 0.1 * rng.random::<f64>() + 1e-3, &mut rng);
             let e = Ellipsoid { centre: &centre, covariance: &cov, radius2: 9.0 };
             let passes: Vec<bool> =
                 (0..60).map(|i| robustly_stable(&e, -2.0 + 0.08 * f64::from(i))).collect();

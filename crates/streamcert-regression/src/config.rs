@@ -178,21 +178,30 @@ impl RegressionConfig {
                 ),
             );
         }
-        if self.refresh_period == 0 || self.refresh_period > self.window {
-            return bad(
-                "refresh_period",
-                format!(
-                    "must lie in [1, window] = [1, {}], got {}",
-                    self.window, self.refresh_period
-                ),
-            );
-        }
-        if !(0.0..1.0).contains(&self.min_excitation_ratio) {
-            return bad(
-                "min_excitation_ratio",
-                format!("must lie in [0, 1), got {}", self.min_excitation_ratio),
-            );
-        }
-        Ok(())
+        check_refresh_and_ratio(self.refresh_period, self.window, self.min_excitation_ratio)
     }
+}
+
+/// The checks every windowed regression's configuration shares: an exact recompute every
+/// `1 <= refresh_period <= window` columns, and an excitation ratio in `[0, 1)`.
+pub(crate) fn check_refresh_and_ratio(
+    refresh_period: usize,
+    window: usize,
+    min_excitation_ratio: f64,
+) -> Result<(), RegressionError> {
+    let bad =
+        |field: &'static str, reason: String| Err(RegressionError::InvalidConfig { field, reason });
+    if refresh_period == 0 || refresh_period > window {
+        return bad(
+            "refresh_period",
+            format!("must lie in [1, window] = [1, {window}], got {refresh_period}"),
+        );
+    }
+    if !(0.0..1.0).contains(&min_excitation_ratio) {
+        return bad(
+            "min_excitation_ratio",
+            format!("must lie in [0, 1), got {min_excitation_ratio}"),
+        );
+    }
+    Ok(())
 }

@@ -53,6 +53,7 @@ mod fit;
 mod rows;
 mod spline;
 mod streaming;
+mod variance;
 
 pub use fit::{ClosedLoop, OrderNFit, OrderNRecord};
 pub use streaming::OrderNRegression;
@@ -144,22 +145,11 @@ impl OrderNConfig {
                 format!("must lie in [d, window] = [{d}, {}], got {}", self.window, self.min_rows),
             );
         }
-        if self.refresh_period == 0 || self.refresh_period > self.window {
-            return bad(
-                "refresh_period",
-                format!(
-                    "must lie in [1, window] = [1, {}], got {}",
-                    self.window, self.refresh_period
-                ),
-            );
-        }
-        if !(0.0..1.0).contains(&self.min_excitation_ratio) {
-            return bad(
-                "min_excitation_ratio",
-                format!("must lie in [0, 1), got {}", self.min_excitation_ratio),
-            );
-        }
-        Ok(())
+        crate::config::check_refresh_and_ratio(
+            self.refresh_period,
+            self.window,
+            self.min_excitation_ratio,
+        )
     }
 }
 

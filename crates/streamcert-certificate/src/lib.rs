@@ -77,6 +77,7 @@ mod guard;
 mod ladder;
 mod look;
 pub mod nonlinear;
+mod order_n;
 mod radius;
 mod rate;
 mod row;
@@ -103,6 +104,7 @@ pub use ladder::HorizonLadder;
 pub use nonlinear::{
     Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest, RegionBound,
 };
+pub use order_n::{OrderNCertificate, OrderNCertificateConfig, OrderNLook, OrderNRegion};
 pub use radius::{certificate_surface, certificate_value};
 pub use rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
 pub use row::{

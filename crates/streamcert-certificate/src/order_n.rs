@@ -1,0 +1,405 @@
+//! The certificate of order `n` (an addition to the paper): a lower confidence bound on the
+//! closed loop's margin for a plant whose output is not its whole state, read from one output
+//! through the order-`n` integral regression
+//! ([`OrderNRecord`](streamcert_regression::OrderNRecord)), whose gate opens for a loop with
+//! true margin below `β_margin` with probability at most `δ` over the whole run.
+//!
+//! ## Method
+//!
+//! **Model.** The plant from its inputs to its one output is linear of order at most `n`
+//! (`n = 1, 2, 3`) over the region the run explores: `p(D) y = q(D) u + c` with
+//! `p(s) = sⁿ + a_1 sⁿ⁻¹ + … + a_n`. Under the candidate `u = K y` the closed loop's
+//! characteristic polynomial is `sⁿ + β_1 sⁿ⁻¹ + … + β_n`, `β = a − Σ_j K_j b_j`, and its
+//! *margin* is minus its spectral abscissa (`−max Re s` over its roots; for `n = 1` the
+//! paper's rate `β̂`).
+//!
+//! **Estimate and covariance.** At a look the window's last `N = min(M, available)` rows are
+//! fitted by least squares with the model-structured covariance (white sensor noise and white
+//! noise where the intercept enters, fitted from the residuals' autocovariances;
+//! [`OrderNFit`](streamcert_regression::OrderNFit)), and mapped to the closed loop:
+//! `β̂ = T θ̂`, `Σ_β = T V Tᵀ`.
+//!
+//! **Radius.** The covariance's scale is estimated from the same window, so the region is
+//! calibrated by Fisher's F rather than `χ²`:
+//!
+//! ```text
+//! E_k = {β : (β − β̂)ᵀ Σ_β⁻¹ (β − β̂) <= r_k²},   r_k² = n · F_{n, ν}(1 − δ_k)
+//! ν   = ⌊N / (n h + 1)⌋ − d      (the window's disjoint spans, less one per coefficient)
+//! ```
+//!
+//! Rows share `n h` of their `n h + 1` samples, so the residuals hold about one independent
+//! value per span; `ν` counts those, not the rows. With `χ²` (as if the scale were known) the
+//! first looks of a slow plant, with a few spans, opened where they should not: the scale
+//! estimated from few spans is itself noisy. `d = n (1 + m) + 1` coefficients.
+//!
+//! **Test.** A look certifies when every member of `E_k` has all its roots left of
+//! `−β_margin`: the exact zero-exclusion test ([`robustly_stable`](crate::robustly_stable)).
+//! Its value is the largest such margin ([`robust_margin`](crate::robust_margin)), reported,
+//! never above the truth for the members of `E_k`.
+//!
+//! **Looks and risk.** The first look comes at the first sample with `min_rows` rows (the
+//! smallest window, at least `(d + 1)(n h + 1)` rows so that `ν >= 1`), then one every
+//! `look_period` samples. The `k`-th look spends `δ_k = δ / (k (k + 1))`
+//! ([`look_risk`](crate::look_risk)), which sums to `δ` over any number of looks: the gate
+//! (open while the latest look certifies) opens for a loop whose margin is below `β_margin`
+//! with probability at most `δ`, whatever the run's length and whenever it is stopped.
+//!
+//! **Identification.** A look whose column-scaled Gram matrix has
+//! `λ_min <= min_excitation_ratio · λ_max` (an input held still: `u = K y + d` with `d`
+//! constant is an affine function of `y`, and `a` cannot be told from `b`) certifies nothing
+//! and closes the gate ([`NotCertified::InsufficientExcitation`]).
+//!
+//! ## Assumptions
+//! - linear dynamics of order at most `n` over the region (a plant of higher order, a delay,
+//!   a nonlinearity are not detected by this certificate alone);
+//! - white sensor noise on `y` and white noise entering where the intercept enters;
+//! - the inputs applied are known exactly (the logged `u`).
+//!
+//! ## Cost
+//! A sample is stored in rings of `M + n h` samples (`O(1 + m)`, no allocation). A look fits
+//! its window (`O(N n h d)`) and decides the exact test, paid once per look.
+
+use streamcert_regression::{OrderNConfig, OrderNRecord, RegressionError};
+
+use crate::look::hotelling::f_quantile;
+use crate::look::quantile::look_risk;
+use crate::rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
+use crate::{CertifyError, NotCertified};
+
+/// Configuration of [`OrderNCertificate`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderNCertificateConfig {
+    /// The regression: the order, the inputs `m`, the horizon `h`, the window `M` (rows), the
+    /// smallest window a look uses (`min_rows`, at least `(d + 1)(n h + 1)`) and the
+    /// identification threshold. `refresh_period` is not used.
+    pub regression: OrderNConfig,
+    /// The candidate gain `K`, `m` values (`u = K y`).
+    pub gain: Vec<f64>,
+    /// `β_margin` (1/s): the margin the gate asks for.
+    pub margin: f64,
+    /// `δ ∈ (0, 1)`: the probability, over the whole run, that the gate opens for a loop
+    /// whose margin is below `β_margin`.
+    pub delta: f64,
+    /// Samples between looks (`>= 1`). Default `M / 10`.
+    pub look_period: usize,
+    /// The reported margin's bisection tolerance (1/s, `> 0`). Default `1e-4`. The decision
+    /// at `β_margin` is exact whatever it is.
+    pub tolerance: f64,
+}
+
+impl OrderNCertificateConfig {
+    /// The documented defaults: looks every `M / 10` samples (at least 1), a tolerance of
+    /// `1e-4`; the first look when the window is full (`min_rows = M`, as `regression` has
+    /// it).
+    #[must_use]
+    pub fn new(regression: OrderNConfig, gain: Vec<f64>, margin: f64, delta: f64) -> Self {
+        Self {
+            regression,
+            gain,
+            margin,
+            delta,
+            look_period: (regression.window / 10).max(1),
+            tolerance: 1e-4,
+        }
+    }
+
+    /// The smallest window a look may use: `(d + 1)(n h + 1)` rows, so that the window holds
+    /// at least one disjoint span more than it has coefficients (`ν >= 1`).
+    #[must_use]
+    pub fn smallest_window(&self) -> usize {
+        (self.regression.width() + 1) * (self.regression.span() + 1)
+    }
+
+    /// Check every field.
+    ///
+    /// # Errors
+    /// [`CertifyError::InvalidConfig`] naming the field and what is accepted, or
+    /// [`CertifyError::Regression`] for the regression's own fields.
+    pub fn validate(&self) -> Result<(), CertifyError> {
+        let mut probe = self.regression;
+        probe.refresh_period = probe.refresh_period.clamp(1, probe.window.max(1));
+        probe.validate()?;
+        let m = self.regression.inputs;
+        if self.gain.len() != m {
+            return CertifyError::refuse(
+                "gain",
+                format!("must have one value per input ({m}), got {}", self.gain.len()),
+            );
+        }
+        if self.gain.iter().any(|k| !k.is_finite()) {
+            return CertifyError::refuse("gain", "must be finite".into());
+        }
+        if !self.margin.is_finite() {
+            return CertifyError::refuse("margin", "must be finite".into());
+        }
+        if !(self.delta > 0.0 && self.delta < 1.0) {
+            return CertifyError::refuse(
+                "delta",
+                format!("must lie in (0, 1), got {}", self.delta),
+            );
+        }
+        if self.look_period == 0 {
+            return CertifyError::refuse("look_period", "must be at least 1 sample".into());
+        }
+        if !(self.tolerance > 0.0 && self.tolerance.is_finite()) {
+            return CertifyError::refuse("tolerance", "must be finite and positive".into());
+        }
+        let smallest = self.smallest_window();
+        if self.regression.min_rows < smallest {
+            return CertifyError::refuse(
+                "min_rows",
+                format!(
+                    "must be at least (d + 1)(n h + 1) = {smallest} rows, got {}: a smaller \
+                     window holds no disjoint span beyond its coefficients to estimate the \
+                     noise's scale from (raise the window or shorten the horizon)",
+                    self.regression.min_rows
+                ),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// One look of [`OrderNCertificate`]: the window's closed loop, its region and the verdict.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderNLook {
+    /// The look's number `k >= 1` since the start or the last [`OrderNCertificate::reset`].
+    pub index: u64,
+    /// The time of the sample it falls on.
+    pub time: f64,
+    /// The rows fitted, `N`.
+    pub rows: usize,
+    /// The risk it spends, `δ_k = δ / (k (k + 1))`.
+    pub risk: f64,
+    /// What it found: the region and its margin, or why it certifies nothing.
+    pub outcome: Result<OrderNRegion, NotCertified>,
+}
+
+impl OrderNLook {
+    /// Whether this look certifies the margin.
+    #[must_use]
+    pub fn certified(&self) -> bool {
+        self.outcome.as_ref().is_ok_and(|r| r.certified)
+    }
+}
+
+/// The confidence region of a look and what it certifies.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderNRegion {
+    /// `β̂ = (β̂_1..β̂_n)`.
+    pub beta: Vec<f64>,
+    /// `Σ_β`, `n × n` row-major.
+    pub covariance: Vec<f64>,
+    /// The degrees of freedom `ν = ⌊N / (n h + 1)⌋ − d`.
+    pub dof: usize,
+    /// `r_k² = n · F_{n, ν}(1 − δ_k)`.
+    pub radius2: f64,
+    /// The largest margin every member of the region has (1/s), to the tolerance and never
+    /// above it; `None` when no margin can be stated (the region reaches polynomials with
+    /// roots anywhere).
+    pub margin: Option<f64>,
+    /// Whether every member has every root left of `−β_margin` (exact).
+    pub certified: bool,
+}
+
+/// The certificate of order `n` over a stream of samples (module docs: method, risk,
+/// assumptions).
+///
+/// ```
+/// use streamcert_certificate::{OrderNCertificate, OrderNCertificateConfig};
+/// use streamcert_regression::{LoopModel, OrderNConfig};
+/// let regression = OrderNConfig::new(LoopModel::of_order(2).unwrap(), 1, 400, 5);
+/// let cfg = OrderNCertificateConfig::new(regression, vec![-1.0], 0.05, 0.01);
+/// let mut cert = OrderNCertificate::new(cfg)?;
+/// // ÿ + 3 ẏ + 2 y = u, u = −y + d, d a dither, sampled at 100 Hz (one Euler step per
+/// // sample, which the model of order 2 fits well enough for this sketch).
+/// let (dt, mut y, mut v) = (0.01f64, 0.0f64, 0.0f64);
+/// for k in 0..1000 {
+///     let d = if (k / 37) % 2 == 0 { 1.0 } else { -1.0 };
+///     let u = -y + d;
+///     cert.push(k as f64 * dt, y, &[u])?;
+///     (y, v) = (y + dt * v, v + dt * (-3.0 * v - 2.0 * y + u));
+/// }
+/// // The closed loop s² + 3 s + 3 has margin 1.5.
+/// let look = cert.latest().unwrap();
+/// assert!(look.certified() && cert.open());
+/// # Ok::<(), streamcert_certificate::CertifyError>(())
+/// ```
+#[derive(Debug, Clone)]
+pub struct OrderNCertificate {
+    cfg: OrderNCertificateConfig,
+    /// Rings of the newest `M + n h` samples: time, output, inputs (`m` per sample).
+    t: Vec<f64>,
+    y: Vec<f64>,
+    u: Vec<f64>,
+    /// The next slot to write, and the samples held.
+    head: usize,
+    held: usize,
+    /// The previous sample's time (the rings' newest), for the time check.
+    previous: Option<f64>,
+    /// Samples since the first sample with `min_rows` rows (that sample is 0).
+    since_first: Option<usize>,
+    looks: u64,
+    latest: Option<OrderNLook>,
+}
+
+impl OrderNCertificate {
+    /// A certificate with no samples.
+    ///
+    /// # Errors
+    /// As [`OrderNCertificateConfig::validate`].
+    pub fn new(cfg: OrderNCertificateConfig) -> Result<Self, CertifyError> {
+        cfg.validate()?;
+        let capacity = cfg.regression.window + cfg.regression.span();
+        let m = cfg.regression.inputs;
+        Ok(Self {
+            t: vec![0.0; capacity],
+            y: vec![0.0; capacity],
+            u: vec![0.0; capacity * m],
+            head: 0,
+            held: 0,
+            previous: None,
+            since_first: None,
+            looks: 0,
+            latest: None,
+            cfg,
+        })
+    }
+
+    /// The configuration.
+    #[must_use]
+    pub fn config(&self) -> &OrderNCertificateConfig {
+        &self.cfg
+    }
+
+    /// The latest look, held until the next.
+    #[must_use]
+    pub fn latest(&self) -> Option<&OrderNLook> {
+        self.latest.as_ref()
+    }
+
+    /// Whether the gate is open: the latest look certifies the margin.
+    #[must_use]
+    pub fn open(&self) -> bool {
+        self.latest.as_ref().is_some_and(OrderNLook::certified)
+    }
+
+    /// The rows the window holds now, `min(M, samples − n h)`.
+    #[must_use]
+    pub fn rows(&self) -> usize {
+        self.held.saturating_sub(self.cfg.regression.span()).min(self.cfg.regression.window)
+    }
+
+    /// Forget every sample, and the latest look, after a gap or a known change of the plant:
+    /// the next look is the first of a new run, with its own risk `δ`. (The risk spent before
+    /// is not recovered: the union bound over the two runs is `2δ`.)
+    pub fn reset(&mut self) {
+        (self.head, self.held, self.previous, self.since_first) = (0, 0, None, None);
+        (self.looks, self.latest) = (0, None);
+    }
+
+    /// Take one sample `(t, y, u)` and look when the schedule says so. Returns the look when
+    /// one was made at this sample.
+    ///
+    /// # Errors
+    /// A sample with a non-finite value, a time not after the previous one, or the wrong
+    /// number of inputs is rejected ([`CertifyError::Regression`]), and nothing changes.
+    pub fn push(&mut self, t: f64, y: f64, u: &[f64]) -> Result<Option<&OrderNLook>, CertifyError> {
+        let m = self.cfg.regression.inputs;
+        check_sample(self.previous, t, y, u, m)?;
+        let capacity = self.t.len();
+        self.t[self.head] = t;
+        self.y[self.head] = y;
+        self.u[self.head * m..(self.head + 1) * m].copy_from_slice(u);
+        self.head = (self.head + 1) % capacity;
+        self.held = (self.held + 1).min(capacity);
+        self.previous = Some(t);
+        if self.since_first.is_none() && self.rows() >= self.cfg.regression.min_rows {
+            self.since_first = Some(0);
+        } else if let Some(s) = self.since_first.as_mut() {
+            *s += 1;
+        }
+        match self.since_first {
+            Some(s) if s % self.cfg.look_period == 0 => {
+                self.latest = Some(self.look(t));
+                Ok(self.latest.as_ref())
+            }
+            _ => Ok(None),
+        }
+    }
+
+    /// The look at the newest sample (time `t`): the window's fit, its region and the test.
+    fn look(&mut self, t: f64) -> OrderNLook {
+        self.looks += 1;
+        let (k, rows) = (self.looks, self.rows());
+        let risk = look_risk(self.cfg.delta, 1.0, k);
+        let outcome = self.region(rows, risk);
+        OrderNLook { index: k, time: t, rows, risk, outcome }
+    }
+
+    fn region(&self, rows: usize, risk: f64) -> Result<OrderNRegion, NotCertified> {
+        let cfg = &self.cfg.regression;
+        let (n, m, span, d) = (cfg.model.order(), cfg.inputs, cfg.span(), cfg.width());
+        // The window's samples in time order (paid at the look).
+        let count = rows + span;
+        let capacity = self.t.len();
+        let first = (self.head + capacity - count) % capacity;
+        let index = |i: usize| (first + i) % capacity;
+        let t: Vec<f64> = (0..count).map(|i| self.t[index(i)]).collect();
+        let y: Vec<f64> = (0..count).map(|i| self.y[index(i)]).collect();
+        let u: Vec<f64> =
+            (0..count).flat_map(|i| self.u[index(i) * m..(index(i) + 1) * m].to_vec()).collect();
+        let fit = OrderNRecord::new(cfg, &t, &y, &u)
+            .and_then(|record| record.fit(0..record.rows()))
+            .map_err(|e| match e {
+                RegressionError::NotIdentified(_) => NotCertified::InsufficientExcitation,
+                _ => NotCertified::WarmingUp { columns: rows, needed: cfg.min_rows },
+            })?;
+        let closed = fit
+            .closed_loop(&self.cfg.gain)
+            .map_err(|_| NotCertified::WarmingUp { columns: rows, needed: cfg.min_rows })?;
+        let dof = (rows / (span + 1)).saturating_sub(d);
+        let radius2 = n as f64 * f_quantile(n as f64, dof as f64, risk);
+        let e = Ellipsoid { centre: &closed.beta, covariance: &closed.covariance, radius2 };
+        let certified = radius2.is_finite() && robustly_stable(&e, self.cfg.margin);
+        let margin = if radius2.is_finite() { robust_margin(&e, self.cfg.tolerance) } else { None };
+        Ok(OrderNRegion {
+            beta: closed.beta,
+            covariance: closed.covariance,
+            dof,
+            radius2,
+            margin,
+            certified,
+        })
+    }
+}
+
+/// Check one sample: finite values, `m` inputs, time after `previous`.
+fn check_sample(
+    previous: Option<f64>,
+    t: f64,
+    y: f64,
+    u: &[f64],
+    m: usize,
+) -> Result<(), RegressionError> {
+    if u.len() != m {
+        return Err(RegressionError::DimensionMismatch { field: "u", expected: m, got: u.len() });
+    }
+    for (field, index, value) in [("t", 0, t), ("y", 0, y)]
+        .into_iter()
+        .chain(u.iter().enumerate().map(|(i, v)| ("u", i, *v)))
+    {
+        if !value.is_finite() {
+            return Err(RegressionError::NonFinite { field, index, value });
+        }
+    }
+    match previous {
+        Some(previous) if t <= previous => {
+            Err(RegressionError::NonIncreasingTime { previous, got: t })
+        }
+        _ => Ok(()),
+    }
+}
+
+#[cfg(test)]
+mod tests;

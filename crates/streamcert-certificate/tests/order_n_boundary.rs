@@ -1,0 +1,152 @@
+//! The certificate of order 2 at its boundary: loops just below the margin, simulated exactly
+//! and measured through one output, open the gate in few enough runs (a Clopper–Pearson
+//! bound), and a loop at five times the margin is certified.
+//!
+//! Protocol (fixed before the runs; nothing here is tuned to the result):
+//! - the plant `ÿ + a_1 ẏ + a_2 y = u + 0.1` in observable form (`y = x_1`, the input and the
+//!   constant entering the unmeasured `x_2`), from rest, simulated exactly (zero-order hold)
+//!   at 100 Hz for 40 s;
+//! - the loop `u = K y_m + d`, `d` a dither of `±0.1` whose sign is redrawn every second;
+//! - either sensor noise (`y_m = y + e`, `e` white, `σ = 0.01`) or process noise on the
+//!   unmeasured state (`x_2` receives `σ_p √dt w` per sample, `w` white, `σ_p = 0.05`);
+//! - the certificate's defaults at order 2: `h = 50` (`L = 0.5 s`), `M = 2000` rows, the
+//!   first look when the window is full, looks every 200 samples, `δ = 0.01`, margin 0.05.
+//!
+//! Every look counts, the first included: a run opens when any look certifies. With no
+//! opening in 200 runs the one-sided 95 % Clopper–Pearson bound is 0.0149, within `2δ`.
+
+use nalgebra::{DMatrix, DVector};
+use statrs::distribution::{Beta, ContinuousCDF};
+use streamcert_certificate::{OrderNCertificate, OrderNCertificateConfig};
+use streamcert_regression::{LoopModel, OrderNConfig};
+
+/// SplitMix64 uniforms in `[0, 1)` and Box–Muller normals: seeded and portable.
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn normal(&mut self) -> f64 {
+        let u1 = 1.0 - self.uniform();
+        let u2 = self.uniform();
+        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+    }
+}
+
+const DT: f64 = 0.01;
+const SAMPLES: usize = 4000;
+const MARGIN: f64 = 0.05;
+const DELTA: f64 = 0.01;
+
+/// One cell: the plant's `a`, the gain, and which noise.
+#[derive(Clone, Copy)]
+struct Cell {
+    a: [f64; 2],
+    gain: f64,
+    sensor: f64,
+    process: f64,
+}
+
+/// Whether one seeded run opens the gate at any look, and the time of its first opening.
+fn run(cell: Cell, seed: u64) -> Option<f64> {
+    let mut big = DMatrix::<f64>::zeros(4, 4);
+    big[(0, 0)] = -cell.a[0];
+    big[(0, 1)] = 1.0;
+    big[(1, 0)] = -cell.a[1];
+    big[(1, 2)] = 1.0;
+    big[(1, 3)] = 0.1;
+    let step = (big * DT).exp();
+    let regression = OrderNConfig::new(LoopModel::of_order(2).unwrap(), 1, 2000, 50);
+    let cfg = OrderNCertificateConfig::new(regression, vec![cell.gain], MARGIN, DELTA);
+    let mut cert = OrderNCertificate::new(cfg).unwrap();
+    let mut rng = Rng(seed);
+    let mut x = DVector::<f64>::zeros(4);
+    let mut dither = 0.1;
+    for k in 0..SAMPLES {
+        if k % 100 == 0 {
+            dither = if rng.uniform() < 0.5 { -0.1 } else { 0.1 };
+        }
+        let measured = x[0] + cell.sensor * rng.normal();
+        let input = cell.gain * measured + dither;
+        let t = k as f64 * DT;
+        if let Some(look) = cert.push(t, measured, &[input]).unwrap()
+            && look.certified()
+        {
+            return Some(t);
+        }
+        x[2] = input;
+        x[3] = 1.0;
+        x = &step * x;
+        x[1] += cell.process * DT.sqrt() * rng.normal();
+    }
+    None
+}
+
+/// The runs `seeds` of a cell on two threads: the opening times, in seed order.
+fn runs(cell: Cell, seeds: std::ops::Range<u64>) -> Vec<Option<f64>> {
+    let seeds: Vec<u64> = seeds.collect();
+    let (left, right) = seeds.split_at(seeds.len() / 2);
+    std::thread::scope(|s| {
+        let a = s.spawn(|| left.iter().map(|&k| run(cell, k)).collect::<Vec<_>>());
+        let b = right.iter().map(|&k| run(cell, k)).collect::<Vec<_>>();
+        let mut all = a.join().unwrap();
+        all.extend(b);
+        all
+    })
+}
+
+/// The one-sided 95 % Clopper–Pearson upper bound on a rate seen `k` times in `n`.
+fn clopper_pearson_upper(k: usize, n: usize) -> f64 {
+    if k == n {
+        return 1.0;
+    }
+    Beta::new(k as f64 + 1.0, (n - k) as f64).unwrap().inverse_cdf(0.95)
+}
+
+fn the_cell_opens_rarely(name: &str, cell: Cell, runs_n: u64, seed: u64) {
+    let opened = runs(cell, seed..seed + runs_n).iter().filter(|o| o.is_some()).count();
+    let bound = clopper_pearson_upper(opened, runs_n as usize);
+    eprintln!("{name}: opened in {opened} of {runs_n} runs; 95 % Clopper–Pearson bound {bound:.4}");
+    assert!(bound <= 2.0 * DELTA, "{name}: {opened} of {runs_n}, bound {bound:.4}");
+}
+
+#[test]
+fn a_real_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
+    // K = 0.948025: the closed loop (s + 0.045)(s + 1.155).
+    let cell = Cell { a: [1.2, 1.0], gain: 0.948_025, sensor: 0.01, process: 0.0 };
+    the_cell_opens_rarely("real pair, sensor noise", cell, 200, 10_000);
+}
+
+#[test]
+fn a_complex_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
+    // s² + 0.09 s + 1 under K = −1: s² + 0.09 s + 2, poles −0.045 ± 1.41 j.
+    let cell = Cell { a: [0.09, 1.0], gain: -1.0, sensor: 0.01, process: 0.0 };
+    the_cell_opens_rarely("complex pair, sensor noise", cell, 200, 20_000);
+}
+
+#[test]
+fn a_real_pair_just_below_the_margin_with_process_noise_rarely_opens() {
+    let cell = Cell { a: [1.2, 1.0], gain: 0.948_025, sensor: 0.0, process: 0.05 };
+    the_cell_opens_rarely("real pair, process noise", cell, 200, 30_000);
+}
+
+#[test]
+fn a_loop_at_five_times_the_margin_is_certified_in_nine_runs_of_ten_or_more() {
+    // K = 0.7625: the closed loop (s + 0.25)(s + 0.95).
+    let cell = Cell { a: [1.2, 1.0], gain: 0.7625, sensor: 0.01, process: 0.0 };
+    let opened = runs(cell, 40_000..40_050);
+    let mut times: Vec<f64> = opened.iter().flatten().copied().collect();
+    times.sort_by(f64::total_cmp);
+    let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
+    eprintln!(
+        "5× the margin: certified in {} of 50 runs, median first opening {median} s",
+        times.len()
+    );
+    assert!(times.len() >= 45, "certified in {} of 50 runs", times.len());
+}

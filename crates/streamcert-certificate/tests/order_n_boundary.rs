@@ -44,61 +44,108 @@ const SAMPLES: usize = 4000;
 const MARGIN: f64 = 0.05;
 const DELTA: f64 = 0.01;
 
-/// One cell: the plant's `a`, the gain, and which noise.
+/// One cell: the plant's `a`, the gain, which noise, how long the dither is held, the units
+/// the certificate reads `y` and `u` in, and a change of the plant.
 #[derive(Clone, Copy)]
 struct Cell {
     a: [f64; 2],
     gain: f64,
     sensor: f64,
     process: f64,
+    /// Samples between the dither's draws (100: every second).
+    hold: usize,
+    /// The certificate reads `y · scale.0` and `u · scale.1` (and the gain in those units).
+    scale: (f64, f64),
+    /// From this sample on the plant's `a_2` is `change.1`.
+    change: Option<(usize, f64)>,
+    samples: usize,
 }
 
-/// Whether one seeded run opens the gate at any look, and the time of its first opening.
-fn run(cell: Cell, seed: u64) -> Option<f64> {
+impl Cell {
+    fn new(a: [f64; 2], gain: f64, sensor: f64, process: f64) -> Self {
+        Self {
+            a,
+            gain,
+            sensor,
+            process,
+            hold: 100,
+            scale: (1.0, 1.0),
+            change: None,
+            samples: SAMPLES,
+        }
+    }
+}
+
+fn step_of(a: [f64; 2]) -> DMatrix<f64> {
     let mut big = DMatrix::<f64>::zeros(4, 4);
-    big[(0, 0)] = -cell.a[0];
+    big[(0, 0)] = -a[0];
     big[(0, 1)] = 1.0;
-    big[(1, 0)] = -cell.a[1];
+    big[(1, 0)] = -a[1];
     big[(1, 2)] = 1.0;
     big[(1, 3)] = 0.1;
-    let step = (big * DT).exp();
+    (big * DT).exp()
+}
+
+/// One seeded run: at every look, its time and whether it certified, with its margin.
+fn looks(cell: Cell, seed: u64, stop_at_first: bool) -> Vec<(f64, bool, Option<f64>)> {
+    let mut step = step_of(cell.a);
     let regression = OrderNConfig::new(LoopModel::of_order(2).unwrap(), 1, 2000, 50);
-    let cfg = OrderNCertificateConfig::new(regression, vec![cell.gain], MARGIN, DELTA);
+    let gain = cell.gain * cell.scale.1 / cell.scale.0;
+    let cfg = OrderNCertificateConfig::new(regression, vec![gain], MARGIN, DELTA);
     let mut cert = OrderNCertificate::new(cfg).unwrap();
     let mut rng = Rng(seed);
     let mut x = DVector::<f64>::zeros(4);
     let mut dither = 0.1;
-    for k in 0..SAMPLES {
-        if k % 100 == 0 {
+    let mut out = Vec::new();
+    for k in 0..cell.samples {
+        if let Some((at, a2)) = cell.change
+            && k == at
+        {
+            step = step_of([cell.a[0], a2]);
+        }
+        if k % cell.hold == 0 {
             dither = if rng.uniform() < 0.5 { -0.1 } else { 0.1 };
         }
         let measured = x[0] + cell.sensor * rng.normal();
         let input = cell.gain * measured + dither;
         let t = k as f64 * DT;
-        if let Some(look) = cert.push(t, measured, &[input]).unwrap()
-            && look.certified()
-        {
-            return Some(t);
+        let seen = cert.push(t, measured * cell.scale.0, &[input * cell.scale.1]).unwrap();
+        if let Some(look) = seen {
+            let margin = look.outcome.as_ref().ok().and_then(|r| r.margin);
+            out.push((t, look.certified(), margin));
+            if stop_at_first && look.certified() {
+                return out;
+            }
         }
         x[2] = input;
         x[3] = 1.0;
         x = &step * x;
         x[1] += cell.process * DT.sqrt() * rng.normal();
     }
-    None
+    out
 }
 
-/// The runs `seeds` of a cell on two threads: the opening times, in seed order.
-fn runs(cell: Cell, seeds: std::ops::Range<u64>) -> Vec<Option<f64>> {
+/// Whether one seeded run opens the gate at any look, and the time of its first opening.
+fn run(cell: Cell, seed: u64) -> Option<f64> {
+    looks(cell, seed, true).into_iter().find(|l| l.1).map(|l| l.0)
+}
+
+/// `f` over `seeds` on two threads, in seed order.
+fn par_map<T: Send>(seeds: std::ops::Range<u64>, f: impl Fn(u64) -> T + Sync) -> Vec<T> {
     let seeds: Vec<u64> = seeds.collect();
     let (left, right) = seeds.split_at(seeds.len() / 2);
     std::thread::scope(|s| {
-        let a = s.spawn(|| left.iter().map(|&k| run(cell, k)).collect::<Vec<_>>());
-        let b = right.iter().map(|&k| run(cell, k)).collect::<Vec<_>>();
+        let a = s.spawn(|| left.iter().map(|&k| f(k)).collect::<Vec<_>>());
+        let b = right.iter().map(|&k| f(k)).collect::<Vec<_>>();
         let mut all = a.join().unwrap();
         all.extend(b);
         all
     })
+}
+
+/// The runs `seeds` of a cell: the opening times, in seed order.
+fn runs(cell: Cell, seeds: std::ops::Range<u64>) -> Vec<Option<f64>> {
+    par_map(seeds, |k| run(cell, k))
 }
 
 /// The one-sided 95 % Clopper–Pearson upper bound on a rate seen `k` times in `n`.
@@ -119,27 +166,27 @@ fn the_cell_opens_rarely(name: &str, cell: Cell, runs_n: u64, seed: u64) {
 #[test]
 fn a_real_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
     // K = 0.948025: the closed loop (s + 0.045)(s + 1.155).
-    let cell = Cell { a: [1.2, 1.0], gain: 0.948_025, sensor: 0.01, process: 0.0 };
+    let cell = Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0);
     the_cell_opens_rarely("real pair, sensor noise", cell, 200, 10_000);
 }
 
 #[test]
 fn a_complex_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
     // s² + 0.09 s + 1 under K = −1: s² + 0.09 s + 2, poles −0.045 ± 1.41 j.
-    let cell = Cell { a: [0.09, 1.0], gain: -1.0, sensor: 0.01, process: 0.0 };
+    let cell = Cell::new([0.09, 1.0], -1.0, 0.01, 0.0);
     the_cell_opens_rarely("complex pair, sensor noise", cell, 200, 20_000);
 }
 
 #[test]
 fn a_real_pair_just_below_the_margin_with_process_noise_rarely_opens() {
-    let cell = Cell { a: [1.2, 1.0], gain: 0.948_025, sensor: 0.0, process: 0.05 };
+    let cell = Cell::new([1.2, 1.0], 0.948_025, 0.0, 0.05);
     the_cell_opens_rarely("real pair, process noise", cell, 200, 30_000);
 }
 
 #[test]
 fn a_loop_at_five_times_the_margin_is_certified_in_nine_runs_of_ten_or_more() {
     // K = 0.7625: the closed loop (s + 0.25)(s + 0.95).
-    let cell = Cell { a: [1.2, 1.0], gain: 0.7625, sensor: 0.01, process: 0.0 };
+    let cell = Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0);
     let opened = runs(cell, 40_000..40_050);
     let mut times: Vec<f64> = opened.iter().flatten().copied().collect();
     times.sort_by(f64::total_cmp);
@@ -149,4 +196,62 @@ fn a_loop_at_five_times_the_margin_is_certified_in_nine_runs_of_ten_or_more() {
         times.len()
     );
     assert!(times.len() >= 45, "certified in {} of 50 runs", times.len());
+}
+
+#[test]
+fn a_real_pair_just_below_the_margin_with_the_input_held_ten_seconds_rarely_opens() {
+    // The dither redrawn every 10 s: a window of 20 s may hold one switch, or none.
+    let cell = Cell { hold: 1000, ..Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0) };
+    the_cell_opens_rarely("real pair, input held 10 s", cell, 200, 50_000);
+}
+
+#[test]
+fn the_verdict_does_not_depend_on_the_units_of_y_and_u() {
+    // The same runs read in units ×0.01 and ×100 of y and of u: the same decision at every
+    // look, and the same margin to rounding. The boundary loop and the loop at 5×.
+    for (cell, seed) in [
+        (Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0), 60_000),
+        (Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0), 60_100),
+    ] {
+        for k in 0..2 {
+            let plain = looks(cell, seed + k, false);
+            assert!(plain.len() >= 9);
+            for scale in [(0.01, 1.0), (100.0, 1.0), (1.0, 0.01), (1.0, 100.0), (0.01, 100.0)] {
+                let scaled = looks(Cell { scale, ..cell }, seed + k, false);
+                assert_eq!(plain.len(), scaled.len());
+                for (a, b) in plain.iter().zip(&scaled) {
+                    assert_eq!((a.0, a.1), (b.0, b.1), "units {scale:?}");
+                    match (a.2, b.2) {
+                        (Some(x), Some(y)) => assert!((x - y).abs() <= 2e-4, "{x} against {y}"),
+                        (x, y) => assert_eq!(x.is_some(), y.is_some()),
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn after_a_plant_change_the_gate_is_open_past_one_and_a_half_windows_in_few_runs() {
+    // 5× the margin for 30 s, then a_2 = 0.814475: the closed loop (s + 0.045)(s + 1.155),
+    // just below the margin. A window is 20 s (2000 rows); 1.5 windows after the change is 60 s.
+    let cell = Cell {
+        change: Some((3000, 0.814_475)),
+        samples: 7000,
+        ..Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0)
+    };
+    let runs_n = 60u64;
+    let seen = par_map(70_000..70_000 + runs_n, |seed| looks(cell, seed, false));
+    let open = |range: std::ops::Range<f64>| {
+        seen.iter().filter(|s| s.iter().any(|l| range.contains(&l.0) && l.1)).count()
+    };
+    let (before, after) = (open(0.0..30.0), open(60.0..f64::INFINITY));
+    eprintln!(
+        "plant change: open before it in {before} of {runs_n} runs, past 1.5 windows after it in {after}"
+    );
+    assert!(
+        before * 10 >= runs_n as usize * 9,
+        "certified before the change in {before} of {runs_n} runs"
+    );
+    assert!(after * 20 <= runs_n as usize, "open past 1.5 windows in {after} of {runs_n} runs");
 }

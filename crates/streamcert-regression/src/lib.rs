@@ -78,7 +78,9 @@ pub use config::{Estimator, InputIntegral, Model, RegressionConfig, ResidualSour
 pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
 pub use loop_model::{FastPath, HiddenDynamicsTest, LoopModel};
-pub use order_n::{ClosedLoop, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression};
+pub use order_n::{
+    ClosedLoop, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression, PastRowTest,
+};
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;
 pub use windows::{

@@ -50,12 +50,14 @@
 //! intercept sees; it is reported in the plant's own coordinates.
 
 mod fit;
+mod past;
 mod rows;
 mod spline;
 mod streaming;
 mod variance;
 
 pub use fit::{ClosedLoop, OrderNFit, OrderNRecord};
+pub use past::PastRowTest;
 pub use streaming::OrderNRegression;
 
 use crate::{LoopModel, RegressionError};

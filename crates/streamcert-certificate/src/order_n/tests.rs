@@ -93,27 +93,33 @@ fn looks_fall_on_the_schedule_and_spend_the_split_risk() {
 
 #[test]
 fn the_smallest_window_is_accepted_and_one_row_less_is_refused() {
-    let mut cfg = config(400, 10);
-    // d = 5, n h = 20: (5 + 1)(20 + 1) = 126.
-    assert_eq!(cfg.smallest_window(), 126);
-    cfg.regression.min_rows = 126;
-    let mut cert = OrderNCertificate::new(cfg.clone()).unwrap();
-    let looks = feed(&mut cert, &record(3, 200, -1.0, 0.001, 40));
-    let first = &looks[0];
-    assert_eq!((first.rows, first.time), (126, 1.45));
-    let region = first.outcome.as_ref().unwrap();
-    assert_eq!(region.dof, 1);
-    assert!(region.radius2.is_finite() && region.radius2 > 100.0);
-    cfg.regression.min_rows = 125;
-    let err = OrderNCertificate::new(cfg).unwrap_err();
-    assert!(matches!(err, CertifyError::InvalidConfig { field: "min_rows", .. }), "{err}");
+    // d = 5, n h = 20: (5 + 1)(20 + 1) = 126 rows, and (5 + 3)(20 + 1) = 168 with the guard.
+    for (guard, smallest, dof) in [(false, 126, 1), (true, 168, 3)] {
+        let mut cfg = config(400, 10);
+        cfg.hidden_dynamics = guard;
+        assert_eq!(cfg.smallest_window(), smallest);
+        cfg.regression.min_rows = smallest;
+        let mut cert = OrderNCertificate::new(cfg.clone()).unwrap();
+        let looks = feed(&mut cert, &record(3, 250, -1.0, 0.001, 40));
+        let first = &looks[0];
+        assert_eq!(first.rows, smallest);
+        assert!((first.time - (smallest + 19) as f64 * 0.01).abs() < 1e-9);
+        let region = first.outcome.as_ref().unwrap();
+        assert_eq!(region.dof, dof);
+        assert!(region.radius2.is_finite() && region.radius2 > 10.0);
+        cfg.regression.min_rows = smallest - 1;
+        let err = OrderNCertificate::new(cfg).unwrap_err();
+        assert!(matches!(err, CertifyError::InvalidConfig { field: "min_rows", .. }), "{err}");
+    }
 }
 
 #[test]
 fn every_field_is_checked() {
     let good = config(400, 10);
     type Spoil = fn(&mut OrderNCertificateConfig);
-    let bad: [(&str, Spoil); 7] = [
+    let bad: [(&str, Spoil); 9] = [
+        ("guard_risk", |c| c.guard_risk = 0.0),
+        ("guard_risk", |c| c.guard_risk = f64::NAN),
         ("gain", |c| c.gain = vec![1.0, 2.0]),
         ("gain", |c| c.gain = vec![f64::NAN]),
         ("margin", |c| c.margin = f64::INFINITY),
@@ -209,8 +215,11 @@ fn a_loop_below_the_margin_is_not_certified_and_the_decision_matches_the_margin(
     for look in &looks {
         assert!(!look.certified(), "{look:?}");
     }
-    // And above it the reported margin agrees with the exact decision.
-    let mut cert = OrderNCertificate::new(config(1000, 10)).unwrap();
+    // And above it the reported margin agrees with the exact decision (the guard off: at
+    // σ = 0.001 it can see the sampling's own approximation, which is not what this checks).
+    let mut cfg = config(1000, 10);
+    cfg.hidden_dynamics = false;
+    let mut cert = OrderNCertificate::new(cfg).unwrap();
     for look in feed(&mut cert, &record(7, 3000, -1.0, 0.001, 40)) {
         let region = look.outcome.unwrap();
         let margin = region.margin.unwrap();

@@ -106,16 +106,16 @@ impl ClosedLoop {
 /// `r + n h`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OrderNRecord {
-    n: usize,
-    m: usize,
-    span: usize,
-    min_excitation_ratio: f64,
-    origin: Vec<f64>,
-    phi: Vec<f64>,
-    z: Vec<f64>,
-    wz: Vec<f64>,
-    wy: Vec<f64>,
-    wv: Vec<f64>,
+    pub(super) n: usize,
+    pub(super) m: usize,
+    pub(super) span: usize,
+    pub(super) min_excitation_ratio: f64,
+    pub(super) origin: Vec<f64>,
+    pub(super) phi: Vec<f64>,
+    pub(super) z: Vec<f64>,
+    pub(super) wz: Vec<f64>,
+    pub(super) wy: Vec<f64>,
+    pub(super) wv: Vec<f64>,
 }
 
 impl OrderNRecord {
@@ -244,7 +244,7 @@ impl OrderNRecord {
 
     /// `θ̂` and `G⁻¹` by least squares on the column-scaled Gram matrix, after the
     /// identification test.
-    fn solve(
+    pub(super) fn solve(
         &self,
         phi: &[f64],
         z: &[f64],
@@ -303,7 +303,7 @@ impl OrderNRecord {
 
     /// The model-structured covariance of the rows from `first` (see [`OrderNFit`]), in the
     /// origin's coordinates, with the fitted `(σ_e², σ_v²)`.
-    fn structured_covariance(
+    pub(super) fn structured_covariance(
         &self,
         first: usize,
         phi: &[f64],

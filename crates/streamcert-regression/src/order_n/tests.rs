@@ -378,3 +378,47 @@ proptest::proptest! {
         }
     }
 }
+
+/// The past-row test's coefficients are least squares on the rows widened by the past row's
+/// regressand and output regressors (a dense solve as the oracle), its covariance is the
+/// larger fit's block, and its rows are those with a past row.
+#[test]
+fn the_past_row_test_is_the_widened_least_squares() {
+    for n in [2, 3] {
+        let (t, y, u) = noisy_record(n, 3000, 11 + n as u64);
+        let cfg = OrderNConfig::new(LoopModel::of_order(n).unwrap(), 1, 3000, 20);
+        let record = OrderNRecord::new(&cfg, &t, &y, &u).unwrap();
+        let (span, d) = (cfg.span(), cfg.width());
+        let rows = 100..record.rows();
+        let test = record.past_row_test(rows.clone()).unwrap();
+        let first = rows.start.max(span + 1);
+        assert_eq!(test.rows, rows.end - first);
+        let wide = d + 1 + n;
+        let x = DMatrix::from_fn(test.rows, wide, |i, j| {
+            let r = first + i;
+            match j {
+                j if j < d => record.phi[r * d + j],
+                j if j == d => record.z[r - span - 1],
+                j => record.phi[(r - span - 1) * d + j - d - 1],
+            }
+        });
+        let z = DMatrix::from_fn(test.rows, 1, |i, _| record.z[first + i]);
+        let xt = x.transpose();
+        let theta = (&xt * &x).lu().solve(&(&xt * z)).unwrap();
+        for (k, g) in test.coefficients.iter().enumerate() {
+            let want = theta[d + k];
+            assert!(
+                (g - want).abs() <= 1e-6 * want.abs().max(1e-3),
+                "n {n}: γ_{k} {g} against {want}"
+            );
+        }
+        assert_eq!(test.covariance.len(), (n + 1) * (n + 1));
+        assert!((0..=n).all(|k| test.covariance[k * (n + 2)] > 0.0));
+        assert!(test.statistic().is_finite() && test.statistic() >= 0.0);
+        // Too few rows for the larger fit: refused, typed.
+        assert!(matches!(
+            record.past_row_test(0..span + 1 + d + 1),
+            Err(RegressionError::InsufficientData { .. })
+        ));
+    }
+}

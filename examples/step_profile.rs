@@ -18,7 +18,9 @@
 //! intercept, the guards, the fifth window and the anchored window, the baseline of the
 //! default step's target), `unguarded`, `without_change`, `without_model` (the default with
 //! no guard, without its change guard, without its two model guards), `auto` (the default
-//! with the horizon ladder of `horizon = "auto"`: `h = 1, 2, 5, 10`, `M = 30 h`), all for
+//! with the horizon ladder of `horizon = "auto"`: `h = 1, 2, 5, 10`, `M = 30 h`), `order2`
+//! (the default at `[regression] order = 2` with its documented `M = 2000` rows, `h = 50`:
+//! the certificate of order 2, its looks included), all for
 //! `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
@@ -31,7 +33,7 @@ use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
     Calibration, Certifier, CertifierConfig, HorizonLadder, NonlinearConfig, RiskSplit,
 };
-use streamcert::regression::{Model, RegressionConfig, SlidingRegression};
+use streamcert::regression::{LoopModel, Model, RegressionConfig, SlidingRegression};
 
 /// The calibrated certifier of `mode`, `None` for a mode without one: `calibrated`
 /// (Gaussian + calibrated, δ = 0.01, the default windows, as the bench's
@@ -66,6 +68,11 @@ fn calibrated(
         "without_model" => Calibration { hidden_dynamics: false, nonlinearity: false, ..default },
         "auto" => {
             cfg.ladder = Some(HorizonLadder::automatic());
+            default
+        }
+        "order2" => {
+            cfg.regression.order = LoopModel::Order(2);
+            (cfg.regression.window, cfg.regression.horizon) = (2000, 50);
             default
         }
         _ => return Ok(None),
@@ -141,7 +148,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
             }
             "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model"
-            | "auto" => {
+            | "auto" | "order2" => {
                 let Some(cert) = cal.as_mut() else { unreachable!("built for these modes") };
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));

@@ -40,6 +40,7 @@ mod calibrated_step;
 pub(crate) mod checkpoint;
 mod closed;
 mod ladder_step;
+mod order_n_step;
 use closed::closed_reason;
 pub use ladder_step::RungStatus;
 #[cfg(feature = "checkpoint")]
@@ -48,14 +49,17 @@ mod verify;
 
 use serde::{Deserialize, Serialize};
 use streamcert_ambiguity::AmbiguityRadius;
-use streamcert_regression::{EstimateStatus, FastPath, ResidualSource, SlidingRegression, linalg};
+use streamcert_regression::{
+    EstimateStatus, FastPath, LoopModel, RegressionConfig, ResidualSource, SlidingRegression,
+    linalg,
+};
 
 use crate::calibrated::CalibratedState;
 use crate::gap::{Gap, GapDetector};
 use crate::rate::first_order::{self, form_sym_jcl};
 use crate::{
     AmbiguityLevel, BadSamplePolicy, CertifierConfig, CertifyError, Evidence, Fit, Gate,
-    NotCertified, Verdict, certificate_value,
+    NotCertified, OrderNCertificate, Verdict, certificate_value,
 };
 
 /// The streaming certifier. Serde-serialisable: [`Certifier::checkpoint`] and
@@ -104,6 +108,10 @@ pub struct Certifier {
     /// A rung of another certifier's ladder: the paper's estimate is not computed.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     calibrated_only: bool,
+    /// At `[regression] order = 2 | 3`: the certificate of order `n`, which then takes every
+    /// sample (the first-order regression above is built but not fed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    order_n: Option<Box<OrderNCertificate>>,
 }
 
 /// The regression's outcome, reduced to what the certificate needs.
@@ -136,8 +144,11 @@ impl Certifier {
         cfg.validate()?;
         let (p, m) = (cfg.regression.outputs, cfg.regression.inputs);
         let gain = cfg.metric_gain();
+        let order_n = cfg.order_n().map(OrderNCertificate::new).transpose()?.map(Box::new);
+        // At order n the first-order regression is built (its state's shape) but not fed.
+        let first_order = RegressionConfig { order: LoopModel::FirstOrder, ..cfg.regression };
         Ok(Self {
-            regression: SlidingRegression::new(cfg.regression)?,
+            regression: SlidingRegression::new(first_order)?,
             gain_norm: linalg::spectral_norm(&gain, m, p),
             gauss: Gate::new(cfg.margin, cfg.consecutive),
             wass: Gate::new(cfg.margin, cfg.consecutive),
@@ -146,6 +157,7 @@ impl Certifier {
             calibrated_window: None,
             calibrated: cfg
                 .calibration_in_effect()
+                .filter(|_| order_n.is_none())
                 .map(|c| {
                     let coupling = cfg.couplings.as_ref();
                     CalibratedState::new(c, cfg.nonlinear, coupling, &cfg.regression, &gain)
@@ -167,6 +179,7 @@ impl Certifier {
             rung_verdicts: ladder_step::verdicts(&cfg),
             standing: None,
             calibrated_only: false,
+            order_n,
             gain,
             cfg,
         })
@@ -202,6 +215,9 @@ impl Certifier {
     /// [`push`](Self::push) of outputs already in the metric's units.
     #[inline(always)]
     fn push_scaled(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
+        if self.order_n.is_some() {
+            return self.push_order_n(t, y, u);
+        }
         let previous = self.regression.last_time();
         if let Err(e) = self.regression.push(t, y, u) {
             return match self.cfg.bad_samples {

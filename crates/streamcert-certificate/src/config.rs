@@ -7,6 +7,8 @@ use streamcert_regression::{RegressionConfig, ResidualSource};
 
 use crate::{Calibration, CertifyError, CouplingConfig, NonlinearConfig};
 
+mod order_n;
+
 /// What to do with a sample that has a NaN or infinite value, a non-increasing time or the
 /// wrong number of values.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -149,6 +151,9 @@ impl CertifierConfig {
     /// # Errors
     /// [`CertifyError::InvalidConfig`] or the regression's configuration error.
     pub fn validate(&self) -> Result<(), CertifyError> {
+        if !self.regression.order.is_first_order() {
+            return self.validate_order_n(self.regression.order);
+        }
         self.regression.validate()?;
         let (p, m) = (self.regression.outputs, self.regression.inputs);
         let bad = CertifyError::refuse::<()>;

@@ -174,6 +174,10 @@ pub enum NotCertified {
         /// The region's upper end.
         hi: f64,
     },
+    /// The paper's Gaussian and Wasserstein certificates are of the first-order model: at
+    /// `[regression] order = 2 | 3` they are not computed, and the calibrated column carries
+    /// the certificate of order `n` ([`OrderNCertificate`](crate::OrderNCertificate)).
+    FirstOrderOnly,
 }
 
 impl NotCertified {
@@ -206,6 +210,7 @@ impl NotCertified {
             | N::OrderUntested { .. }
             | N::LibraryUntested { .. }
             | N::InputFollowsOutputs { .. }
+            | N::FirstOrderOnly
             | N::NoNonlinearModel => [0; 3],
         }
     }
@@ -220,7 +225,7 @@ impl NotCertified {
 
     /// Every reason's name (the `reason` tag of its serde form) in the order of
     /// [`code`](Self::code), from code 1.
-    pub const KINDS: [&'static str; 21] = [
+    pub const KINDS: [&'static str; 22] = [
         "warming_up",
         "insufficient_excitation",
         "weak_instruments",
@@ -242,6 +247,7 @@ impl NotCertified {
         "weakly_identified",
         "outside_region",
         "input_follows_outputs",
+        "first_order_only",
     ];
 
     /// A small stable integer per kind of reason, from 1 (0 is left for "certified" in
@@ -270,6 +276,7 @@ impl NotCertified {
             Self::WeaklyIdentified { .. } => 19,
             Self::OutsideRegion { .. } => 20,
             Self::InputFollowsOutputs { .. } => 21,
+            Self::FirstOrderOnly => 22,
         }
     }
 

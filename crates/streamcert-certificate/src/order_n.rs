@@ -72,6 +72,7 @@
 //! A sample is stored in rings of `M + n h` samples (`O(1 + m)`, no allocation). A look fits
 //! its window (`O(N n h d)`) and decides the exact test, paid once per look.
 
+use serde::{Deserialize, Serialize};
 use streamcert_regression::{OrderNConfig, OrderNRecord, RegressionError};
 
 use crate::look::hotelling::f_quantile;
@@ -80,7 +81,7 @@ use crate::rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
 use crate::{CertifyError, NotCertified};
 
 /// Configuration of [`OrderNCertificate`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OrderNCertificateConfig {
     /// The regression: the order, the inputs `m`, the horizon `h`, the window `M` (rows), the
     /// smallest window a look uses (`min_rows`, at least `(d + 1)(n h + 1)`) and the
@@ -196,9 +197,10 @@ impl OrderNCertificateConfig {
 }
 
 /// One look of [`OrderNCertificate`]: the window's closed loop, its region and the verdict.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OrderNLook {
-    /// The look's number `k >= 1` since the start or the last [`OrderNCertificate::reset`].
+    /// The look's number `k >= 1` since the start (a [`reset`](OrderNCertificate::reset) does
+    /// not restart it).
     pub index: u64,
     /// The time of the sample it falls on.
     pub time: f64,
@@ -219,7 +221,7 @@ impl OrderNLook {
 }
 
 /// The confidence region of a look and what it certifies.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OrderNRegion {
     /// `β̂ = (β̂_1..β̂_n)`.
     pub beta: Vec<f64>,
@@ -266,7 +268,7 @@ pub struct OrderNRegion {
 /// assert!(look.certified() && cert.open(), "{look:?}");
 /// # Ok::<(), streamcert_certificate::CertifyError>(())
 /// ```
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct OrderNCertificate {
     cfg: OrderNCertificateConfig,
     /// Rings of the newest `M + n h` samples: time, output, inputs (`m` per sample).
@@ -331,12 +333,38 @@ impl OrderNCertificate {
         self.held.saturating_sub(self.cfg.regression.span()).min(self.cfg.regression.window)
     }
 
-    /// Forget every sample, and the latest look, after a gap or a known change of the plant:
-    /// the next look is the first of a new run, with its own risk `δ`. (The risk spent before
-    /// is not recovered: the union bound over the two runs is `2δ`.)
+    /// Forget every sample, and the latest look, after a gap: the window starts again at the
+    /// next sample. The looks keep their count, so the risk schedule goes on where it was and
+    /// the whole run, gaps included, spends at most `δ`.
     pub fn reset(&mut self) {
         (self.head, self.held, self.previous, self.since_first) = (0, 0, None, None);
-        (self.looks, self.latest) = (0, None);
+        self.latest = None;
+    }
+
+    /// Whether the state is consistent with its configuration (what a restored checkpoint is
+    /// checked for): the rings' lengths, the positions within them, a latest look no later
+    /// than the newest sample.
+    #[must_use]
+    pub fn is_consistent(&self) -> bool {
+        let capacity = self.cfg.regression.window + self.cfg.regression.span();
+        let m = self.cfg.regression.inputs;
+        self.t.len() == capacity
+            && self.y.len() == capacity
+            && self.u.len() == capacity * m
+            && self.head < capacity
+            && self.held <= capacity
+            && (self.held == 0) == self.previous.is_none()
+            && self.since_first.is_none_or(|_| self.rows() >= self.cfg.regression.min_rows)
+            && self
+                .latest
+                .as_ref()
+                .is_none_or(|l| l.index <= self.looks && self.previous.is_some_and(|t| l.time <= t))
+    }
+
+    /// The time of the newest sample taken since the start or the last reset.
+    #[must_use]
+    pub fn last_time(&self) -> Option<f64> {
+        self.previous
     }
 
     /// Take one sample `(t, y, u)` and look when the schedule says so. Returns the look when

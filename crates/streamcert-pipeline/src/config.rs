@@ -5,7 +5,7 @@ use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
     Calibration, Certifier, CertifierConfig, GuardVariance, ResidualSource, RiskSplit,
 };
-use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
+use streamcert_regression::{Estimator, InputIntegral, LoopModel, Model, RegressionConfig};
 
 use crate::CliError;
 
@@ -223,6 +223,7 @@ fn default_consecutive() -> usize {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct Regression {
+    order: LoopModel,
     model: Model,
     window: Choice,
     horizon: Choice,
@@ -235,6 +236,7 @@ struct Regression {
 impl Default for Regression {
     fn default() -> Self {
         Self {
+            order: LoopModel::FirstOrder,
             model: Model::Affine,
             window: Choice::Fixed(150),
             horizon: Choice::Fixed(5),
@@ -362,6 +364,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
         input_integral: r.input_integral,
         estimator: r.estimator,
         model: r.model,
+        order: r.order,
         ..RegressionConfig::new(p, m, window, horizon, r.ridge)
     };
     let mut certifier = CertifierConfig::new(

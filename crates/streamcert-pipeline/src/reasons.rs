@@ -36,6 +36,9 @@ pub fn reason_phrase(kind: &str) -> &str {
         "outside_region" => "the output is outside the region the nonlinear certificate speaks for",
         "library_misfit" => "the feature library misses the drift (lack-of-fit check)",
         "library_untested" => "the lack-of-fit check has not tested the window yet",
+        "first_order_only" => {
+            "not computed at this order (the paper's certificates are first-order)"
+        }
         other => other,
     }
 }

@@ -325,7 +325,11 @@ impl Summary {
                     .collect();
                 // The risk is stated for one Jacobian over the region; the nonlinearity guard
                 // tests that, it does not bound a rate that varies (NONLINEAR.md).
-                let scope = if cfg.nonlinear.is_some() {
+                let order = cfg.regression.order.order();
+                let scope = if order > 1 {
+                    "the certificate of order n does not test this: its nonlinearity guard runs \
+                     at order 1 only"
+                } else if cfg.nonlinear.is_some() {
                     "the region-valid verdict after it bounds the rate at every state of a region"
                 } else if cal.nonlinearity {
                     "the nonlinearity guard tests this but does not bound a rate that varies \
@@ -335,8 +339,9 @@ impl Summary {
                     "the nonlinearity guard is off"
                 };
                 let at = self.calibrated_horizon.map_or(String::new(), |h| format!(" at h = {h}"));
+                let of = if order > 1 { format!(" of order {order}") } else { String::new() };
                 format!(
-                    "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate{at}, \
+                    "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate{of}{at}, \
                      risk delta = {} over the run), over the region {}; the risk assumes dynamics \
                      linear over that region ({scope})",
                     self.when(Some(since)),

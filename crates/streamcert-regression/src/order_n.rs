@@ -66,7 +66,7 @@ use crate::{LoopModel, RegressionError};
 pub const MAX_ORDER: usize = 3;
 
 /// Configuration of an order-`n` regression ([`OrderNRegression`], [`OrderNFit`]).
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct OrderNConfig {
     /// The plant's order: [`LoopModel::FirstOrder`] or [`LoopModel::Order`] `(2 | 3)`.
     pub model: LoopModel,

@@ -31,6 +31,7 @@ enum ReasonDef {
     WeaklyIdentified { window: usize, moves: f64 },
     InputFollowsOutputs { window: usize },
     OutsideRegion { y: f64, lo: f64, hi: f64 },
+    FirstOrderOnly,
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]

@@ -147,7 +147,8 @@ impl Certifier {
         if fresh.len() != self.rungs.len()
             || self.rung_verdicts.len() != verdicts(&self.cfg).len()
             || self.standing.is_some_and(|i| i >= self.rungs.len())
-            || self.calibrated.as_ref().map(|c| c.calibration()) != self.cfg.calibration_in_effect()
+            || self.calibrated.as_ref().map(|c| c.calibration())
+                != self.cfg.calibration_in_effect().filter(|_| self.order_n.is_none())
         {
             return bad("the horizon ladder does not match its configuration");
         }

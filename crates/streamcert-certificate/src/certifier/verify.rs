@@ -29,7 +29,13 @@ impl Certifier {
         let gain = c.cfg.metric_gain();
         let gain_norm =
             streamcert_regression::linalg::spectral_norm(&gain, c.cfg.regression.inputs, p);
-        if c.regression.config() != &c.cfg.regression
+        // At order n the first-order regression is built at the first order and not fed.
+        let first_order = streamcert_regression::RegressionConfig {
+            order: streamcert_regression::LoopModel::FirstOrder,
+            ..c.cfg.regression
+        };
+        let order_n = c.cfg.order_n();
+        if c.regression.config() != &first_order
             || c.jcl.len() != p * p
             || c.work.len() != p * p
             || c.resid.len() != p
@@ -37,7 +43,9 @@ impl Certifier {
             || c.gain_norm.to_bits() != gain_norm.to_bits()
             || c.gain != gain
             || c.scaled.len() != if c.cfg.metric.is_some() { p } else { 0 }
-            || c.calibrated.is_some() != c.cfg.calibration.is_some()
+            || c.calibrated.is_some() != (c.cfg.calibration.is_some() && order_n.is_none())
+            || c.order_n.as_ref().map(|o| o.config()) != order_n.as_ref()
+            || c.order_n.as_ref().is_some_and(|o| !o.is_consistent())
             || !c.gap.is_consistent(c.cfg.gap_factor)
         {
             return Err(CertifyError::Checkpoint("state does not match its configuration".into()));

@@ -4,6 +4,11 @@
 use super::NotCertified;
 use crate::fixed::{Fixed, Sig};
 
+/// [`NotCertified::FirstOrderOnly`]'s text.
+const FIRST_ORDER_ONLY: &str = "not computed at this order: the paper's certificates are of the \
+     first-order model (order = 1); the calibrated column carries the certificate of the order \
+     configured";
+
 impl std::fmt::Display for NotCertified {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -72,6 +77,7 @@ impl std::fmt::Display for NotCertified {
                  add a dither, a small signal on the input that the outputs do not explain \
                  (VALIDITY.md's cells add a PRBS of ±1 held 0.2 s)"
             ),
+            Self::FirstOrderOnly => f.write_str(FIRST_ORDER_ONLY),
             Self::WeaklyIdentified { window, moves } if *moves <= 0.0 => write!(
                 f,
                 "the data do not identify the rate: an input or output has not moved beyond \

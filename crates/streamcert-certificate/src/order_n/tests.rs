@@ -232,10 +232,19 @@ fn a_loop_below_the_margin_is_not_certified_and_the_decision_matches_the_margin(
 fn reset_starts_a_new_run() {
     let samples = record(8, 1500, -1.0, 0.001, 40);
     let mut cert = OrderNCertificate::new(config(400, 10)).unwrap();
-    feed(&mut cert, &samples[..700]);
-    assert!(cert.latest().is_some());
+    let before = feed(&mut cert, &samples[..700]).len() as u64;
+    assert!(before > 0 && cert.latest().is_some());
     cert.reset();
     assert_eq!((cert.rows(), cert.latest()), (0, None));
+    // The same looks as a fresh certificate's from the same samples, the risk schedule going
+    // on: the k-th look after the reset is the run's (k + before)-th.
     let mut fresh = OrderNCertificate::new(config(400, 10)).unwrap();
-    assert_eq!(feed(&mut cert, &samples[700..]), feed(&mut fresh, &samples[700..]));
+    let (after, clean) = (feed(&mut cert, &samples[700..]), feed(&mut fresh, &samples[700..]));
+    assert_eq!(after.len(), clean.len());
+    for (a, b) in after.iter().zip(&clean) {
+        assert_eq!((a.time, a.rows), (b.time, b.rows));
+        assert_eq!(a.index, b.index + before);
+        assert_eq!(a.risk, look_risk(0.01, 1.0, a.index));
+        assert!(a.risk < b.risk);
+    }
 }

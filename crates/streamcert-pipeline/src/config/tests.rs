@@ -285,3 +285,36 @@ fn auto_horizon_and_window_select_the_ladder() {
     let err = parse(&bad, "x").unwrap_err().to_string();
     assert!(err.contains("a positive integer or \"auto\""), "{err}");
 }
+
+/// `[regression] order` selects the certificate of order n; what it does not support is
+/// refused naming the key, and an order outside 1..=3 does not parse.
+#[test]
+fn order_selects_the_certificate_of_order_n() {
+    let first = parse(&base(), "default").unwrap();
+    assert!(first.certifier.regression.order.is_first_order());
+    assert!(first.certifier.order_n().is_none());
+    let order2 = base()
+        .replace("order = 1", "order = 2")
+        .replace("window = 150 ", "window = 2000 ")
+        .replace("horizon = 5 ", "horizon = 50 ");
+    let c = parse(&order2, "x").unwrap();
+    let on = c.certifier.order_n().expect("order 2");
+    assert_eq!(
+        (on.regression.model.order(), on.regression.window, on.regression.horizon),
+        (2, 2000, 50)
+    );
+    assert_eq!(on.delta, c.certifier.calibration.unwrap().delta);
+    // Too small a window for the horizon: refused, naming what would be valid.
+    let small = base().replace("order = 1", "order = 2").replace("horizon = 5 ", "horizon = 50 ");
+    let err = parse(&small, "x").unwrap_err().to_string();
+    assert!(err.contains("min_rows") && err.contains("horizon"), "{err}");
+    // Without the calibrated certificate there is no risk to certify at.
+    let bare = order2.replacen("\nenabled = true\n", "\nenabled = false\n", 1);
+    assert_ne!(bare, order2, "the calibration section's switch");
+    let err = parse(&bare, "x").unwrap_err().to_string();
+    assert!(err.contains("calibration"), "{err}");
+    for bad in ["order = 4", "order = 0", "order = \"second\""] {
+        let text = base().replace("order = 1", bad);
+        assert!(parse(&text, "x").is_err(), "{bad}");
+    }
+}

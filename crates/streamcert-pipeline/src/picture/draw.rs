@@ -167,6 +167,7 @@ fn reason_color(kind: &str) -> RGBColor {
         "library_untested" => RGBColor(152, 223, 138),
         "no_ambiguity_model" => RGBColor(255, 152, 150),
         "no_calibration" => RGBColor(230, 220, 250),
+        "first_order_only" => RGBColor(250, 250, 180),
         _ => RGBColor(120, 20, 90),
     }
 }

@@ -220,16 +220,9 @@ impl Certifier {
         }
         let previous = self.regression.last_time();
         if let Err(e) = self.regression.push(t, y, u) {
-            return match self.cfg.bad_samples {
-                BadSamplePolicy::Reject => Err(e.into()),
-                BadSamplePolicy::Skip => Ok(self.skip(t)),
-            };
+            return self.refused(e.into(), t);
         }
-        let dt = previous.map_or(f64::NAN, |p| t - p);
-        if previous.is_none() {
-            self.gap.unforce();
-        }
-        let gap = if dt > 0.0 { self.gap.observe(dt) } else { None };
+        let (dt, gap) = self.step_gap(previous, t);
         if gap.is_some() {
             // Start a new window at this sample; the calibrated windows follow the
             // regression's reset through its column count.
@@ -298,6 +291,26 @@ impl Certifier {
             nonlinear_window: nl_best.map(|b| b.window),
             nonlinear_region: nl_best.map(|b| b.region),
         })
+    }
+
+    /// A sample the model refused: the error under [`BadSamplePolicy::Reject`], a skipped
+    /// sample under [`BadSamplePolicy::Skip`].
+    fn refused(&mut self, e: CertifyError, t: f64) -> Result<Evidence, CertifyError> {
+        match self.cfg.bad_samples {
+            BadSamplePolicy::Reject => Err(e),
+            BadSamplePolicy::Skip => Ok(self.skip(t)),
+        }
+    }
+
+    /// The step from the `previous` sample's time to `t` (NaN for the first sample, which
+    /// also clears a gap declared before any sample) and the gap it makes, if any.
+    #[inline(always)]
+    fn step_gap(&mut self, previous: Option<f64>, t: f64) -> (f64, Option<Gap>) {
+        let dt = previous.map_or(f64::NAN, |p| t - p);
+        if previous.is_none() {
+            self.gap.unforce();
+        }
+        (dt, if dt > 0.0 { self.gap.observe(dt) } else { None })
     }
 
     /// A gap closes every verdict this certifier computes (the Wasserstein one where an

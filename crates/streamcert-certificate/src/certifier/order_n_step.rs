@@ -6,7 +6,7 @@ use streamcert_regression::RegressionError;
 
 use super::Certifier;
 use super::closed::closed_reason;
-use crate::{BadSamplePolicy, CertifyError, Evidence, NotCertified, OrderNCertificate, Verdict};
+use crate::{CertifyError, Evidence, NotCertified, OrderNCertificate, Verdict};
 
 impl Certifier {
     /// [`push`](Self::push) at order `n`: the sample into the certificate of order `n`, its
@@ -18,12 +18,25 @@ impl Certifier {
         y: &[f64],
         u: &[f64],
     ) -> Result<Evidence, CertifyError> {
-        let Some(cert) = self.order_n.as_mut() else {
+        let Some(mut cert) = self.order_n.take() else {
             return Err(CertifyError::InvalidConfig {
                 field: "regression.order",
                 reason: "the certificate of order n is not built".into(),
             });
         };
+        let evidence = self.step_order_n(&mut cert, t, y, u);
+        self.order_n = Some(cert);
+        evidence
+    }
+
+    /// [`push_order_n`](Self::push_order_n) with the certificate taken out of `self`.
+    fn step_order_n(
+        &mut self,
+        cert: &mut OrderNCertificate,
+        t: f64,
+        y: &[f64],
+        u: &[f64],
+    ) -> Result<Evidence, CertifyError> {
         let previous = cert.last_time();
         let pushed = match y {
             [y] => cert.push(t, *y, u).map(|look| look.is_some()),
@@ -34,16 +47,9 @@ impl Certifier {
             })),
         };
         if let Err(e) = pushed {
-            return match self.cfg.bad_samples {
-                BadSamplePolicy::Reject => Err(e),
-                BadSamplePolicy::Skip => Ok(self.skip(t)),
-            };
+            return self.refused(e, t);
         }
-        let dt = previous.map_or(f64::NAN, |p| t - p);
-        if previous.is_none() {
-            self.gap.unforce();
-        }
-        let gap = if dt > 0.0 { self.gap.observe(dt) } else { None };
+        let (_, gap) = self.step_gap(previous, t);
         if gap.is_some() {
             // A new window from this sample on; the looks keep the run's risk schedule.
             cert.reset();

@@ -180,9 +180,18 @@ impl OrderNRecord {
             wy: vec![0.0; rows * n * (span + 1)],
             wv: vec![0.0; rows * span],
         };
+        // The weights depend on the span's times relative to its first: a row whose times
+        // match the last filled row's to `1e-12` of the span (equal sampling, up to the
+        // rounding of the times) takes its weights, a change far below the fill's own
+        // accuracy; any other row (jitter, a gap) is filled anew.
+        let mut filled: Option<usize> = None;
         for r in 0..rows {
             let s = r..r + span + 1;
-            weights.fill(shape, &t[s.clone()]);
+            let same = filled.is_some_and(|q| same_offsets(&t[q..=q + span], &t[s.clone()]));
+            if !same {
+                weights.fill(shape, &t[s.clone()]);
+                filled = Some(r);
+            }
             let row = &mut record.phi[r * d..(r + 1) * d];
             record.z[r] = weights.apply(shape, &ys[s], &us[r * m..(r + span + 1) * m], row);
             record.wz[r * (span + 1)..(r + 1) * (span + 1)].copy_from_slice(&weights.wz);
@@ -476,4 +485,12 @@ impl OrderNFit {
         }
         Ok(ClosedLoop { beta, covariance })
     }
+}
+
+/// Whether the times `b` have the offsets from their first that `a` has, each to within
+/// `1e-12` of `a`'s span.
+fn same_offsets(a: &[f64], b: &[f64]) -> bool {
+    let (a0, b0) = (a[0], b[0]);
+    let tol = 1e-12 * (a[a.len() - 1] - a0);
+    a.iter().zip(b).all(|(x, y)| ((x - a0) - (y - b0)).abs() <= tol)
 }

@@ -15,136 +15,56 @@
 //! Every look counts, the first included: a run opens when any look certifies. With no
 //! opening in 200 runs the one-sided 95 % Clopper–Pearson bound is 0.0149, within `2δ`.
 
-use nalgebra::{DMatrix, DVector};
 use statrs::distribution::{Beta, ContinuousCDF};
 use streamcert_certificate::{OrderNCertificate, OrderNCertificateConfig};
 use streamcert_regression::{LoopModel, OrderNConfig};
 
-/// SplitMix64 uniforms in `[0, 1)` and Box–Muller normals: seeded and portable.
-struct Rng(u64);
+use crate::support::{Loop, par_map};
 
-impl Rng {
-    fn uniform(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn normal(&mut self) -> f64 {
-        let u1 = 1.0 - self.uniform();
-        let u2 = self.uniform();
-        (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
-    }
-}
-
-const DT: f64 = 0.01;
-const SAMPLES: usize = 4000;
 const MARGIN: f64 = 0.05;
 const DELTA: f64 = 0.01;
 
-/// One cell: the plant's `a`, the gain, which noise, how long the dither is held, the units
-/// the certificate reads `y` and `u` in, and a change of the plant.
-#[derive(Clone, Copy)]
+/// One cell: the loop, and the units the certificate reads `y` and `u` in (`y · scale.0`,
+/// `u · scale.1`, the gain in those units).
+#[derive(Clone)]
 struct Cell {
-    a: [f64; 2],
-    gain: f64,
-    sensor: f64,
-    process: f64,
-    /// Samples between the dither's draws (100: every second).
-    hold: usize,
-    /// The certificate reads `y · scale.0` and `u · scale.1` (and the gain in those units).
+    plant: Loop,
     scale: (f64, f64),
-    /// From this sample on the plant's `a_2` is `change.1`.
-    change: Option<(usize, f64)>,
-    samples: usize,
 }
 
 impl Cell {
+    /// The plant `s² + a_1 s + a_2` under `gain`, sensor noise `σ = 0.01` or, with
+    /// `process`, process noise `σ_p = process` on the unmeasured state and no sensor noise.
     fn new(a: [f64; 2], gain: f64, sensor: f64, process: f64) -> Self {
-        Self {
-            a,
-            gain,
-            sensor,
-            process,
-            hold: 100,
-            scale: (1.0, 1.0),
-            change: None,
-            samples: SAMPLES,
-        }
+        Self { plant: Loop { sensor, process, ..Loop::new(&a, gain) }, scale: (1.0, 1.0) }
     }
-}
-
-fn step_of(a: [f64; 2]) -> DMatrix<f64> {
-    let mut big = DMatrix::<f64>::zeros(4, 4);
-    big[(0, 0)] = -a[0];
-    big[(0, 1)] = 1.0;
-    big[(1, 0)] = -a[1];
-    big[(1, 2)] = 1.0;
-    big[(1, 3)] = 0.1;
-    (big * DT).exp()
 }
 
 /// One seeded run: at every look, its time and whether it certified, with its margin.
-fn looks(cell: Cell, seed: u64, stop_at_first: bool) -> Vec<(f64, bool, Option<f64>)> {
-    let mut step = step_of(cell.a);
+fn looks(cell: &Cell, seed: u64, stop_at_first: bool) -> Vec<(f64, bool, Option<f64>)> {
     let regression = OrderNConfig::new(LoopModel::of_order(2).unwrap(), 1, 2000, 50);
-    let gain = cell.gain * cell.scale.1 / cell.scale.0;
+    let gain = cell.plant.gain * cell.scale.1 / cell.scale.0;
     let cfg = OrderNCertificateConfig::new(regression, vec![gain], MARGIN, DELTA);
     let mut cert = OrderNCertificate::new(cfg).unwrap();
-    let mut rng = Rng(seed);
-    let mut x = DVector::<f64>::zeros(4);
-    let mut dither = 0.1;
     let mut out = Vec::new();
-    for k in 0..cell.samples {
-        if let Some((at, a2)) = cell.change
-            && k == at
-        {
-            step = step_of([cell.a[0], a2]);
-        }
-        if k % cell.hold == 0 {
-            dither = if rng.uniform() < 0.5 { -0.1 } else { 0.1 };
-        }
-        let measured = x[0] + cell.sensor * rng.normal();
-        let input = cell.gain * measured + dither;
-        let t = k as f64 * DT;
-        let seen = cert.push(t, measured * cell.scale.0, &[input * cell.scale.1]).unwrap();
-        if let Some(look) = seen {
+    cell.plant.run(seed, |t, y, u| {
+        if let Some(look) = cert.push(t, y * cell.scale.0, &[u * cell.scale.1]).unwrap() {
             let margin = look.outcome.as_ref().ok().and_then(|r| r.margin);
             out.push((t, look.certified(), margin));
-            if stop_at_first && look.certified() {
-                return out;
-            }
+            return !(stop_at_first && look.certified());
         }
-        x[2] = input;
-        x[3] = 1.0;
-        x = &step * x;
-        x[1] += cell.process * DT.sqrt() * rng.normal();
-    }
+        true
+    });
     out
 }
 
 /// Whether one seeded run opens the gate at any look, and the time of its first opening.
-fn run(cell: Cell, seed: u64) -> Option<f64> {
+fn run(cell: &Cell, seed: u64) -> Option<f64> {
     looks(cell, seed, true).into_iter().find(|l| l.1).map(|l| l.0)
 }
 
-/// `f` over `seeds` on two threads, in seed order.
-fn par_map<T: Send>(seeds: std::ops::Range<u64>, f: impl Fn(u64) -> T + Sync) -> Vec<T> {
-    let seeds: Vec<u64> = seeds.collect();
-    let (left, right) = seeds.split_at(seeds.len() / 2);
-    std::thread::scope(|s| {
-        let a = s.spawn(|| left.iter().map(|&k| f(k)).collect::<Vec<_>>());
-        let b = right.iter().map(|&k| f(k)).collect::<Vec<_>>();
-        let mut all = a.join().unwrap();
-        all.extend(b);
-        all
-    })
-}
-
 /// The runs `seeds` of a cell: the opening times, in seed order.
-fn runs(cell: Cell, seeds: std::ops::Range<u64>) -> Vec<Option<f64>> {
+fn runs(cell: &Cell, seeds: std::ops::Range<u64>) -> Vec<Option<f64>> {
     par_map(seeds, |k| run(cell, k))
 }
 
@@ -156,7 +76,7 @@ fn clopper_pearson_upper(k: usize, n: usize) -> f64 {
     Beta::new(k as f64 + 1.0, (n - k) as f64).unwrap().inverse_cdf(0.95)
 }
 
-fn the_cell_opens_rarely(name: &str, cell: Cell, runs_n: u64, seed: u64) {
+fn the_cell_opens_rarely(name: &str, cell: &Cell, runs_n: u64, seed: u64) {
     let opened = runs(cell, seed..seed + runs_n).iter().filter(|o| o.is_some()).count();
     let bound = clopper_pearson_upper(opened, runs_n as usize);
     eprintln!("{name}: opened in {opened} of {runs_n} runs; 95 % Clopper–Pearson bound {bound:.4}");
@@ -167,27 +87,27 @@ fn the_cell_opens_rarely(name: &str, cell: Cell, runs_n: u64, seed: u64) {
 fn a_real_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
     // K = 0.948025: the closed loop (s + 0.045)(s + 1.155).
     let cell = Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0);
-    the_cell_opens_rarely("real pair, sensor noise", cell, 200, 10_000);
+    the_cell_opens_rarely("real pair, sensor noise", &cell, 200, 10_000);
 }
 
 #[test]
 fn a_complex_pair_just_below_the_margin_with_sensor_noise_rarely_opens() {
     // s² + 0.09 s + 1 under K = −1: s² + 0.09 s + 2, poles −0.045 ± 1.41 j.
     let cell = Cell::new([0.09, 1.0], -1.0, 0.01, 0.0);
-    the_cell_opens_rarely("complex pair, sensor noise", cell, 200, 20_000);
+    the_cell_opens_rarely("complex pair, sensor noise", &cell, 200, 20_000);
 }
 
 #[test]
 fn a_real_pair_just_below_the_margin_with_process_noise_rarely_opens() {
     let cell = Cell::new([1.2, 1.0], 0.948_025, 0.0, 0.05);
-    the_cell_opens_rarely("real pair, process noise", cell, 200, 30_000);
+    the_cell_opens_rarely("real pair, process noise", &cell, 200, 30_000);
 }
 
 #[test]
 fn a_loop_at_five_times_the_margin_is_certified_in_nine_runs_of_ten_or_more() {
     // K = 0.7625: the closed loop (s + 0.25)(s + 0.95).
     let cell = Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0);
-    let opened = runs(cell, 40_000..40_050);
+    let opened = runs(&cell, 40_000..40_050);
     let mut times: Vec<f64> = opened.iter().flatten().copied().collect();
     times.sort_by(f64::total_cmp);
     let median = times.get(times.len() / 2).copied().unwrap_or(f64::NAN);
@@ -201,8 +121,9 @@ fn a_loop_at_five_times_the_margin_is_certified_in_nine_runs_of_ten_or_more() {
 #[test]
 fn a_real_pair_just_below_the_margin_with_the_input_held_ten_seconds_rarely_opens() {
     // The dither redrawn every 10 s: a window of 20 s may hold one switch, or none.
-    let cell = Cell { hold: 1000, ..Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0) };
-    the_cell_opens_rarely("real pair, input held 10 s", cell, 200, 50_000);
+    let mut cell = Cell::new([1.2, 1.0], 0.948_025, 0.01, 0.0);
+    cell.plant.hold = 1000;
+    the_cell_opens_rarely("real pair, input held 10 s", &cell, 200, 50_000);
 }
 
 #[test]
@@ -214,10 +135,10 @@ fn the_verdict_does_not_depend_on_the_units_of_y_and_u() {
         (Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0), 60_100),
     ] {
         for k in 0..2 {
-            let plain = looks(cell, seed + k, false);
+            let plain = looks(&cell, seed + k, false);
             assert!(plain.len() >= 9);
             for scale in [(0.01, 1.0), (100.0, 1.0), (1.0, 0.01), (1.0, 100.0), (0.01, 100.0)] {
-                let scaled = looks(Cell { scale, ..cell }, seed + k, false);
+                let scaled = looks(&Cell { scale, ..cell.clone() }, seed + k, false);
                 assert_eq!(plain.len(), scaled.len());
                 for (a, b) in plain.iter().zip(&scaled) {
                     assert_eq!((a.0, a.1), (b.0, b.1), "units {scale:?}");
@@ -235,13 +156,10 @@ fn the_verdict_does_not_depend_on_the_units_of_y_and_u() {
 fn after_a_plant_change_the_gate_is_open_past_one_and_a_half_windows_in_few_runs() {
     // 5× the margin for 30 s, then a_2 = 0.814475: the closed loop (s + 0.045)(s + 1.155),
     // just below the margin. A window is 20 s (2000 rows); 1.5 windows after the change is 60 s.
-    let cell = Cell {
-        change: Some((3000, 0.814_475)),
-        samples: 7000,
-        ..Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0)
-    };
+    let mut cell = Cell::new([1.2, 1.0], 0.7625, 0.01, 0.0);
+    (cell.plant.change, cell.plant.samples) = (Some((3000, vec![1.2, 0.814_475])), 7000);
     let runs_n = 60u64;
-    let seen = par_map(70_000..70_000 + runs_n, |seed| looks(cell, seed, false));
+    let seen = par_map(70_000..70_000 + runs_n, |seed| looks(&cell, seed, false));
     let open = |range: std::ops::Range<f64>| {
         seen.iter().filter(|s| s.iter().any(|l| range.contains(&l.0) && l.1)).count()
     };

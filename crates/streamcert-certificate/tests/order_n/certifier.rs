@@ -2,48 +2,22 @@
 //! carries the certificate of order `n` through the gate, the gap, and a checkpoint that
 //! continues the run bit for bit.
 
-use nalgebra::{DMatrix, DVector};
 use streamcert_certificate::{
     Calibration, Certifier, CertifierConfig, CertifyError, Evidence, NonlinearConfig, NotCertified,
     OrderNCertificate,
 };
 use streamcert_regression::{LoopModel, RegressionConfig};
 
+use crate::support::Loop;
+
 /// `ÿ + 1.2 ẏ + y = u + 0.1` under `u = 0.7625 y_m + d` (closed loop `(s + 0.25)(s + 0.95)`,
-/// five times a margin of 0.05), exact zero-order hold at 100 Hz, sensor noise `σ = 0.01`, a
-/// dither of `±0.1` redrawn every second by a SplitMix64 stream: `(t, y_m, u)`.
+/// five times a margin of 0.05), sensor noise `σ = 0.01`: `(t, y_m, u)`.
 fn record(seed: u64, samples: usize) -> Vec<(f64, f64, f64)> {
-    let dt = 0.01;
-    let mut big = DMatrix::<f64>::zeros(4, 4);
-    big[(0, 0)] = -1.2;
-    big[(0, 1)] = 1.0;
-    big[(1, 0)] = -1.0;
-    big[(1, 2)] = 1.0;
-    big[(1, 3)] = 0.1;
-    let step = (big * dt).exp();
-    let mut state = seed;
-    let mut uniform = move || {
-        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = state;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    };
-    let mut x = DVector::<f64>::zeros(4);
-    let (mut dither, mut out) = (0.1, Vec::with_capacity(samples));
-    for k in 0..samples {
-        if k % 100 == 0 {
-            dither = if uniform() < 0.5 { -0.1 } else { 0.1 };
-        }
-        let (u1, u2) = (1.0 - uniform(), uniform());
-        let e = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos();
-        let measured = x[0] + 0.01 * e;
-        let input = 0.7625 * measured + dither;
-        out.push((k as f64 * dt, measured, input));
-        x[2] = input;
-        x[3] = 1.0;
-        x = &step * x;
-    }
+    let mut out = Vec::with_capacity(samples);
+    Loop { samples, ..Loop::new(&[1.2, 1.0], 0.7625) }.run(seed, |t, y, u| {
+        out.push((t, y, u));
+        true
+    });
     out
 }
 

@@ -375,7 +375,7 @@ impl OrderNCertificate {
     /// number of inputs is rejected ([`CertifyError::Regression`]), and nothing changes.
     pub fn push(&mut self, t: f64, y: f64, u: &[f64]) -> Result<Option<&OrderNLook>, CertifyError> {
         let m = self.cfg.regression.inputs;
-        check_sample(self.previous, t, y, u, m)?;
+        self.cfg.regression.check_sample(self.previous, t, y, u)?;
         let capacity = self.t.len();
         self.t[self.head] = t;
         self.y[self.head] = y;
@@ -452,33 +452,6 @@ impl OrderNCertificate {
             margin,
             certified,
         })
-    }
-}
-
-/// Check one sample: finite values, `m` inputs, time after `previous`.
-fn check_sample(
-    previous: Option<f64>,
-    t: f64,
-    y: f64,
-    u: &[f64],
-    m: usize,
-) -> Result<(), RegressionError> {
-    if u.len() != m {
-        return Err(RegressionError::DimensionMismatch { field: "u", expected: m, got: u.len() });
-    }
-    for (field, index, value) in [("t", 0, t), ("y", 0, y)]
-        .into_iter()
-        .chain(u.iter().enumerate().map(|(i, v)| ("u", i, *v)))
-    {
-        if !value.is_finite() {
-            return Err(RegressionError::NonFinite { field, index, value });
-        }
-    }
-    match previous {
-        Some(previous) if t <= previous => {
-            Err(RegressionError::NonIncreasingTime { previous, got: t })
-        }
-        _ => Ok(()),
     }
 }
 

@@ -116,6 +116,22 @@ impl OrderNConfig {
         self.model.span(self.horizon)
     }
 
+    /// Check one sample `(t, y, u)` taken after a sample at `previous`: finite values, the
+    /// configured number of inputs, a time after `previous`.
+    ///
+    /// # Errors
+    /// [`RegressionError::DimensionMismatch`], [`RegressionError::NonFinite`] or
+    /// [`RegressionError::NonIncreasingTime`], naming the value.
+    pub fn check_sample(
+        &self,
+        previous: Option<f64>,
+        t: f64,
+        y: f64,
+        u: &[f64],
+    ) -> Result<(), RegressionError> {
+        check_sample(previous, t, y, u, self.inputs)
+    }
+
     pub(crate) fn shape(&self) -> Shape {
         Shape { n: self.model.order(), m: self.inputs, h: self.horizon }
     }

@@ -221,3 +221,37 @@ fn mappings_are_refused_by_key_path() {
     .to_string();
     assert!(err.contains("`regression.window`"), "{err}");
 }
+
+/// `{"regression": {"order": 2, ...}}` from Python runs the certificate of order 2: the
+/// configuration reads as the command line's, G5's node b (a first-order loop at its
+/// horizon) gives rows whose paper verdicts are not computed and whose calibrated column is
+/// the order-2 certificate's, and what order 2 does not support is refused by its key.
+#[test]
+fn order_two_from_a_mapping_runs_the_certificate_of_order_two() {
+    let json = |order: u8, window: usize, horizon: usize| {
+        from_json_over_defaults(&format!(
+            r#"{{"columns": {{"time": "t", "outputs": ["y_b"], "inputs": ["u_b"]}},
+                "controller": {{"gain": [[-4.0]]}}, "certificate": {{"margin": 0.05}},
+                "regression": {{"order": {order}, "window": {window}, "horizon": {horizon}}}}}"#
+        ))
+    };
+    let cfg = json(2, 600, 5).unwrap();
+    let on = cfg.config.certifier.order_n().expect("order 2");
+    assert_eq!((on.regression.model.order(), on.regression.window), (2, 600));
+    let mut run = Run::new(cfg.config).unwrap();
+    let (t, y, u) = node_b(&g5(1000));
+    let mut last = None;
+    for k in 0..t.len() {
+        let ev = run.push(t[k], &[y[k]], &[u[k]]).unwrap();
+        assert_eq!(ev.gaussian.reason, Some(streamcert_certificate::NotCertified::FirstOrderOnly));
+        last = Some(ev);
+    }
+    // 1000 samples, 990 rows of order 2: the window (600 rows) has looked.
+    let last = last.unwrap();
+    assert_eq!(last.columns, 600);
+    assert!(last.calibrated_window == Some(600), "{last:?}");
+    // Too small a window for the horizon is refused, naming the bound.
+    let err = json(2, 100, 50).unwrap_err().to_string();
+    assert!(err.contains("min_rows"), "{err}");
+    assert!(json(4, 600, 5).is_err());
+}

@@ -84,6 +84,12 @@ enum Command {
         /// written to POWER.md.
         #[arg(long)]
         only_power: Option<usize>,
+        /// Only the certificate of order n (`[regression] order = 2 | 3`): loops measured
+        /// through one output with hidden states, with this many runs per near-margin cell
+        /// (at most 200 per cell beyond the order, a fifth, 20 to 400, per power cell, a
+        /// tenth, 20 to 200, after a plant change), written to ORDER.md.
+        #[arg(long)]
+        only_order: Option<usize>,
         /// The calibrated certificate's horizon in the default cells: `fixed` (h = 5, the
         /// default) or `auto` (the horizon ladder of `horizon = "auto"`: h = 1, 2, 5, 10,
         /// `M / 5` blocks of h columns per base window, δ/4 each), on the same seeds.
@@ -288,6 +294,7 @@ fn main() -> Result<()> {
         Command::Reproduce(run) => report::reproduce(&run.options()?, true, true),
         Command::Exp1(run) => report::reproduce(&run.options()?, true, false),
         Command::Exp2(run) => report::reproduce(&run.options()?, false, true),
+        Command::Validity { out, only_order: Some(runs), .. } => validity::order_only(runs, &out),
         Command::Validity { out, only_held: Some(runs), .. } => validity::held_only(runs, &out),
         Command::Validity { out, only_power: Some(runs), .. } => validity::power_only(runs, &out),
         Command::Validity { runs, out, only_change: None, .. } => validity::run(runs, &out),

@@ -16,8 +16,10 @@ use crate::common::{markdown, median, progress, write};
 mod cells;
 mod change;
 mod held;
+mod order;
 pub(crate) use cells::set_horizon_auto;
 use cells::{Cell, near_margin_cells, power_cells};
+pub(crate) use order::order_only;
 
 const DELTA: f64 = 0.01;
 const MARGIN: f64 = 0.05;

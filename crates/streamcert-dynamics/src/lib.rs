@@ -2,8 +2,9 @@
 //!
 //! Simulation substrate for streamcert: the [`Dynamics`] trait, the paper's five-node
 //! benchmark network G5 (the paper's eqs. SA1 to SB5; docs/paper.md), seeded disturbance
-//! processes for the three regimes of Experiment 1, probing inputs (dither), and the two
-//! integrators (Euler–Maruyama and RK4).
+//! processes for the three regimes of Experiment 1, probing inputs (dither), the two
+//! integrators (Euler–Maruyama and RK4), and [`ObservableLoop`]: a loop of any order measured
+//! through one output, simulated exactly, the plant family of the certificate of order `n`.
 //!
 //! Key design decisions:
 //!
@@ -34,6 +35,7 @@ mod dither;
 mod error;
 mod g5;
 mod linear;
+mod observable;
 mod scalar;
 mod scenario;
 mod simulate;
@@ -44,6 +46,7 @@ pub use dither::{Dither, DitherConfig};
 pub use error::DynamicsError;
 pub use g5::{Coupling, G5, G5Config, LocalRates};
 pub use linear::LinearSystem;
+pub use observable::{ObservableLoop, SplitMix};
 pub use scalar::{ScalarDrift, ScalarScenario};
 pub use scenario::{LinearScenario, PlantSwitch};
 pub use simulate::{Integrator, NoiseScaling, SimConfig, Trajectory, simulate};

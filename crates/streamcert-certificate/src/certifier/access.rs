@@ -75,6 +75,13 @@ impl Certifier {
         self.calibrated.as_ref().map_or((None, 0), |c| (c.anchored_look(), c.anchored_epoch()))
     }
 
+    /// The certificate of order `n`'s latest look (`None` at order 1, or before its first
+    /// look): its index, the rows it fitted, the risk it spent and its region and margin.
+    #[must_use]
+    pub fn order_n_look(&self) -> Option<&crate::OrderNLook> {
+        self.order_n.as_ref().and_then(|c| c.latest())
+    }
+
     /// The latest nonlinear look of each window, shortest window first (empty without a
     /// nonlinear configuration).
     #[must_use]

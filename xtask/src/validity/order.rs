@@ -1,0 +1,392 @@
+//! The order-`n` cells of `cargo xtask validity --only-order RUNS`: the certificate of order
+//! `n` (`[regression] order = 2 | 3`) through the certifier and its calibrated gate, on loops
+//! measured through one output whose other states are hidden (`ObservableLoop`), at the
+//! boundary (closed loops just below the margin), beyond the order, for power and after a
+//! plant change (ORDER.md).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Result;
+use streamcert_certificate::{Calibration, Certifier, CertifierConfig, NotCertified};
+use streamcert_dynamics::ObservableLoop;
+use streamcert_regression::{LoopModel, RegressionConfig};
+
+use super::{DELTA, MARGIN, clopper_pearson};
+use crate::common::{markdown, median, progress, write};
+
+/// The certificate's window in rows and its horizon in samples (20 s and 0.5 s at 100 Hz).
+const WINDOW: usize = 2000;
+const HORIZON: usize = 50;
+/// Where the plant-change cell's plant changes (samples), and its length.
+const CHANGE_AT: usize = 3000;
+const CHANGE_SAMPLES: usize = 7000;
+
+/// One cell: a loop, the order certified, and the units `y` and `u` are read in (`y · scale.0`,
+/// `u · scale.1`; the gain is given to the certifier in those units).
+#[derive(Clone)]
+struct Cell {
+    name: String,
+    order: usize,
+    plant: ObservableLoop,
+    scale: (f64, f64),
+}
+
+impl Cell {
+    /// The plant `a` under `gain` at `order`, with sensor noise `σ = 0.01` or, with
+    /// `process`, process noise `σ_p = 0.05` on the unmeasured last state and no sensor noise.
+    fn new(name: &str, order: usize, a: &[f64], gain: f64, process: bool) -> Self {
+        let mut plant = ObservableLoop::new(a, gain);
+        if process {
+            (plant.sensor, plant.process) = (0.0, 0.05);
+        }
+        let noise = if process { "process noise" } else { "sensor noise" };
+        Self { name: format!("{name}, {noise}"), order, plant, scale: (1.0, 1.0) }
+    }
+
+    /// The certifier a user gets with `[regression] order = n`, `window = 2000`, `horizon =
+    /// 50`, `[calibration] delta = 0.01` (every default of the certificate of order `n`: its
+    /// look period, the hidden-dynamics guard), margin 0.05, a one-sample gate.
+    fn config(&self) -> Result<CertifierConfig> {
+        let regression = RegressionConfig {
+            order: LoopModel::of_order(self.order)
+                .ok_or_else(|| anyhow::anyhow!("order {} is not 1, 2 or 3", self.order))?,
+            ..RegressionConfig::new(1, 1, WINDOW, HORIZON, 0.0)
+        };
+        let gain = self.plant.gain * self.scale.1 / self.scale.0;
+        let mut cfg = CertifierConfig::new(regression, vec![gain], 1.0, MARGIN, 1);
+        cfg.calibration = Some(Calibration::new(DELTA));
+        Ok(cfg)
+    }
+
+    /// The true rate before and after the cell's plant change (the same without one).
+    fn truth(&self) -> (f64, f64) {
+        let before = self.plant.rate();
+        let after = self.plant.change.as_ref().map_or(before, |(_, a)| {
+            ObservableLoop { a: a.clone(), change: None, ..self.plant.clone() }.rate()
+        });
+        (before, after)
+    }
+}
+
+/// What one run shows.
+#[derive(Default)]
+struct Run {
+    /// The first and the last sample the gate was open at.
+    first_open: Option<f64>,
+    last_open: Option<f64>,
+    /// Open at some sample before the plant change (the whole run without one).
+    open_before_change: bool,
+    /// Some look stated a margin above the true rate (an overstated rate, whether or not the
+    /// gate opened on it).
+    overstated: bool,
+    /// Looks, and looks the hidden-dynamics guard refused.
+    looks: usize,
+    hidden: usize,
+}
+
+fn one(cell: &Cell, seed: u64) -> Result<Run> {
+    let mut cert = Certifier::new(cell.config()?)?;
+    let (before, after) = cell.truth();
+    let change_time =
+        cell.plant.change.as_ref().map_or(f64::INFINITY, |c| c.0 as f64 * cell.plant.dt);
+    let mut run = Run::default();
+    let (mut seen, mut failed) = (0u64, None);
+    cell.plant.run(seed, |t, y, u| {
+        let ev = match cert.push(t, &[y * cell.scale.0], &[u * cell.scale.1]) {
+            Ok(ev) => ev,
+            Err(e) => {
+                failed = Some(e);
+                return false;
+            }
+        };
+        if ev.calibrated.open {
+            run.first_open.get_or_insert(t);
+            run.last_open = Some(t);
+            run.open_before_change |= t < change_time;
+        }
+        if let Some(look) = cert.order_n_look().filter(|l| l.index != seen) {
+            seen = look.index;
+            run.looks += 1;
+            // The truth the look is judged against: the worse of the two where its window
+            // holds rows from both plants.
+            let truth = if t < change_time { before } else { before.min(after) };
+            match &look.outcome {
+                Ok(region) => run.overstated |= region.margin.is_some_and(|m| m > truth),
+                Err(NotCertified::HiddenDynamics { .. }) => run.hidden += 1,
+                Err(_) => {}
+            }
+        }
+        true
+    });
+    match failed {
+        Some(e) => Err(e.into()),
+        None => Ok(run),
+    }
+}
+
+/// `runs` seeds of a cell from `base`, on two threads.
+fn runs_of(cell: &Cell, base: u64, runs: usize, bar: &indicatif::ProgressBar) -> Result<Vec<Run>> {
+    let half = runs / 2;
+    std::thread::scope(|s| {
+        let a =
+            s.spawn(|| (0..half).map(|r| one(cell, base + r as u64)).collect::<Result<Vec<_>>>());
+        let b = (half..runs)
+            .map(|r| {
+                bar.inc(2);
+                one(cell, base + r as u64)
+            })
+            .collect::<Result<Vec<_>>>();
+        let mut a = a.join().expect("worker thread")?;
+        a.extend(b?);
+        Ok(a)
+    })
+}
+
+/// The loops just below the margin: each order-2 and order-3 plant with sensor noise and with
+/// process noise, the input held 10 s and 30 s, and the units of `y` and `u`.
+fn near_cells() -> Vec<Cell> {
+    let real = |name: &str| Cell::new(name, 2, &[1.2, 1.0], 0.948_025, false);
+    let mut cells = Vec::new();
+    for process in [false, true] {
+        // s² + 0.09 s + 2: −0.045 ± 1.41 j.
+        cells.push(Cell::new("order 2, a complex pair", 2, &[0.09, 1.0], -1.0, process));
+        // Open loop (s + 0.1)(s + 2); closed (s + 0.045)(s + 2.055).
+        let slow = "order 2, a slow tank feeding a fast one";
+        cells.push(Cell::new(slow, 2, &[2.1, 0.2], 0.107_525, process));
+        // An unstable plant (s − 0.5) read through a sensor lag (s + 5); closed
+        // (s + 0.045)(s + 4.455).
+        let lag = "order 2, an unstable plant behind a sensor lag";
+        cells.push(Cell::new(lag, 2, &[4.5, -2.5], -2.700_475, process));
+        // (s + 1)³ − 0.955³: rightmost root −0.045.
+        cells.push(Cell::new(
+            "order 3, three lags",
+            3,
+            &[3.0, 3.0, 1.0],
+            0.955f64.powi(3),
+            process,
+        ));
+    }
+    for hold in [10, 30] {
+        let mut cell = real(&format!("order 2, a real pair, the input held {hold} s"));
+        cell.plant.hold = hold * 100;
+        cells.push(cell);
+    }
+    for (what, scale) in [
+        ("y × 0.01", (0.01, 1.0)),
+        ("y × 100", (100.0, 1.0)),
+        ("u × 0.01", (1.0, 0.01)),
+        ("u × 100", (1.0, 100.0)),
+    ] {
+        cells.push(Cell { scale, ..real(&format!("order 2, a real pair in units {what}")) });
+    }
+    cells
+}
+
+/// Plants beyond order 3, just below the margin, certified at order 3.
+fn beyond_cells() -> Vec<Cell> {
+    // (s + 1)⁴ − 0.955⁴: rightmost root −0.045.
+    let four = Cell::new("four lags in series", 3, &[4.0, 6.0, 4.0, 1.0], 0.955f64.powi(4), false);
+    // ẏ = −y + K y(t − τ), τ = 10 samples: rightmost root −0.045 for K = 0.955 e^{−0.045 τ}.
+    let mut delay = Cell::new(
+        "a lag behind a transport delay of 10 samples",
+        3,
+        &[1.0],
+        0.955 * (-0.0045f64).exp(),
+        false,
+    );
+    delay.plant.delay = 10;
+    vec![four, delay]
+}
+
+/// Loops of order 2 at 2×, 5× and 20× the margin.
+fn power_cells() -> Vec<Cell> {
+    vec![
+        // (s + 0.1)(s + 1.1), (s + 0.25)(s + 0.95), (s + 1)(s + 2).
+        Cell::new("order 2, 2× the margin", 2, &[1.2, 1.0], 0.89, false),
+        Cell::new("order 2, 5× the margin", 2, &[1.2, 1.0], 0.7625, false),
+        Cell::new("order 2, 20× the margin", 2, &[3.0, 3.0], 1.0, false),
+    ]
+}
+
+/// 5× the margin for 30 s, then the closed loop (s + 0.045)(s + 1.155), for 70 s.
+fn change_cell() -> Cell {
+    let mut cell =
+        Cell::new("order 2, 5× the margin → just below it", 2, &[1.2, 1.0], 0.7625, false);
+    (cell.plant.change, cell.plant.samples) =
+        (Some((CHANGE_AT, vec![1.2, 0.814_475])), CHANGE_SAMPLES);
+    cell
+}
+
+fn share(k: usize, n: usize) -> String {
+    format!("{:.1} %", 100.0 * k as f64 / n.max(1) as f64)
+}
+
+/// Looks the hidden-dynamics guard refused, over all looks.
+fn hidden_share(results: &[Run]) -> String {
+    let (hidden, looks) = results.iter().fold((0, 0), |(h, l), r| (h + r.hidden, l + r.looks));
+    share(hidden, looks)
+}
+
+/// The loops just below the margin, `runs` each.
+fn near_table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
+    let mut s = String::new();
+    let mut rows = Vec::new();
+    for (ci, cell) in near_cells().iter().enumerate() {
+        let results = runs_of(cell, 300_000_000 + 1_000_000 * ci as u64, runs, bar)?;
+        let opened = results.iter().filter(|r| r.first_open.is_some()).count();
+        let (_, hi) = clopper_pearson(opened, runs);
+        rows.push(vec![
+            cell.name.clone(),
+            format!("{:.4}", cell.truth().0),
+            format!("{opened} / {runs}"),
+            format!("{hi:.4}"),
+            if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
+            format!("{} / {runs}", results.iter().filter(|r| r.overstated).count()),
+            hidden_share(&results),
+        ]);
+    }
+    let _ = writeln!(s, "## Loops just below the margin (n_s = 1): every opening is false\n");
+    let header = [
+        "cell",
+        "β*",
+        "opened",
+        "95 % CP upper",
+        "≤ 2δ",
+        "runs with a look above β*",
+        "looks refused: hidden dynamics",
+    ];
+    let _ = writeln!(s, "{}", markdown(&header, &rows));
+    Ok(s)
+}
+
+/// The plants beyond order 3, `beyond_runs` each.
+fn beyond_table(beyond_runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
+    let mut s = String::new();
+    let mut rows = Vec::new();
+    for (ci, cell) in beyond_cells().iter().enumerate() {
+        let results = runs_of(cell, 310_000_000 + 1_000_000 * ci as u64, beyond_runs, bar)?;
+        let opened = results.iter().filter(|r| r.first_open.is_some()).count();
+        rows.push(vec![
+            cell.name.clone(),
+            cell.order.to_string(),
+            format!("{:.4}", cell.truth().0),
+            format!("{opened} / {beyond_runs}"),
+            hidden_share(&results),
+        ]);
+    }
+    let _ = writeln!(s, "## Beyond the order: plants of order above 3, certified at order 3\n");
+    let header = ["cell", "order", "β*", "opened", "looks refused: hidden dynamics"];
+    let _ = writeln!(s, "{}", markdown(&header, &rows));
+    Ok(s)
+}
+
+/// The loops of order 2 at 2×, 5× and 20× the margin, `power_runs` each.
+fn power_table(power_runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
+    let mut s = String::new();
+    let mut rows = Vec::new();
+    for (ci, cell) in power_cells().iter().enumerate() {
+        let results = runs_of(cell, 320_000_000 + 1_000_000 * ci as u64, power_runs, bar)?;
+        let times: Vec<f64> = results.iter().filter_map(|r| r.first_open).collect();
+        rows.push(vec![
+            cell.name.clone(),
+            format!("{:.4}", cell.truth().0),
+            share(times.len(), power_runs),
+            if times.is_empty() { "never".into() } else { format!("{:.2}", median(&times)) },
+            hidden_share(&results),
+        ]);
+    }
+    let _ = writeln!(s, "## Power ({power_runs} runs each)\n");
+    let header =
+        ["cell", "β*", "certified", "median first opening [s]", "looks refused: hidden dynamics"];
+    let _ = writeln!(s, "{}", markdown(&header, &rows));
+    Ok(s)
+}
+
+/// The plant change, `change_runs` runs.
+fn change_table(change_runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
+    let mut s = String::new();
+    let cell = change_cell();
+    let results = runs_of(&cell, 330_000_000, change_runs, bar)?;
+    let change = CHANGE_AT as f64 * cell.plant.dt;
+    let span = WINDOW as f64 * cell.plant.dt;
+    let late = results.iter().filter(|r| r.last_open.is_some_and(|t| t >= change + 1.5 * span));
+    let late = late.count();
+    let (before, after) = cell.truth();
+    let _ = writeln!(s, "## A plant change ({change_runs} runs)\n");
+    let header = [
+        "cell",
+        "β* before / after",
+        "change at [s]",
+        "open before it",
+        "open past 1.5 windows after it",
+        "≤ 5 %",
+    ];
+    let row = vec![
+        cell.name.clone(),
+        format!("{before:.4} / {after:.4}"),
+        format!("{change}"),
+        share(results.iter().filter(|r| r.open_before_change).count(), change_runs),
+        share(late, change_runs),
+        if late * 20 <= change_runs { "yes".into() } else { "**no**".into() },
+    ];
+    let _ = writeln!(s, "{}", markdown(&header, &[row]));
+    Ok(s)
+}
+
+/// The order cells, `runs` per near-margin cell, into `ORDER.md` under `out`.
+pub(crate) fn order_only(runs: usize, out: &Path) -> Result<()> {
+    let beyond_runs = runs.min(200);
+    let power_runs = (runs / 5).clamp(20, 400);
+    let change_runs = (runs / 10).clamp(20, 200);
+    let bar = progress(
+        near_cells().len() * runs
+            + beyond_cells().len() * beyond_runs
+            + power_cells().len() * power_runs
+            + change_runs,
+        "order n",
+    );
+    let mut s = format!(
+        "# The certificate of order n\n\nProduced by `cargo xtask validity --only-order {runs}`. Each run: a loop `u = K y_m + d` around the plant `y⁽ᴺ⁾ + a_1 y⁽ᴺ⁻¹⁾ + … + a_N y = u + 0.1` in observable form (only `y` measured; the input and the constant enter the last state), from rest, simulated exactly (zero-order hold) at 100 Hz for 40 s; `d` a dither of ±0.1 whose sign is redrawn every second (unless held longer); sensor noise `σ = 0.01` on `y`, or process noise `σ_p = 0.05` (`σ_p √dt w` per sample) on the last, unmeasured state. The certifier a user gets with `[regression] order = n`, `window = {WINDOW}`, `horizon = {HORIZON}` and `[calibration] delta = {DELTA}`: the certificate of order n with its defaults (the first look when the window is full, looks every {} samples, the hidden-dynamics guard at risk δ per look), margin {MARGIN}, a one-sample gate. `β*` is the rate of the loop as simulated (`−ln ϱ(Φ_cl)/dt`, the sampled closed loop's spectral radius, `ObservableLoop::rate`).\n\n",
+        WINDOW / 10
+    );
+    s.push_str(&near_table(runs, &bar)?);
+    s.push_str(&beyond_table(beyond_runs, &bar)?);
+    s.push_str(&power_table(power_runs, &bar)?);
+    s.push_str(&change_table(change_runs, &bar)?);
+    bar.finish_and_clear();
+    let _ = writeln!(
+        s,
+        "## Reading the tables\n\n- `95 % CP upper`: the upper end of the two-sided 95 % Clopper–Pearson interval on the false-opening rate; the cell passes when it is at most 2δ = {}.\n- `runs with a look above β*`: the runs in which some look stated a margin above the loop's true rate, whether or not the gate opened on it (a look below the margin states one too).\n- `looks refused: hidden dynamics`: the looks whose verdict was the hidden-dynamics guard's (the past row's coefficients tested at every look); beyond the order it is the guard's power, on a loop the order holds its false refusals.\n- A plant change: the window is {} s; past 1.5 windows after the change every row the window holds comes from the new plant. The certificate of order n has no change guard of its own: it forgets the old plant as its window slides.",
+        2.0 * DELTA,
+        WINDOW as f64 * 0.01
+    );
+    write(&out.join("ORDER.md"), &s)?;
+    println!("wrote {}", out.join("ORDER.md").display());
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every boundary and beyond-the-order loop is just below the margin (within 0.01 of it),
+    /// every power loop above it, and the plant change crosses it.
+    #[test]
+    fn the_cells_sit_where_their_tables_say() {
+        for cell in near_cells().iter().chain(&beyond_cells()) {
+            let rate = cell.truth().0;
+            assert!(rate < MARGIN && rate > MARGIN - 0.01, "{}: {rate}", cell.name);
+        }
+        for (cell, times) in power_cells().iter().zip([2.0, 5.0, 20.0]) {
+            let rate = cell.truth().0;
+            assert!((rate / MARGIN - times).abs() < 0.05 * times, "{}: {rate}", cell.name);
+        }
+        let (before, after) = change_cell().truth();
+        assert!(before > 4.0 * MARGIN && after < MARGIN, "{before} → {after}");
+        // Each cell's configuration is one the certifier accepts.
+        for cell in near_cells().iter().chain(&beyond_cells()).chain(&power_cells()) {
+            assert!(Certifier::new(cell.config().unwrap()).is_ok(), "{}", cell.name);
+        }
+    }
+}

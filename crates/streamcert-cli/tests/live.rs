@@ -244,3 +244,46 @@ fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
     }
     case.assert_same(&got);
 }
+
+/// `[regression] order = 2` live: the rows a live run certifies from the embedded broker are,
+/// bit for bit, those of `certify --input` on the same samples with the same configuration,
+/// and they are the certificate of order 2's (not the first order's).
+#[test]
+fn a_live_loop_at_order_two_writes_the_files_rows_bit_for_bit() {
+    let port = streamcert_live::broker::free_loopback().unwrap();
+    streamcert_live::broker::serve(port).unwrap();
+    let (csv, header, rows) = common::live::g5("1500");
+    let template = streamcert_pipeline::config::g5_node_b();
+    assert!(template.contains("\norder = 1\n"));
+    let order_two = template.replace("\norder = 1\n", "\norder = 2\n");
+    let data = common::tmp("order2-live.csv");
+    std::fs::write(&data, &csv).unwrap();
+    let file_run = |tag: &str, cfg_text: &str| {
+        let (cfg, out) = (common::tmp(&format!("{tag}.toml")), common::tmp(&format!("{tag}.csv")));
+        std::fs::write(&cfg, cfg_text).unwrap();
+        let status = bin()
+            .args(["certify", "--config", &path(&cfg), "--input", &path(&data)])
+            .args(["--output", &path(&out)])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        common::live::rows_of(&out)
+    };
+    let want = file_run("order2-file", &order_two);
+    assert_ne!(want, file_run("order1-file", &template), "order 2 changes the rows");
+    assert_eq!(want.len(), rows.len());
+    let source = format!(
+        "\n[source]\nkind = \"mqtt\"\nservers = [\"tcp://127.0.0.1:{}\"]\n\
+         client_id = \"streamcert-order2\"\ntopics = [\"g5/order2\"]\nidle_timeout = 2.0\n",
+        port.port()
+    );
+    let live_cfg = common::tmp("order2-live.toml");
+    std::fs::write(&live_cfg, order_two + &source).unwrap();
+    let got = common::tmp("order2-got.csv");
+    let run = Certify::start(&live_cfg, &["--output", &path(&got)]);
+    let opts = common::live::publisher(port.port(), "g5/order2", "pub-order2");
+    streamcert_live::publish::publish(&opts, &header, 0, rows).unwrap();
+    let (status, err) = run.finish();
+    assert!(status.success(), "{err}");
+    assert!(common::live::rows_of(&got) == want, "the live rows differ from the file's: {err}");
+}

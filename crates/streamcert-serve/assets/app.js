@@ -24,6 +24,7 @@ function gate(s) {
     text("gate-words", "The run ended: " + s.ended + ". Nothing is vouched for after its last sample.");
   } else if (s.open) {
     text("gate-words", "CERTIFIED: the candidate may be deployed (" + s.certificate + " certificate" +
+      (s.order === null || s.order === 1 ? "" : " of order " + s.order) +
       (s.risk === null ? ", no stated risk" : ", risk " + s.risk + " over the run") + ").");
   } else {
     text("gate-words", "NOT CERTIFIED: do not deploy the candidate.");
@@ -99,7 +100,11 @@ function draw(s) {
   text("name", s.name);
   text("kind", s.kind === "network" ? "network" : "loop");
   document.title = (s.open ? "OPEN" : "CLOSED") + " · " + s.name + " · streamcert";
-  text("candidate", "Candidate judged at the margin " + s.margin + " /s; deciding certificate: " + s.certificate + ".");
+  // The loop model's order: 1 is the paper's first-order model; 2 and 3 read a closed loop of
+  // that order through one output.
+  const order = s.order === null ? "" : " with a loop model of order " + s.order;
+  text("candidate", "Candidate judged at the margin " + s.margin + " /s" + order +
+    "; deciding certificate: " + s.certificate + ".");
   gate(s);
   stall(s);
   text("reason", s.reason ? s.reason.words : "none: the gate is open");

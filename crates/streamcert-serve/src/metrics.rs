@@ -8,6 +8,7 @@
 //! | `streamcert_rate_estimate_per_second` | gauge | loop, certificate | the rate estimate it bounds: `β̂` (paper's), `β̂_w` (calibrated) |
 //! | `streamcert_radius_per_second` | gauge | loop, certificate | the radius subtracted |
 //! | `streamcert_margin_per_second` | gauge | loop | the margin the certificate must clear |
+//! | `streamcert_model_order` | gauge | loop | the loop model's order (`[regression] order`: 1, 2 or 3) |
 //! | `streamcert_gate_open` | gauge | loop, certificate | 1 while the gate is open |
 //! | `streamcert_gate_reason` | gauge (state set) | loop, certificate, reason | 1 for the reason the gate is closed (`none` when open), 0 for the others |
 //! | `streamcert_network_rate_per_second` | gauge | loop | the network rate (NaN while there is none) |
@@ -53,6 +54,7 @@ pub(crate) struct Metrics {
     estimate: Family<Labels, FGauge>,
     radius: Family<Labels, FGauge>,
     margin: Family<Labels, FGauge>,
+    order: Family<Labels, FGauge>,
     gate: Family<Labels, FGauge>,
     reason: Family<Labels, FGauge>,
     network_rate: Family<Labels, FGauge>,
@@ -127,6 +129,7 @@ impl Metrics {
         );
         let radius = gauge("streamcert_radius_per_second", "The radius the certificate subtracts");
         let margin = gauge("streamcert_margin_per_second", "The margin the certificate must clear");
+        let order = gauge("streamcert_model_order", "The loop model's order ([regression] order)");
         let gate = gauge("streamcert_gate_open", "1 while the gate is open");
         let reason = gauge("streamcert_gate_reason", "1 for the reason the gate is closed");
         let network_rate = gauge("streamcert_network_rate_per_second", "The network rate");
@@ -163,6 +166,7 @@ impl Metrics {
             estimate,
             radius,
             margin,
+            order,
             gate,
             reason,
             network_rate,
@@ -234,6 +238,11 @@ impl Metrics {
         s.age.set(f64::NAN);
         s.lag.set(f64::NAN);
         s
+    }
+
+    /// Run `name`'s loop model order, set once: `[regression] order`.
+    pub(crate) fn model_order(&self, name: &str, order: usize) {
+        self.order.get_or_create(&labels(&[("loop", name)])).set(order as f64);
     }
 
     /// The series of network `name` with `subsystems`, a state per reason of `reasons`.

@@ -33,6 +33,9 @@ pub struct Status {
     pub risk: Option<f64>,
     /// The margin (1/s).
     pub margin: f64,
+    /// The loop model's order (`[regression] order`; `None` for a network): the verdict is
+    /// the certificate of that order.
+    pub order: Option<usize>,
     /// Whether the deciding gate is open.
     pub open: bool,
     /// The sample time from which it has been in this state (seconds).
@@ -107,6 +110,7 @@ impl Status {
             certificate,
             risk: None,
             margin: 0.0,
+            order: None,
             open: false,
             since: None,
             since_text: None,

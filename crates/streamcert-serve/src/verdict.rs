@@ -3,7 +3,7 @@
 //!
 //! ```json
 //! {"schema": "streamcert.verdict/1", "sequence": 3, "name": "loop7", "kind": "loop",
-//!  "certificate": "calibrated", "candidate": {"gain": [[0.5]], "margin": 0.001},
+//!  "certificate": "calibrated", "candidate": {"gain": [[0.5]], "margin": 0.001, "order": 1},
 //!  "open": true, "since": 12.5, "t": 12.5, "since_text": "12.5", "t_text": "12.5",
 //!  "value": 0.0021, "reason": null, "risk": {"delta": 0.05}, "ended": false,
 //!  "counters": {"samples": 626, "epochs": 0, "gaps": 0, "skipped": 0, "bad": 0,
@@ -68,14 +68,18 @@ pub struct VerdictMessage {
     pub counters: Counters,
 }
 
-/// A candidate: its gain (rows of `K`, one per input; empty for a network) and the margin the
-/// certificate must clear (1/s).
+/// A candidate: its gain (rows of `K`, one per input; empty for a network), the margin the
+/// certificate must clear (1/s) and the order of the loop model it is judged with.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Candidate {
     /// `K`, one row per input.
     pub gain: Vec<Vec<f64>>,
     /// The margin (1/s).
     pub margin: f64,
+    /// The loop model's order, `[regression] order`: 1 the paper's first-order model (the
+    /// output's rate a function of the output and the input), 2 or 3 a closed loop
+    /// `sⁿ + β_1 sⁿ⁻¹ + … + β_n` read through one output; `None` for a network.
+    pub order: Option<usize>,
 }
 
 /// Counts of a run.

@@ -205,6 +205,7 @@ impl CertifyWatch {
             .map(|k| (k, shared.metrics.certificate(&name, kind_name(k), &reasons)))
             .collect();
         let series = LoopSeries { certificates, run: shared.metrics.run(&name, cfg.margin) };
+        shared.metrics.model_order(&name, cfg.regression.order.order());
         *shared.loop_series.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
             Some(series);
         let message = VerdictMessage {
@@ -216,6 +217,7 @@ impl CertifyWatch {
             candidate: Candidate {
                 gain: cfg.gain.chunks(cfg.regression.outputs.max(1)).map(<[f64]>::to_vec).collect(),
                 margin: cfg.margin,
+                order: Some(cfg.regression.order.order()),
             },
             open: false,
             since: None,

@@ -437,3 +437,39 @@ fn the_lag_and_the_age_of_the_last_sample_are_measured_on_the_wall_clock() {
     let m = parse(&monitor.metrics_text());
     assert!(value(&m, "streamcert_evidence_lag_seconds", &[("loop", "file")]).is_nan());
 }
+
+/// The loop model's order is shown wherever the verdict is: the verdict message's candidate,
+/// the status document and the metrics say 2 for `[regression] order = 2` and 1 for the
+/// template's first order.
+#[test]
+fn the_loop_models_order_is_in_the_message_the_status_and_the_metrics() {
+    let text = streamcert_pipeline::config::g5_node_b();
+    assert!(text.contains("\norder = 1\n"));
+    for order in [1usize, 2] {
+        let cfg = streamcert_pipeline::config::parse(
+            &text.replace("\norder = 1\n", &format!("\norder = {order}\n")),
+            "g5_node_b",
+        )
+        .unwrap();
+        let (monitor, server) = started("node_b");
+        let (tx, rx) = std::sync::mpsc::channel::<VerdictMessage>();
+        let sink = move |m: &VerdictMessage| tx.send(m.clone()).unwrap();
+        let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, vec![Box::new(sink)]);
+        let mut seen = None;
+        run_paused(&cfg, &g5_rows(None), &mut watch, |k| {
+            if k == 400 {
+                seen = Some((get(server.addr(), "/api/status"), get(server.addr(), "/metrics")));
+            }
+        });
+        drop(watch);
+        let messages: Vec<VerdictMessage> = rx.try_iter().collect();
+        assert!(!messages.is_empty());
+        assert!(messages.iter().all(|m| m.candidate.order == Some(order)));
+        let (status, metrics) = seen.unwrap();
+        let doc: serde_json::Value = serde_json::from_str(&status.body).unwrap();
+        assert_eq!(doc["order"], order, "{}", status.body);
+        let m = parse(&metrics.body);
+        assert_eq!(value(&m, "streamcert_model_order", &[("loop", "node_b")]), order as f64);
+        assert_eq!(monitor.status().order, Some(order));
+    }
+}

@@ -53,7 +53,7 @@ impl NetworkWatch {
             name: name.clone(),
             kind: "network",
             certificate: "network",
-            candidate: Candidate { gain: Vec::new(), margin: cfg.margin },
+            candidate: Candidate { gain: Vec::new(), margin: cfg.margin, order: None },
             open: false,
             since: None,
             t: None,

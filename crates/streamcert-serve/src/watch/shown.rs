@@ -41,6 +41,7 @@ impl Shown {
             st.kind = message.kind;
             st.certificate = message.certificate;
             st.margin = message.candidate.margin;
+            st.order = message.candidate.order;
             st.risk = message.risk.map(|r| r.delta);
             st.reason.clone_from(&message.reason);
         }

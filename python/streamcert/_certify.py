@@ -14,7 +14,8 @@ from ._errors import ConfigError
 
 #: The gates, in the CSV's order.
 GATES = tuple(_native.GATES)
-#: The reasons' names: code ``k`` (1 to 21) is ``REASON_KINDS[k - 1]``; code 0 is "open".
+#: The reasons' names: code ``k`` (1 to ``len(REASON_KINDS)``) is ``REASON_KINDS[k - 1]``; code 0 is
+#: "open".
 REASON_KINDS = tuple(_native.reason_kinds())
 
 

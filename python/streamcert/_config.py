@@ -141,12 +141,19 @@ class Config:
         """The deployment margin."""
         return self._native.margin
 
+    @property
+    def order(self) -> int:
+        """The loop model's order, ``regression.order``: 1 the paper's first-order model (the
+        default), 2 or 3 a closed loop of that order read through one output (a tank behind
+        a tank, a mass read by its position, a plant behind a sensor lag)."""
+        return self._native.order
+
     def __reduce__(self) -> Any:
         return (Config.from_toml_str, (self.toml,))
 
     def __repr__(self) -> str:
         mode = "paper-only, NO STATED RISK" if self.paper_only else "calibrated"
-        return f"Config(outputs={self.outputs}, inputs={self.inputs}, {mode})"
+        return f"Config(outputs={self.outputs}, inputs={self.inputs}, {mode}, order {self.order})"
 
 
 def resolve(config: Any) -> Config:

@@ -106,6 +106,13 @@ impl PyConfig {
     fn margin(&self) -> f64 {
         self.inner.config.certifier.margin
     }
+
+    /// The loop model's order, `[regression] order`: 1 the paper's first-order model, 2 or 3
+    /// a closed loop of that order read through one output.
+    #[getter]
+    fn order(&self) -> usize {
+        self.inner.config.certifier.regression.order.order()
+    }
 }
 
 /// Compose rates `β_i` with coupling triplets `(rows[k], cols[k], gains[k])`: a dict of the

@@ -62,9 +62,23 @@
 //! `W = 14.2` against `13.0`; with the dither at `±0.1` and `h = 50` it is certified (the
 //! example below).
 //!
+//! **Nonlinearity.** At every look the curvature test
+//! ([`CurvatureTest`](streamcert_regression::CurvatureTest)) asks whether the square and the
+//! cube of the output, where the plant's static term enters, explain what the linear model
+//! leaves: under linear dynamics they do not (`W / 2 ~ F(2, ν_c)`, `ν_c` the window's disjoint
+//! spans less the larger fit's `d + 2` coefficients). Where `W` exceeds its `1 − guard_risk`
+//! quantile the look certifies nothing ([`NotCertified::VaryingDynamics`]): a static term that
+//! bends over the explored region (a stiffening spring, a valve's characteristic) gives a
+//! closed loop whose rate varies over the region, and one linear fit certifies its average.
+//! A nonlinearity in the damping terms only is not seen.
+//!
+//! **Plant change.** There is no change guard of its own: a look fits the window's last
+//! `N` rows, so a plant change leaves every look once the window holds only the new plant's
+//! rows (one window after the change; `cargo xtask validity --only-order` measures it).
+//!
 //! ## Assumptions
 //! - linear dynamics of order at most `n` over the region (the hidden-dynamics guard tests
-//!   the order; a nonlinearity is not tested by this certificate);
+//!   the order, the nonlinearity guard the static term's curvature);
 //! - white sensor noise on `y` and white noise entering where the intercept enters;
 //! - the inputs applied are known exactly (the logged `u`).
 //!
@@ -106,14 +120,28 @@ pub struct OrderNCertificateConfig {
     /// ([`NotCertified::OrderUntested`]). Off, a plant with a state beyond the order is
     /// certified on a model that does not describe it, which `δ` does not cover.
     pub hidden_dynamics: bool,
-    /// The guard's risk per look, in `(0, 1)`: the chance that it closes the gate of a loop
-    /// the model holds (it only closes, so it costs power, never validity). Default `δ`.
+    /// The nonlinearity guard (default on): at every look, the curvature test
+    /// ([`CurvatureTest`](streamcert_regression::CurvatureTest): the square and the cube of
+    /// the output where the static term enters) at risk [`guard_risk`](Self::guard_risk);
+    /// where it rejects, the look certifies nothing ([`NotCertified::VaryingDynamics`]), and
+    /// where it cannot run, neither ([`NotCertified::LinearityUntested`]). Off, a loop whose
+    /// static term bends over the explored region is certified on its average slope, which
+    /// `δ` does not cover.
+    #[serde(default = "default_true")]
+    pub nonlinearity: bool,
+    /// Each guard's risk per look, in `(0, 1)`: the chance that it closes the gate of a loop
+    /// the model holds (a guard only closes, so it costs power, never validity). Default `δ`.
     pub guard_risk: f64,
+}
+
+fn default_true() -> bool {
+    true
 }
 
 impl OrderNCertificateConfig {
     /// The documented defaults: looks every `M / 10` samples (at least 1), a tolerance of
-    /// `1e-4`, the hidden-dynamics guard on at risk `δ` per look; the first look when the
+    /// `1e-4`, the hidden-dynamics and nonlinearity guards on at risk `δ` per look each; the
+    /// first look when the
     /// window is full (`min_rows = M`, as `regression` has it).
     #[must_use]
     pub fn new(regression: OrderNConfig, gain: Vec<f64>, margin: f64, delta: f64) -> Self {
@@ -125,17 +153,21 @@ impl OrderNCertificateConfig {
             look_period: (regression.window / 10).max(1),
             tolerance: 1e-4,
             hidden_dynamics: true,
+            nonlinearity: true,
             guard_risk: delta,
         }
     }
 
     /// The smallest window a look may use, so that each fit holds at least one disjoint
     /// span more than it has coefficients (`ν >= 1`): `(d + 1)(n h + 1)` rows, and
-    /// `(d + 3)(n h + 1)` with the hidden-dynamics guard (its larger fit has `d + 1`
-    /// coefficients and loses the first `n h + 1` rows, which have no past row).
+    /// `(d + 3)(n h + 1)` with a guard (the nonlinearity guard's larger fit has `d + 2`
+    /// coefficients; the hidden-dynamics guard's loses the first `n h + 1` rows, which have
+    /// no past row).
     #[must_use]
     pub fn smallest_window(&self) -> usize {
-        let extra = if self.hidden_dynamics { 2 } else { 0 };
+        // The past-row fit: `d + n + 1` coefficients on the rows that have a past row; the
+        // curvature fit: `d + 2` on every row.
+        let extra = if self.hidden_dynamics || self.nonlinearity { 2 } else { 0 };
         (self.regression.width() + 1 + extra) * (self.regression.span() + 1)
     }
 
@@ -185,7 +217,7 @@ impl OrderNCertificateConfig {
                 "min_rows",
                 format!(
                     "must be at least {smallest} rows ((d + 1)(n h + 1), or (d + 3)(n h + 1) \
-                     with the hidden-dynamics guard), got {}: a smaller window holds no \
+                     with a guard), got {}: a smaller window holds no \
                      disjoint span beyond its coefficients to estimate the noise's scale from \
                      (raise the window or shorten the horizon)",
                     self.regression.min_rows
@@ -434,6 +466,17 @@ impl OrderNCertificate {
             let statistic = test.statistic();
             if !(statistic <= threshold) {
                 return Err(NotCertified::HiddenDynamics { window: rows, statistic, threshold });
+            }
+        }
+        if self.cfg.nonlinearity {
+            let test = record
+                .curvature_test(0..record.rows())
+                .map_err(|_| NotCertified::LinearityUntested { window: rows })?;
+            let dof = (test.rows / (span + 1)).saturating_sub(d + 2);
+            let threshold = 2.0 * f_quantile(2.0, dof as f64, self.cfg.guard_risk);
+            let statistic = test.statistic();
+            if !(statistic <= threshold) {
+                return Err(NotCertified::VaryingDynamics { window: rows, statistic, threshold });
             }
         }
         let closed = fit

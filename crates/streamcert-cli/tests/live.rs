@@ -12,6 +12,7 @@ use common::live::{Certify, live_config};
 
 #[test]
 fn the_simulated_plant_with_its_own_broker_is_certified_live() {
+    let ports = common::live::port_lock();
     let port = streamcert_live::broker::free_loopback().unwrap().port();
     let config = live_config("sim", port, "plant/g5");
     // The plant serves its broker and publishes at 20 times real time once started.
@@ -23,6 +24,7 @@ fn the_simulated_plant_with_its_own_broker_is_certified_live() {
         .unwrap();
     let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
     let line = plant_err.next().unwrap().unwrap();
+    drop(ports);
     assert!(line.starts_with("broker: serving MQTT on"), "{line}");
     let certify = Certify::start(&config, &["--output", "/dev/null"]);
     let (status, err) = certify.finish();
@@ -61,6 +63,7 @@ struct WalkThrough {
 fn walk_through(plant: u8, certify: u8, port: &str, config: &str, extra: &[String]) -> WalkThrough {
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let doc = std::fs::read_to_string(root.join("docs/live.md")).unwrap();
+    let ports = common::live::port_lock();
     let free = streamcert_live::broker::free_loopback().unwrap().port().to_string();
     let on_port = |w: &String| w.replace(port, &free);
     let mut plant_args: Vec<String> = terminal(&doc, plant).iter().map(on_port).collect();
@@ -80,6 +83,7 @@ fn walk_through(plant: u8, certify: u8, port: &str, config: &str, extra: &[Strin
     let mut plant = bin().args(&plant_args).stderr(Stdio::piped()).spawn().unwrap();
     let mut plant_err = BufReader::new(plant.stderr.take().unwrap()).lines();
     let plant_says = plant_err.next().unwrap().unwrap();
+    drop(ports);
     let args: Vec<&str> = certify_args.iter().map(String::as_str).collect();
     let (status, stderr) = Certify::start_args(&args).finish();
     plant.kill().unwrap();
@@ -130,8 +134,10 @@ struct NetworkCase {
 }
 
 fn network_case(tag: &str, example: &str) -> NetworkCase {
+    let ports = common::live::port_lock();
     let port = streamcert_live::broker::free_loopback().unwrap();
     streamcert_live::broker::serve(port).unwrap();
+    drop(ports);
     let sim = bin()
         .args(["simulate", "g5", "--experiment", "2", "--coupling", "bidirectional", "--seed", "1"])
         .output()
@@ -250,8 +256,10 @@ fn two_sites_read_their_subsystems_from_a_broker_and_write_the_files_epochs() {
 /// and they are the certificate of order 2's (not the first order's).
 #[test]
 fn a_live_loop_at_order_two_writes_the_files_rows_bit_for_bit() {
+    let ports = common::live::port_lock();
     let port = streamcert_live::broker::free_loopback().unwrap();
     streamcert_live::broker::serve(port).unwrap();
+    drop(ports);
     let (csv, header, rows) = common::live::g5("1500");
     let template = streamcert_pipeline::config::g5_node_b();
     assert!(template.contains("\norder = 1\n"));

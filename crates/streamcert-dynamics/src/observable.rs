@@ -60,6 +60,10 @@ pub struct ObservableLoop {
     pub amplitude: f64,
     /// From this sample on the plant's `a` is this one (a plant change).
     pub change: Option<(usize, Vec<f64>)>,
+    /// A cubic static term: `ẋ_N` also receives `−cubic · y³` (a spring that stiffens for
+    /// `cubic > 0`). 0 (the default) is the linear loop; otherwise each sample is integrated
+    /// by the classical Runge–Kutta method in ten steps, the input held.
+    pub cubic: f64,
     /// Samples in a run.
     pub samples: usize,
     /// The sampling step in seconds.
@@ -80,6 +84,7 @@ impl ObservableLoop {
             hold: 100,
             amplitude: 0.1,
             change: None,
+            cubic: 0.0,
             samples: 4000,
             dt: 0.01,
         }
@@ -88,6 +93,11 @@ impl ObservableLoop {
     /// One exact step of `dt` of the plant `a`, its state augmented by the input and the
     /// constant: `exp([[A, b, 0.1 b], [0, 0, 0], [0, 0, 0]] dt)`.
     fn step(&self, a: &[f64]) -> DMatrix<f64> {
+        (Self::generator(a) * self.dt).exp()
+    }
+
+    /// The augmented system's matrix `[[A, b, 0.1 b], [0, 0, 0], [0, 0, 0]]`.
+    fn generator(a: &[f64]) -> DMatrix<f64> {
         let n = a.len();
         let mut big = DMatrix::<f64>::zeros(n + 2, n + 2);
         for (i, ai) in a.iter().enumerate() {
@@ -98,14 +108,36 @@ impl ObservableLoop {
         }
         big[(n - 1, n)] = 1.0;
         big[(n - 1, n + 1)] = 0.1;
-        (big * self.dt).exp()
+        big
+    }
+
+    /// One step of `dt` with the cubic term: ten classical Runge–Kutta steps of
+    /// `ẋ = G x − cubic x_1³ e_N`, the input and the constant held.
+    fn nonlinear_step(&self, generator: &DMatrix<f64>, x: &DVector<f64>) -> DVector<f64> {
+        let n = self.a.len();
+        let f = |x: &DVector<f64>| {
+            let mut dx = generator * x;
+            dx[n - 1] -= self.cubic * x[0].powi(3);
+            dx
+        };
+        let h = self.dt / 10.0;
+        let mut x = x.clone();
+        for _ in 0..10 {
+            let k1 = f(&x);
+            let k2 = f(&(&x + &k1 * (h / 2.0)));
+            let k3 = f(&(&x + &k2 * (h / 2.0)));
+            let k4 = f(&(&x + &k3 * h));
+            x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
+        }
+        x
     }
 
     /// The noiseless loop's rate: `−ln ϱ(Φ_cl) / dt`, `ϱ` the spectral radius of the sampled
     /// closed loop `x_{k+1} = Φ x_k + Γ u_{k−delay}`, `u_k = K x_{1,k}` (the plant's state and
     /// the `delay` inputs in flight). It is the truth of the loop as simulated, the input held
     /// over each sample; without delay it is the rightmost root of
-    /// `sᴺ + a_1 sᴺ⁻¹ + … + (a_N − K)` to `O(K dt)`. `NaN` for an empty `a`.
+    /// `sᴺ + a_1 sᴺ⁻¹ + … + (a_N − K)` to `O(K dt)`. With a cubic term it is the rate of the
+    /// linearisation at `y = 0`. `NaN` for an empty `a`.
     #[must_use]
     pub fn rate(&self) -> f64 {
         let n = self.a.len();
@@ -145,6 +177,7 @@ impl ObservableLoop {
             return;
         }
         let mut step = self.step(&self.a);
+        let mut generator = Self::generator(&self.a);
         let mut rng = SplitMix(seed);
         let mut x = DVector::<f64>::zeros(n + 2);
         let mut dither = self.amplitude;
@@ -155,6 +188,7 @@ impl ObservableLoop {
                 && a.len() == n
             {
                 step = self.step(a);
+                generator = Self::generator(a);
             }
             if k % self.hold == 0 {
                 dither = if rng.uniform() < 0.5 { -self.amplitude } else { self.amplitude };
@@ -167,7 +201,7 @@ impl ObservableLoop {
             queue.push_back(input);
             x[n] = queue.pop_front().unwrap_or(input);
             x[n + 1] = 1.0;
-            x = &step * x;
+            x = if self.cubic == 0.0 { &step * x } else { self.nonlinear_step(&generator, &x) };
             x[n - 1] += self.process * self.dt.sqrt() * rng.normal();
         }
     }
@@ -242,6 +276,30 @@ mod tests {
         let delayed =
             ObservableLoop { delay: 10, ..ObservableLoop::new(&[1.0], 0.955 * (-0.0045f64).exp()) };
         assert!((delayed.rate() - 0.045).abs() < 1e-3, "{}", delayed.rate());
+    }
+
+    /// The Runge–Kutta path of the cubic term agrees with the exact step where the cubic is
+    /// negligible, and a stiffening spring holds a smaller excursion than the linear one.
+    #[test]
+    fn the_cubic_term_stiffens_the_loop() {
+        let collect = |plant: &ObservableLoop| {
+            let mut v = Vec::new();
+            plant.run(8, |_, y, _| {
+                v.push(y);
+                true
+            });
+            v
+        };
+        let linear = ObservableLoop { sensor: 0.0, ..ObservableLoop::new(&[1.2, 1.0], 0.5) };
+        let tiny = collect(&ObservableLoop { cubic: 1e-12, ..linear.clone() });
+        let exact = collect(&linear);
+        for (a, b) in tiny.iter().zip(&exact) {
+            assert!((a - b).abs() < 1e-9, "{a} against {b}");
+        }
+        let stiff = collect(&ObservableLoop { cubic: 5.0, amplitude: 1.0, ..linear.clone() });
+        let soft = collect(&ObservableLoop { amplitude: 1.0, ..linear });
+        let peak = |v: &[f64]| v.iter().fold(0.0f64, |m, y| m.max(y.abs()));
+        assert!(peak(&stiff) < 0.8 * peak(&soft), "{} against {}", peak(&stiff), peak(&soft));
     }
 
     #[test]

@@ -326,9 +326,11 @@ impl Summary {
                 // The risk is stated for one Jacobian over the region; the nonlinearity guard
                 // tests that, it does not bound a rate that varies (NONLINEAR.md).
                 let order = cfg.regression.order.order();
-                let scope = if order > 1 {
-                    "the certificate of order n does not test this: its nonlinearity guard runs \
-                     at order 1 only"
+                let scope = if order > 1 && cal.nonlinearity {
+                    "the nonlinearity guard of order n tests the curvature of the plant's static \
+                     term over it, not a nonlinearity of its damping terms"
+                } else if order > 1 {
+                    "the nonlinearity guard is off"
                 } else if cfg.nonlinear.is_some() {
                     "the region-valid verdict after it bounds the rate at every state of a region"
                 } else if cal.nonlinearity {

@@ -79,7 +79,8 @@ pub use error::RegressionError;
 pub use estimate::{Estimate, EstimateStatus};
 pub use loop_model::{FastPath, HiddenDynamicsTest, LoopModel};
 pub use order_n::{
-    ClosedLoop, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression, PastRowTest,
+    ClosedLoop, CurvatureTest, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression,
+    PastRowTest, RegressorTest,
 };
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;

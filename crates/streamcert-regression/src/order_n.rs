@@ -49,6 +49,7 @@
 //! Both work on the samples relative to the record's first sample (the origin), which only the
 //! intercept sees; it is reported in the plant's own coordinates.
 
+mod curvature;
 mod fit;
 mod past;
 mod rows;
@@ -56,8 +57,9 @@ mod spline;
 mod streaming;
 mod variance;
 
+pub use curvature::CurvatureTest;
 pub use fit::{ClosedLoop, OrderNFit, OrderNRecord};
-pub use past::PastRowTest;
+pub use past::{PastRowTest, RegressorTest};
 pub use streaming::OrderNRegression;
 
 use crate::{LoopModel, RegressionError};

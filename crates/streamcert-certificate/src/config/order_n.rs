@@ -11,7 +11,8 @@ impl CertifierConfig {
     ///
     /// It takes the regression's order, inputs, horizon `h` and window `M` (in rows; the
     /// first look when the window is full), its identification threshold, the gain, the
-    /// margin, and from the calibration `δ`, the hidden-dynamics guard and its risk (default
+    /// margin, and from the calibration `δ`, the hidden-dynamics and nonlinearity guards and
+    /// their risk (default
     /// `δ` per look). The first order's other calibration keys (its windows, instruments,
     /// anchored window) are not read.
     #[must_use]
@@ -28,6 +29,7 @@ impl CertifierConfig {
             OrderNCertificateConfig::new(regression, self.gain.clone(), self.margin, delta);
         if let Some(c) = &self.calibration {
             cfg.hidden_dynamics = c.hidden_dynamics;
+            cfg.nonlinearity = c.nonlinearity;
             cfg.guard_risk = c.guard_risk.unwrap_or(delta);
         }
         Some(cfg)

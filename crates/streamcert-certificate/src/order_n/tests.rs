@@ -93,10 +93,12 @@ fn looks_fall_on_the_schedule_and_spend_the_split_risk() {
 
 #[test]
 fn the_smallest_window_is_accepted_and_one_row_less_is_refused() {
-    // d = 5, n h = 20: (5 + 1)(20 + 1) = 126 rows, and (5 + 3)(20 + 1) = 168 with the guard.
-    for (guard, smallest, dof) in [(false, 126, 1), (true, 168, 3)] {
+    // d = 5, n h = 20: (5 + 1)(20 + 1) = 126 rows, and (5 + 3)(20 + 1) = 168 with a guard.
+    for (hidden, nonlinearity, smallest, dof) in
+        [(false, false, 126, 1), (true, false, 168, 3), (false, true, 168, 3), (true, true, 168, 3)]
+    {
         let mut cfg = config(400, 10);
-        cfg.hidden_dynamics = guard;
+        (cfg.hidden_dynamics, cfg.nonlinearity) = (hidden, nonlinearity);
         assert_eq!(cfg.smallest_window(), smallest);
         cfg.regression.min_rows = smallest;
         let mut cert = OrderNCertificate::new(cfg.clone()).unwrap();

@@ -11,6 +11,16 @@ use streamcert_live::publish::{Layout, PublishOptions};
 
 use super::{bin, text, tmp};
 
+/// Held from taking a free loopback port until a broker or server listens on it: a port is
+/// free only until someone binds it, and the tests of one binary run in parallel, so without
+/// it a test's broker could take the port another test's plant is about to serve on.
+pub(crate) static PORT: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// The lock of [`PORT`] (a test that failed while holding it does not stop the others).
+pub(crate) fn port_lock() -> std::sync::MutexGuard<'static, ()> {
+    PORT.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
 /// G5 node b's configuration reading the rows of `topic` from the broker on `port`, ending
 /// after 3 s without a message.
 pub(crate) fn live_config(tag: &str, port: u16, topic: &str) -> PathBuf {
@@ -72,11 +82,18 @@ impl Certify {
         }
     }
 
-    /// Wait (60 s at most) for the end; its exit status and whole stderr.
+    /// Wait (60 s at most) for the end; its exit status and whole stderr (the reader's last
+    /// lines included: it sends until the process's stderr closes, 5 s at most after the
+    /// exit).
     pub(crate) fn finish(mut self) -> (std::process::ExitStatus, String) {
         let child = self.child.take().expect("running");
         let out = super::wait_bounded(child, 60, "certify");
-        self.seen.extend(self.lines.try_iter());
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while let Ok(line) =
+            self.lines.recv_timeout(deadline.saturating_duration_since(Instant::now()))
+        {
+            self.seen.push(line);
+        }
         (out.status, self.seen.join("\n"))
     }
 

@@ -116,6 +116,9 @@ pub struct OrderNRecord {
     pub(super) wz: Vec<f64>,
     pub(super) wy: Vec<f64>,
     pub(super) wv: Vec<f64>,
+    /// The output's samples relative to the first (`y − origin[0]`), for the curvature
+    /// test's regressors.
+    pub(super) ys: Vec<f64>,
 }
 
 impl OrderNRecord {
@@ -179,6 +182,7 @@ impl OrderNRecord {
             wz: vec![0.0; rows * (span + 1)],
             wy: vec![0.0; rows * n * (span + 1)],
             wv: vec![0.0; rows * span],
+            ys: Vec::new(),
         };
         // The weights depend on the span's times relative to its first: a row whose times
         // match the last filled row's to `1e-12` of the span (equal sampling, up to the
@@ -198,6 +202,7 @@ impl OrderNRecord {
             record.wy[r * n * (span + 1)..(r + 1) * n * (span + 1)].copy_from_slice(&weights.wy);
             record.wv[r * span..(r + 1) * span].copy_from_slice(&weights.wv);
         }
+        record.ys = ys;
         Ok(record)
     }
 

@@ -19,21 +19,29 @@ use crate::RegressionError;
 /// rows are not identified when order `n` holds (every `(s + λ) p(s)` fits them), so it is
 /// available at every order, the largest included.
 ///
-/// `W = γ̂² / Var γ̂`, with `Var γ̂` the model-structured covariance of the larger fit
-/// ([`OrderNFit`](super::OrderNFit)): under the model, `W ~ F(1, ν)` when the noise's scale is
-/// estimated with `ν` degrees of freedom.
+/// `W = γ̂ᵀ (Var γ̂)⁻¹ γ̂`, with `Var γ̂` the model-structured covariance of the larger fit
+/// ([`OrderNFit`](super::OrderNFit)): under the model, `W / q ~ F(q, ν)` (`q = n + 1`) when the
+/// noise's scale is estimated with `ν` degrees of freedom. `coefficients` are `γ̂`, those of
+/// the past row's regressand and of its `n` output regressors; `rows` are those of the range
+/// that have a past row in the record.
+pub type PastRowTest = RegressorTest;
+
+/// A Wald test of `q` extra regressors in a larger fit of order `n` (the model guards'
+/// [`PastRowTest`] and [`CurvatureTest`](super::CurvatureTest)): their coefficients `γ̂`,
+/// the model-structured covariance of those coefficients, and the rows fitted.
 #[derive(Debug, Clone, PartialEq)]
-pub struct PastRowTest {
-    /// `γ̂`: the coefficients of the past row's regressand and of its `n` output regressors.
+pub struct RegressorTest {
+    /// `γ̂`: the extra regressors' coefficients.
     pub coefficients: Vec<f64>,
-    /// `Var γ̂` (model-structured), `q × q` row-major, `q = n + 1`.
+    /// `Var γ̂` (model-structured), `q × q` row-major.
     pub covariance: Vec<f64>,
-    /// The rows of the larger fit (those of the range that have a past row in the record).
+    /// The rows of the larger fit.
     pub rows: usize,
 }
 
-impl PastRowTest {
-    /// The Wald statistic `W = γ̂ᵀ (Var γ̂)⁻¹ γ̂` (`+∞` when the covariance is singular).
+impl RegressorTest {
+    /// The Wald statistic `W = γ̂ᵀ (Var γ̂)⁻¹ γ̂` (`+∞` when the covariance is not positive
+    /// definite).
     #[must_use]
     pub fn statistic(&self) -> f64 {
         let q = self.coefficients.len();
@@ -87,6 +95,6 @@ impl OrderNRecord {
         let (covariance, _, _) = self.structured_covariance(first, &phi, &theta, &resid, &ginv);
         let q = n + 1;
         let covariance = (0..q * q).map(|i| covariance[(d + i / q) * wide + d + i % q]).collect();
-        Ok(PastRowTest { coefficients: theta[d..].to_vec(), covariance, rows: count })
+        Ok(RegressorTest { coefficients: theta[d..].to_vec(), covariance, rows: count })
     }
 }

@@ -9,6 +9,8 @@ use super::rows::RowWeights;
 use super::*;
 use crate::{InputIntegral, Model, RegressionConfig, SlidingRegression};
 
+mod curvature;
+
 /// Sample times from `0` with mean step `dt`, each step jittered by up to `±jitter · dt`.
 fn times(len: usize, dt: f64, jitter: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let mut t = vec![0.0; len];

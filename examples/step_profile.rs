@@ -20,7 +20,11 @@
 //! no guard, without its change guard, without its two model guards), `auto` (the default
 //! with the horizon ladder of `horizon = "auto"`: `h = 1, 2, 5, 10`, `M = 30 h`), `order2`
 //! (the default at `[regression] order = 2` with its documented `M = 2000` rows, `h = 50`:
-//! the certificate of order 2, its looks included), all for
+//! the certificate of order 2, its looks included; on this stream its hidden-dynamics guard
+//! refuses every look, so the later fit and the bisection are not paid), `order2_loop` (the
+//! same on an exactly simulated order-2 loop at five times the margin, whose looks pass
+//! both guards, fit three times and bisect the margin; at most [`LOOP_SAMPLES`] samples, the
+//! record simulated whole before the loop whatever their number), all for
 //! `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
@@ -70,9 +74,12 @@ fn calibrated(
             cfg.ladder = Some(HorizonLadder::automatic());
             default
         }
-        "order2" => {
+        "order2" | "order2_loop" => {
             cfg.regression.order = LoopModel::Order(2);
             (cfg.regression.window, cfg.regression.horizon) = (2000, 50);
+            if mode == "order2_loop" {
+                cfg.gain = vec![LOOP_GAIN];
+            }
             default
         }
         _ => return Ok(None),
@@ -81,20 +88,56 @@ fn calibrated(
     Ok(Some(Certifier::new(cfg)?))
 }
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
-    let mut args = std::env::args().skip(1);
-    let mode = args.next().unwrap_or_else(|| "step".into());
-    let samples: usize = args.next().map_or(Ok(1_000_000), |s| s.parse())?;
-    let len = 4096;
+/// The `order2_loop` record's length, and its loop's gain: `ÿ + 1.2 ẏ + y = u + 0.1` under
+/// `u = 0.7625 y_m + d`, the closed loop `(s + 0.25)(s + 0.95)`.
+const LOOP_SAMPLES: usize = 60_000;
+const LOOP_GAIN: f64 = 0.7625;
+
+/// `len` samples of `width` independent AR(0.95) channels driven by uniforms on
+/// `[−0.5, 0.5)`, interleaved (seed 1): the bench's stream.
+fn ar_stream(width: usize, len: usize) -> Vec<f64> {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let mut state = [0.0f64; 2];
-    let mut data = Vec::with_capacity(2 * len);
+    let mut state = vec![0.0f64; width];
+    let mut data = Vec::with_capacity(width * len);
     for _ in 0..len {
         for v in &mut state {
             *v = 0.95 * *v + rng.random::<f64>() - 0.5;
         }
         data.extend_from_slice(&state);
     }
+    data
+}
+
+/// A simulated record: its times, and `y, u` interleaved.
+type Record = (Vec<f64>, Vec<f64>);
+
+/// The `order2_loop` record, [`LOOP_SAMPLES`] long whatever the run's length (so that its
+/// simulation cancels in the difference of two runs); empty for the other modes.
+fn loop_record(mode: &str, samples: usize) -> Result<Record, Box<dyn std::error::Error>> {
+    let mut record = (Vec::new(), Vec::new());
+    if mode == "order2_loop" {
+        if samples > LOOP_SAMPLES {
+            return Err(format!("order2_loop runs at most {LOOP_SAMPLES} samples").into());
+        }
+        let plant = streamcert::dynamics::ObservableLoop {
+            samples: LOOP_SAMPLES,
+            ..streamcert::dynamics::ObservableLoop::new(&[1.2, 1.0], LOOP_GAIN)
+        };
+        plant.run(7, |t, y, u| {
+            record.0.push(t);
+            record.1.extend_from_slice(&[y, u]);
+            true
+        });
+    }
+    Ok(record)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let mut args = std::env::args().skip(1);
+    let mode = args.next().unwrap_or_else(|| "step".into());
+    let samples: usize = args.next().map_or(Ok(1_000_000), |s| s.parse())?;
+    let len = 4096;
+    let data = ar_stream(2, len);
     let reg_cfg = RegressionConfig::new(1, 1, 150, 5, 1e-4);
     let mut cfg = CertifierConfig::new(reg_cfg, vec![-1.0], 0.2, 0.05, 10);
     cfg.ambiguity = Some(AmbiguityConfig::paper(150));
@@ -103,25 +146,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut reg = SlidingRegression::new(reg_cfg)?;
     let mut amb = AmbiguityRadius::new(AmbiguityConfig::paper(150))?;
     let (pw, mw) = (10usize, 10usize);
-    let mut wide_data = Vec::with_capacity((pw + mw) * len);
-    let mut wide_state = vec![0.0f64; pw + mw];
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    for _ in 0..len {
-        for v in &mut wide_state {
-            *v = 0.95 * *v + rng.random::<f64>() - 0.5;
-        }
-        wide_data.extend_from_slice(&wide_state);
-    }
+    let wide_data = ar_stream(pw + mw, len);
     let wide_gain: Vec<f64> =
         (0..mw * pw).map(|i| if i % (pw + 1) == 0 { -1.0 } else { 0.0 }).collect();
     let wide_cfg = RegressionConfig::new(pw, mw, 150, 5, 1e-4);
     let mut wide = Certifier::new(CertifierConfig::new(wide_cfg, wide_gain, 0.2, 0.05, 10))?;
     let mut cal = calibrated(reg_cfg, &mode)?;
+    let (times, record) = loop_record(&mode, samples)?;
     let mut t = 0.0;
     for i in 0..samples {
         let k = i % len;
         t += 0.01;
-        let (y, u) = (&data[2 * k..2 * k + 1], &data[2 * k + 1..2 * k + 2]);
+        let (src, k) = if times.is_empty() { (&data, k) } else { (&record, i) };
+        t = times.get(i).copied().unwrap_or(t);
+        let (y, u) = (&src[2 * k..2 * k + 1], &src[2 * k + 1..2 * k + 2]);
         match mode.as_str() {
             "update" => reg.push(black_box(t), y, u)?,
             "estimate" => {
@@ -148,7 +186,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
             }
             "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model"
-            | "auto" | "order2" => {
+            | "auto" | "order2" | "order2_loop" => {
                 let Some(cert) = cal.as_mut() else { unreachable!("built for these modes") };
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));

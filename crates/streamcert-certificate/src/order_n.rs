@@ -159,16 +159,22 @@ impl OrderNCertificateConfig {
     }
 
     /// The smallest window a look may use, so that each fit holds at least one disjoint
-    /// span more than it has coefficients (`ν >= 1`): `(d + 1)(n h + 1)` rows, and
-    /// `(d + 3)(n h + 1)` with a guard (the nonlinearity guard's larger fit has `d + 2`
-    /// coefficients; the hidden-dynamics guard's loses the first `n h + 1` rows, which have
-    /// no past row).
+    /// span more than it has coefficients (`ν >= 1`, a guard whose test has no degree of
+    /// freedom could not refuse): `(d + 1)(n h + 1)` rows for the certificate's fit,
+    /// `(d + 3)(n h + 1)` with the nonlinearity guard (its fit has `d + 2` coefficients) and
+    /// `(d + n + 3)(n h + 1)` with the hidden-dynamics guard (its fit has `d + n + 1`
+    /// coefficients and loses the first `n h + 1` rows, which have no past row).
     #[must_use]
     pub fn smallest_window(&self) -> usize {
-        // The past-row fit: `d + n + 1` coefficients on the rows that have a past row; the
-        // curvature fit: `d + 2` on every row.
-        let extra = if self.hidden_dynamics || self.nonlinearity { 2 } else { 0 };
-        (self.regression.width() + 1 + extra) * (self.regression.span() + 1)
+        let (d, n) = (self.regression.width(), self.regression.model.order());
+        let mut spans = d + 1;
+        if self.nonlinearity {
+            spans = spans.max(d + 3);
+        }
+        if self.hidden_dynamics {
+            spans = spans.max(d + n + 3);
+        }
+        spans * (self.regression.span() + 1)
     }
 
     /// Check every field.
@@ -216,10 +222,11 @@ impl OrderNCertificateConfig {
             return CertifyError::refuse(
                 "min_rows",
                 format!(
-                    "must be at least {smallest} rows ((d + 1)(n h + 1), or (d + 3)(n h + 1) \
-                     with a guard), got {}: a smaller window holds no \
-                     disjoint span beyond its coefficients to estimate the noise's scale from \
-                     (raise the window or shorten the horizon)",
+                    "must be at least {smallest} rows ((d + 1)(n h + 1); (d + 3)(n h + 1) \
+                     with the nonlinearity guard, (d + n + 3)(n h + 1) with the hidden-dynamics \
+                     guard), got {}: a smaller window holds no disjoint span beyond a fit's \
+                     coefficients to estimate the noise's scale from (raise the window or \
+                     shorten the horizon)",
                     self.regression.min_rows
                 ),
             );
@@ -462,6 +469,9 @@ impl OrderNCertificate {
                 .map_err(|_| NotCertified::OrderUntested { window: rows })?;
             let q = test.coefficients.len() as f64;
             let dof = (test.rows / (span + 1)).saturating_sub(d + n + 1);
+            if dof == 0 {
+                return Err(NotCertified::OrderUntested { window: rows });
+            }
             let threshold = q * f_quantile(q, dof as f64, self.cfg.guard_risk);
             let statistic = test.statistic();
             if !(statistic <= threshold) {
@@ -473,6 +483,9 @@ impl OrderNCertificate {
                 .curvature_test(0..record.rows())
                 .map_err(|_| NotCertified::LinearityUntested { window: rows })?;
             let dof = (test.rows / (span + 1)).saturating_sub(d + 2);
+            if dof == 0 {
+                return Err(NotCertified::LinearityUntested { window: rows });
+            }
             let threshold = 2.0 * f_quantile(2.0, dof as f64, self.cfg.guard_risk);
             let statistic = test.statistic();
             if !(statistic <= threshold) {

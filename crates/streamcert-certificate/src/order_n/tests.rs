@@ -93,9 +93,11 @@ fn looks_fall_on_the_schedule_and_spend_the_split_risk() {
 
 #[test]
 fn the_smallest_window_is_accepted_and_one_row_less_is_refused() {
-    // d = 5, n h = 20: (5 + 1)(20 + 1) = 126 rows, and (5 + 3)(20 + 1) = 168 with a guard.
+    // d = 5, n = 2, n h = 20: (5 + 1)(20 + 1) = 126 rows; (5 + 3)(20 + 1) = 168 with the
+    // nonlinearity guard; (5 + 2 + 3)(20 + 1) = 210 with the hidden-dynamics guard, whose
+    // test then has ν = 210/21 − 1 − (5 + 2 + 1) = 1.
     for (hidden, nonlinearity, smallest, dof) in
-        [(false, false, 126, 1), (true, false, 168, 3), (false, true, 168, 3), (true, true, 168, 3)]
+        [(false, false, 126, 1), (true, false, 210, 5), (false, true, 168, 3), (true, true, 210, 5)]
     {
         let mut cfg = config(400, 10);
         (cfg.hidden_dynamics, cfg.nonlinearity) = (hidden, nonlinearity);

@@ -61,16 +61,6 @@ impl OrderNRecord {
             }
             (row[d], row[d + 1]) = (square, cube);
         }
-        let z = &self.z[rows.clone()];
-        let (theta, ginv) = self.solve(&phi, z, wide)?;
-        let resid: Vec<f64> = phi
-            .chunks_exact(wide)
-            .zip(z)
-            .map(|(row, zr)| zr - row.iter().zip(&theta).map(|(x, t)| x * t).sum::<f64>())
-            .collect();
-        let (covariance, _, _) =
-            self.structured_covariance(rows.start, &phi, &theta, &resid, &ginv);
-        let covariance = (0..4).map(|i| covariance[(d + i / 2) * wide + d + i % 2]).collect();
-        Ok(RegressorTest { coefficients: theta[d..].to_vec(), covariance, rows: count })
+        self.regressor_test(rows, &phi, d)
     }
 }

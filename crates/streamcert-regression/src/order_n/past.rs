@@ -85,15 +85,29 @@ impl OrderNRecord {
             row[d] = self.z[past];
             row[d + 1..].copy_from_slice(&self.phi[past * d..past * d + n]);
         }
-        let z = &self.z[first..rows.end];
-        let (theta, ginv) = self.solve(&phi, z, wide)?;
+        self.regressor_test(first..rows.end, &phi, d)
+    }
+
+    /// The larger fit of the rows `rows` on `phi` (their `d` regressors, then the extra ones,
+    /// row-major) with the model-structured covariance, and the test of the extra
+    /// regressors' coefficients.
+    pub(super) fn regressor_test(
+        &self,
+        rows: std::ops::Range<usize>,
+        phi: &[f64],
+        d: usize,
+    ) -> Result<RegressorTest, RegressionError> {
+        let count = rows.len();
+        let wide = phi.len() / count.max(1);
+        let z = &self.z[rows.clone()];
+        let (theta, ginv) = self.solve(phi, z, wide)?;
         let resid: Vec<f64> = phi
             .chunks_exact(wide)
             .zip(z)
             .map(|(row, zr)| zr - row.iter().zip(&theta).map(|(x, t)| x * t).sum::<f64>())
             .collect();
-        let (covariance, _, _) = self.structured_covariance(first, &phi, &theta, &resid, &ginv);
-        let q = n + 1;
+        let (covariance, _, _) = self.structured_covariance(rows.start, phi, &theta, &resid, &ginv);
+        let q = wide - d;
         let covariance = (0..q * q).map(|i| covariance[(d + i / q) * wide + d + i % q]).collect();
         Ok(RegressorTest { coefficients: theta[d..].to_vec(), covariance, rows: count })
     }

@@ -1,7 +1,7 @@
 //! [`OrderNFit`]: the batch estimator of order `n`, with the coefficients' covariance from the
 //! residual's known structure.
 
-use super::rows::RowWeights;
+use super::rows::{RowWeights, same_offsets};
 use super::variance::{fit_variances, gram, sandwich};
 use super::{OrderNConfig, check_sample};
 use crate::RegressionError;
@@ -490,12 +490,4 @@ impl OrderNFit {
         }
         Ok(ClosedLoop { beta, covariance })
     }
-}
-
-/// Whether the times `b` have the offsets from their first that `a` has, each to within
-/// `1e-12` of `a`'s span.
-fn same_offsets(a: &[f64], b: &[f64]) -> bool {
-    let (a0, b0) = (a[0], b[0]);
-    let tol = 1e-12 * (a[a.len() - 1] - a0);
-    a.iter().zip(b).all(|(x, y)| ((x - a0) - (y - b0)).abs() <= tol)
 }

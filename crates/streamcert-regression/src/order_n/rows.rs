@@ -123,3 +123,11 @@ impl RowWeights {
         self.wz.iter().zip(y).map(|(w, y)| w * y).sum()
     }
 }
+
+/// Whether the times `b` have the offsets from their first that `a` has, each to within
+/// `1e-12` of `a`'s span.
+pub(super) fn same_offsets(a: &[f64], b: &[f64]) -> bool {
+    let (a0, b0) = (a[0], b[0]);
+    let tol = 1e-12 * (a[a.len() - 1] - a0);
+    a.iter().zip(b).all(|(x, y)| ((x - a0) - (y - b0)).abs() <= tol)
+}

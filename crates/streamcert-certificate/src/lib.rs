@@ -106,7 +106,7 @@ pub use nonlinear::{
 };
 pub use order_n::{OrderNCertificate, OrderNCertificateConfig, OrderNLook, OrderNRegion};
 pub use radius::{certificate_surface, certificate_value};
-pub use rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
+pub use rate::order_n::{Ellipsoid, robust_margin, robustly_stable, robustly_stable_rational};
 pub use row::{
     ColumnKind, EVIDENCE_COLUMN_KINDS, EVIDENCE_COLUMNS, EvidenceRow, NUMBER_COLUMNS, ReasonText,
     WINDOW_COLUMNS,

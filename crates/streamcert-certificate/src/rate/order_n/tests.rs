@@ -220,3 +220,63 @@ fn ill_formed_ellipsoids_are_refused() {
     let m = robust_margin(&e, 1e-12).expect("a (negative) margin");
     assert!(m < 0.0 && m <= margin_of(&[-1.0, 2.0]));
 }
+
+/// The floating-point filter answers only as the rational arithmetic does: over random
+/// ellipsoids of orders 1 to 3 and `α` spread over the bracket, within `1e-9` of the margin and
+/// at the certified margin's neighbouring floats (where the sign of some value is at the
+/// floats' resolution), every run the balls decide gives the rational test's answer. The
+/// filter decides almost every `α` away from the margin (what makes it worth having) and leaves
+/// to the rationals some at it.
+#[test]
+fn the_filter_answers_as_the_rational_test_or_defers() {
+    let mut rng = ChaCha8Rng::seed_from_u64(43);
+    let (mut far, mut far_decided, mut near, mut near_decided) = (0, 0, 0, 0);
+    for n in 1..=3 {
+        for _ in 0..40 {
+            let (centre, cov) = random_ellipsoid(n, 0.01 + 0.3 * rng.random::<f64>(), &mut rng);
+            let r2 = 1.0 + 20.0 * rng.random::<f64>();
+            let e = Ellipsoid { centre: &centre, covariance: &cov, radius2: r2 };
+            let margin = robust_margin(&e, 1e-12);
+            let mut alphas: Vec<(f64, bool)> =
+                (0..8).map(|_| (-2.0 + 5.0 * rng.random::<f64>(), false)).collect();
+            if let Some(m) = margin {
+                let mut up = m;
+                let mut down = m;
+                alphas.push((m, true));
+                for _ in 0..4 {
+                    (up, down) = (up.next_up(), down.next_down());
+                    alphas.extend([(up, true), (down, true)]);
+                }
+                alphas.extend([(m + 1e-9, true), (m - 1e-9, true)]);
+            }
+            for (alpha, at_margin) in alphas {
+                let exact = stable_at::<BigRational>(&e, alpha);
+                let filtered = ball::decided(|| stable_at::<Ball>(&e, alpha));
+                if let Some(answer) = filtered {
+                    assert_eq!(answer, exact, "n {n} {centre:?} {cov:?} {r2} at {alpha}");
+                }
+                if at_margin {
+                    (near, near_decided) =
+                        (near + 1, near_decided + usize::from(filtered.is_some()));
+                } else {
+                    (far, far_decided) = (far + 1, far_decided + usize::from(filtered.is_some()));
+                }
+            }
+        }
+    }
+    assert!(far_decided * 100 >= far * 99, "{far_decided} of {far}");
+    assert!(near_decided < near, "{near_decided} of {near}");
+}
+
+/// At the boundary itself: `β̂ = 1.5`, `Σ = 0.25`, `r² = 4` at first order is robust exactly
+/// below `α = 0.5` (`β̂ − α > r √Σ = 1`), and not at it; the float just below `0.5` passes
+/// although its margin over the boundary (`2⁻⁵⁴`) is below the floats' resolution of the
+/// squared comparison, so the filter defers it to the rationals.
+#[test]
+fn the_boundary_float_is_decided_exactly() {
+    let e = Ellipsoid { centre: &[1.5], covariance: &[0.25], radius2: 4.0 };
+    assert!(!robustly_stable(&e, 0.5));
+    assert!(robustly_stable(&e, 0.5f64.next_down()));
+    assert!(!robustly_stable(&e, 0.5f64.next_up()));
+    assert_eq!(ball::decided(|| stable_at::<Ball>(&e, 0.5f64.next_down())), None);
+}

@@ -415,8 +415,10 @@ impl OrderNCertificate {
         let index = |i: usize| (first + i) % capacity;
         let t: Vec<f64> = (0..count).map(|i| self.t[index(i)]).collect();
         let y: Vec<f64> = (0..count).map(|i| self.y[index(i)]).collect();
-        let u: Vec<f64> =
-            (0..count).flat_map(|i| self.u[index(i) * m..(index(i) + 1) * m].to_vec()).collect();
+        let mut u = Vec::with_capacity(count * m);
+        for i in 0..count {
+            u.extend_from_slice(&self.u[index(i) * m..(index(i) + 1) * m]);
+        }
         let unidentified = |e: RegressionError| match e {
             RegressionError::NotIdentified(_) => NotCertified::InsufficientExcitation,
             _ => NotCertified::WarmingUp { columns: rows, needed: cfg.min_rows },

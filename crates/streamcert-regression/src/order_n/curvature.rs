@@ -52,7 +52,7 @@ impl OrderNRecord {
             let r = rows.start + i;
             row[..d].copy_from_slice(&self.phi[r * d..(r + 1) * d]);
             // The weights of the output regressor `k = n` on the span's samples.
-            let w = &self.wy[(r * n + n - 1) * (span + 1)..(r * n + n) * (span + 1)];
+            let w = self.wy(r, n - 1);
             let (mut square, mut cube) = (0.0, 0.0);
             for (wi, y) in w.iter().zip(&self.ys[r..=r + span]) {
                 let y2 = y * y;

@@ -2,7 +2,7 @@
 //! residual's known structure.
 
 use super::rows::{RowWeights, same_offsets};
-use super::variance::{fit_variances, gram, sandwich};
+use super::variance::sandwich;
 use super::{OrderNConfig, check_sample};
 use crate::RegressionError;
 use crate::linalg::{cholesky_in_place, cholesky_solve_in_place, eig_work_len, psd_eig_extremes};
@@ -113,9 +113,10 @@ pub struct OrderNRecord {
     pub(super) origin: Vec<f64>,
     pub(super) phi: Vec<f64>,
     pub(super) z: Vec<f64>,
-    pub(super) wz: Vec<f64>,
-    pub(super) wy: Vec<f64>,
-    pub(super) wv: Vec<f64>,
+    /// The rows' weights: each distinct set once (one set on equal spacing), and the set of
+    /// each row.
+    pub(super) weights: Vec<RowWeights>,
+    pub(super) weights_of: Vec<usize>,
     /// The output's samples relative to the first (`y − origin[0]`), for the curvature
     /// test's regressors.
     pub(super) ys: Vec<f64>,
@@ -179,9 +180,8 @@ impl OrderNRecord {
             origin,
             phi: vec![0.0; rows * d],
             z: vec![0.0; rows],
-            wz: vec![0.0; rows * (span + 1)],
-            wy: vec![0.0; rows * n * (span + 1)],
-            wv: vec![0.0; rows * span],
+            weights: Vec::new(),
+            weights_of: vec![0; rows],
             ys: Vec::new(),
         };
         // The weights depend on the span's times relative to its first: a row whose times
@@ -198,9 +198,10 @@ impl OrderNRecord {
             }
             let row = &mut record.phi[r * d..(r + 1) * d];
             record.z[r] = weights.apply(shape, &ys[s], &us[r * m..(r + span + 1) * m], row);
-            record.wz[r * (span + 1)..(r + 1) * (span + 1)].copy_from_slice(&weights.wz);
-            record.wy[r * n * (span + 1)..(r + 1) * n * (span + 1)].copy_from_slice(&weights.wy);
-            record.wv[r * span..(r + 1) * span].copy_from_slice(&weights.wv);
+            if !same {
+                record.weights.push(weights.clone());
+            }
+            record.weights_of[r] = record.weights.len() - 1;
         }
         record.ys = ys;
         Ok(record)
@@ -210,6 +211,22 @@ impl OrderNRecord {
     #[must_use]
     pub fn rows(&self) -> usize {
         self.z.len()
+    }
+
+    /// Row `r`'s weights of the regressand on its span's samples.
+    pub(super) fn wz(&self, r: usize) -> &[f64] {
+        &self.weights[self.weights_of[r]].wz
+    }
+
+    /// Row `r`'s weights of the output regressor `k + 1` on its span's samples.
+    pub(super) fn wy(&self, r: usize, k: usize) -> &[f64] {
+        let span = self.span;
+        &self.weights[self.weights_of[r]].wy[k * (span + 1)..(k + 1) * (span + 1)]
+    }
+
+    /// Row `r`'s response to white noise where the intercept enters, per sample interval.
+    pub(super) fn wv(&self, r: usize) -> &[f64] {
+        &self.weights[self.weights_of[r]].wv
     }
 
     /// Fit the consecutive rows `rows` (row `r` ends at sample `r + n h`).
@@ -268,12 +285,18 @@ impl OrderNRecord {
 
         let mut g = vec![0.0; d * d];
         let mut rhs = vec![0.0; d];
+        // The upper triangle over the rows in order, then mirrored (the same products).
         for (row, zr) in phi.chunks_exact(d).zip(z) {
-            for a in 0..d {
-                rhs[a] += row[a] * zr;
-                for b in 0..d {
-                    g[a * d + b] += row[a] * row[b];
+            for (a, (ra, ga)) in row.iter().zip(g.chunks_exact_mut(d)).enumerate() {
+                rhs[a] += ra * zr;
+                for (gab, rb) in ga[a..].iter_mut().zip(&row[a..]) {
+                    *gab += ra * rb;
                 }
+            }
+        }
+        for a in 0..d {
+            for b in 0..a {
+                g[a * d + b] = g[b * d + a];
             }
         }
         let scale: Vec<f64> = (0..d).map(|a| g[a * d + a].sqrt()).collect();
@@ -313,61 +336,6 @@ impl OrderNRecord {
         }
 
         Ok((theta, ginv))
-    }
-
-    /// The model-structured covariance of the rows from `first` (see [`OrderNFit`]), in the
-    /// origin's coordinates, with the fitted `(σ_e², σ_v²)`.
-    pub(super) fn structured_covariance(
-        &self,
-        first: usize,
-        phi: &[f64],
-        theta: &[f64],
-        resid: &[f64],
-        ginv: &[f64],
-    ) -> (Vec<f64>, f64, f64) {
-        let (n, span, d, count) = (self.n, self.span, theta.len(), resid.len());
-        // The residual's kernel on the sensor noise (with â) and on the equation noise; their
-        // filtered rows Ψ (indexed from the range's first sample) and the rows' mean kernels.
-        let mut psi_e = vec![0.0; (count + span) * d];
-        let mut psi_v = vec![0.0; (count + span) * d];
-        let mut mean_e = vec![0.0; span + 1];
-        let mut mean_v = vec![0.0; span];
-        let mut w = vec![0.0; span + 1];
-        for (i, row) in phi.chunks_exact(d).enumerate() {
-            let r = first + i;
-            w.copy_from_slice(&self.wz[r * (span + 1)..(r + 1) * (span + 1)]);
-            for (k, th) in theta.iter().enumerate().take(n) {
-                let wyk = &self.wy[(r * n + k) * (span + 1)..(r * n + k + 1) * (span + 1)];
-                for (wo, wi) in w.iter_mut().zip(wyk) {
-                    *wo -= th * wi;
-                }
-            }
-            for (o, wo) in w.iter().enumerate() {
-                mean_e[o] += wo / count as f64;
-                let psi = &mut psi_e[(i + o) * d..(i + o + 1) * d];
-                for (p, x) in psi.iter_mut().zip(row) {
-                    *p += wo * x;
-                }
-            }
-            for (o, wo) in self.wv[r * span..(r + 1) * span].iter().enumerate() {
-                mean_v[o] += wo / count as f64;
-                let psi = &mut psi_v[(i + o) * d..(i + o + 1) * d];
-                for (p, x) in psi.iter_mut().zip(row) {
-                    *p += wo * x;
-                }
-            }
-        }
-        let (sensor_variance, equation_variance) = fit_variances(resid, &mean_e, &mean_v);
-        let he = gram(&psi_e, d);
-        let hv = gram(&psi_v, d);
-        let middle: Vec<f64> =
-            he.iter().zip(&hv).map(|(e, v)| sensor_variance * e + equation_variance * v).collect();
-        let dof = count as f64 / (count - d) as f64;
-        let mut covariance = sandwich(ginv, &middle, d);
-        for c in &mut covariance {
-            *c *= dof;
-        }
-        (covariance, sensor_variance, equation_variance)
     }
 
     /// `θ` and its covariance moved from the origin's coordinates to the plant's.

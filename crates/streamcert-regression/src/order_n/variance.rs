@@ -1,17 +1,37 @@
-//! The model-structured covariance's arithmetic ([`OrderNFit`](super::OrderNFit)): the two
-//! noise variances fitted to the residual's autocovariances, and the sandwich.
+//! The model-structured covariance ([`OrderNFit`](super::OrderNFit)): the filtered rows, the
+//! two noise variances fitted to the residual's autocovariances, and the sandwich.
 
-/// `Σ_j x_j x_jᵀ` over the rows of `x` (`d` wide).
-pub(super) fn gram(x: &[f64], d: usize) -> Vec<f64> {
+use super::OrderNRecord;
+
+/// `Σ_j x_j x_jᵀ` over the rows of `x`, given by its columns (`x` holds them one after the
+/// other, each `len` long): entry `(a, b)` is the sum over `j` in order of `x_a[j] x_b[j]`,
+/// taken once for `a <= b` and mirrored (the products are the same numbers).
+fn gram_of_columns(x: &[f64], len: usize) -> Vec<f64> {
+    let d = x.len() / len.max(1);
     let mut g = vec![0.0; d * d];
-    for row in x.chunks_exact(d) {
-        for a in 0..d {
-            for b in 0..d {
-                g[a * d + b] += row[a] * row[b];
+    for a in 0..d {
+        let xa = &x[a * len..(a + 1) * len];
+        for b in a..d {
+            let xb = &x[b * len..(b + 1) * len];
+            let mut sum = 0.0;
+            for (p, q) in xa.iter().zip(xb) {
+                sum += p * q;
             }
+            (g[a * d + b], g[b * d + a]) = (sum, sum);
         }
     }
     g
+}
+
+/// `Ψ_{i + o} += w_o · row` for `o` over `w`: one row's contribution (row `i` of the range)
+/// to the filtered rows its kernel reaches, with `Ψ` stored by column (`psi` holds the
+/// columns one after the other, each `len` long).
+fn scatter(psi: &mut [f64], len: usize, i: usize, w: &[f64], row: &[f64]) {
+    for (column, x) in psi.chunks_exact_mut(len).zip(row) {
+        for (p, wo) in column[i..i + w.len()].iter_mut().zip(w) {
+            *p += wo * x;
+        }
+    }
 }
 
 /// `A B Aᵀ` for `d × d` matrices.
@@ -36,17 +56,41 @@ fn shape_of(w: &[f64], lags: usize) -> Vec<f64> {
     (0..lags).map(|l| w.iter().zip(w.iter().skip(l)).map(|(a, b)| a * b).sum()).collect()
 }
 
+/// `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the lags `ℓ = 0..lags` (`lags <= N`), each sum taken
+/// over `k` in order; four lags at a time, their common terms first and then each one's last
+/// terms, so that each sum adds the same products in the same order.
+fn autocovariances(resid: &[f64], lags: usize) -> Vec<f64> {
+    let len = resid.len();
+    let mut gamma = vec![0.0; lags];
+    for (l0, out) in (0..lags).step_by(4).zip(gamma.chunks_mut(4)) {
+        let width = out.len();
+        // Lag l0 + q has the terms k < len − l0 − q; the first len − l0 − (width − 1) are
+        // common to the four.
+        let common = len - l0 - (width - 1);
+        let mut acc = [0.0f64; 4];
+        for (k, rk) in resid[..common].iter().enumerate() {
+            let ahead = &resid[k + l0..k + l0 + width];
+            for (a, r) in acc.iter_mut().zip(ahead) {
+                *a += rk * r;
+            }
+        }
+        for (q, (o, a)) in out.iter_mut().zip(acc).enumerate() {
+            let mut sum = a;
+            for k in common..len - l0 - q {
+                sum += resid[k] * resid[k + l0 + q];
+            }
+            *o = sum / (len - l0 - q) as f64;
+        }
+    }
+    gamma
+}
+
 /// `(σ_e², σ_v²) >= 0` minimising `Σ_ℓ (γ̂(ℓ) − σ_e² s_e(ℓ) − σ_v² s_v(ℓ))²` over the lags
 /// `0..=n h` (two-variable non-negative least squares: the unconstrained solution when both
 /// are positive, else the better of the two one-variable fits, else zero).
-pub(super) fn fit_variances(resid: &[f64], kernel_e: &[f64], kernel_v: &[f64]) -> (f64, f64) {
+fn fit_variances(resid: &[f64], kernel_e: &[f64], kernel_v: &[f64]) -> (f64, f64) {
     let lags = kernel_e.len().min(resid.len());
-    let gamma: Vec<f64> = (0..lags)
-        .map(|l| {
-            resid.iter().zip(&resid[l..]).map(|(a, b)| a * b).sum::<f64>()
-                / (resid.len() - l) as f64
-        })
-        .collect();
+    let gamma: Vec<f64> = autocovariances(resid, lags);
     let (se, sv) = (shape_of(kernel_e, lags), shape_of(kernel_v, lags));
     let dot = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| x * y).sum::<f64>();
     let (ee, vv, ev, eg, vg) =
@@ -69,4 +113,73 @@ pub(super) fn fit_variances(resid: &[f64], kernel_e: &[f64], kernel_v: &[f64]) -
     let only_e = if ee > 0.0 { (eg / ee).max(0.0) } else { 0.0 };
     let only_v = if vv > 0.0 { (vg / vv).max(0.0) } else { 0.0 };
     if sse(only_e, 0.0) <= sse(0.0, only_v) { (only_e, 0.0) } else { (0.0, only_v) }
+}
+
+/// A weight set's residual kernel on the sensor noise and the two kernels over the rows'
+/// number: `(set, w, w / N, wv / N)`.
+type SetKernels = (usize, Vec<f64>, Vec<f64>, Vec<f64>);
+
+impl OrderNRecord {
+    /// The model-structured covariance of the rows from `first` (see [`OrderNFit`]), in the
+    /// origin's coordinates, with the fitted `(σ_e², σ_v²)`.
+    pub(super) fn structured_covariance(
+        &self,
+        first: usize,
+        phi: &[f64],
+        theta: &[f64],
+        resid: &[f64],
+        ginv: &[f64],
+    ) -> (Vec<f64>, f64, f64) {
+        let (n, span, d, count) = (self.n, self.span, theta.len(), resid.len());
+        // The residual's kernel on the sensor noise (with â) and on the equation noise; their
+        // filtered rows Ψ (indexed from the range's first sample; stored by column, each
+        // `N + n h` long) and the rows' mean kernels.
+        let len = count + span;
+        let mut psi_e = vec![0.0; len * d];
+        let mut psi_v = vec![0.0; len * d];
+        let mut mean_e = vec![0.0; span + 1];
+        let mut mean_v = vec![0.0; span];
+        let count_f = count as f64;
+        // Each weight set's residual kernel `w = wz − Σ_k â_k wy_k`, and both kernels over the
+        // rows' number, computed once for the rows that share the set (one set on equal
+        // spacing): `(set, w, w / N, wv / N)`.
+        let mut kernel: Option<SetKernels> = None;
+        for (i, row) in phi.chunks_exact(d).enumerate() {
+            let r = first + i;
+            let set = self.weights_of[r];
+            if kernel.as_ref().is_some_and(|k| k.0 != set) {
+                kernel = None;
+            }
+            let (_, w, we, wv) = kernel.get_or_insert_with(|| {
+                let mut w = self.wz(r).to_vec();
+                for (k, th) in theta.iter().enumerate().take(n) {
+                    for (wo, wi) in w.iter_mut().zip(self.wy(r, k)) {
+                        *wo -= th * wi;
+                    }
+                }
+                let we = w.iter().map(|wo| wo / count_f).collect();
+                let wv = self.wv(r).iter().map(|wo| wo / count_f).collect();
+                (set, w, we, wv)
+            });
+            for (me, wo) in mean_e.iter_mut().zip(we) {
+                *me += *wo;
+            }
+            scatter(&mut psi_e, len, i, w, row);
+            for (mv, wo) in mean_v.iter_mut().zip(wv) {
+                *mv += *wo;
+            }
+            scatter(&mut psi_v, len, i, self.wv(r), row);
+        }
+        let (sensor_variance, equation_variance) = fit_variances(resid, &mean_e, &mean_v);
+        let he = gram_of_columns(&psi_e, len);
+        let hv = gram_of_columns(&psi_v, len);
+        let middle: Vec<f64> =
+            he.iter().zip(&hv).map(|(e, v)| sensor_variance * e + equation_variance * v).collect();
+        let dof = count as f64 / (count - d) as f64;
+        let mut covariance = sandwich(ginv, &middle, d);
+        for c in &mut covariance {
+            *c *= dof;
+        }
+        (covariance, sensor_variance, equation_variance)
+    }
 }

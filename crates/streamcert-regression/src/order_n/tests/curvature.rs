@@ -29,14 +29,14 @@ fn the_curvature_test_is_the_widened_least_squares() {
             if j < d {
                 return record.phi[r * d + j];
             }
-            let w = &record.wy[(r * n + n - 1) * (span + 1)..(r * n + n) * (span + 1)];
+            let w = record.wy(r, n - 1);
             let power = if j == d { 2 } else { 3 };
             w.iter().zip(&excursion[r..=r + span]).map(|(wi, e)| wi * e.powi(power)).sum()
         });
         // The regressor k = n itself is that weighting of the excursion.
         for i in [0, test.rows / 2, test.rows - 1] {
             let r = rows.start + i;
-            let w = &record.wy[(r * n + n - 1) * (span + 1)..(r * n + n) * (span + 1)];
+            let w = record.wy(r, n - 1);
             let direct: f64 = w.iter().zip(&excursion[r..=r + span]).map(|(a, b)| a * b).sum();
             let stored = record.phi[r * d + n - 1];
             assert!((direct - stored).abs() <= 1e-9 * stored.abs().max(1e-6), "row {r}");

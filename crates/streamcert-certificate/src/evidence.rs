@@ -74,17 +74,26 @@ pub enum NotCertified {
         /// Its threshold at the test's risk.
         threshold: f64,
     },
-    /// Calibrated certificate: the hidden-dynamics guard says the output has dynamics the
-    /// first-order model does not hold (the past increment predicts the next one; see the
-    /// [`order`](crate::Calibration::hidden_dynamics) guard), so the window's rate speaks for
-    /// a model that does not describe the plant.
+    /// Calibrated certificate: the hidden-dynamics guard says the output has dynamics beyond
+    /// the order of the model it tested (at the first order, the past increment predicts the
+    /// next one, see the [`order`](crate::Calibration::hidden_dynamics) guard; at order `n`,
+    /// the past row's regressand predicts what the model leaves,
+    /// [`OrderNCertificateConfig::hidden_dynamics`](crate::OrderNCertificateConfig::hidden_dynamics)),
+    /// so the window's rate speaks for a model that does not describe the plant. Its words
+    /// name the order tried and what would be valid: a model of a higher order, or at the
+    /// largest order ([`MAX_ORDER`](streamcert_regression::MAX_ORDER)) the unmeasured states
+    /// logged as outputs.
     HiddenDynamics {
         /// The window length.
         window: usize,
-        /// The Wald statistic of the past increment's coefficients.
+        /// The Wald statistic of the past increment's (the past row's) coefficients.
         statistic: f64,
         /// Its threshold at the guard's risk.
         threshold: f64,
+        /// The order of the model the guard tested: 1 for the first-order model (and when
+        /// absent from a serialised reason), `n` for the certificate of order `n`.
+        #[serde(default = "first_order")]
+        order: usize,
     },
     /// Calibrated certificate: the hidden-dynamics guard's larger fit has no estimate for the
     /// window yet (too few columns, or a singular fit), so the model order is not checked and
@@ -178,6 +187,11 @@ pub enum NotCertified {
     /// `[regression] order = 2 | 3` they are not computed, and the calibrated column carries
     /// the certificate of order `n` ([`OrderNCertificate`](crate::OrderNCertificate)).
     FirstOrderOnly,
+}
+
+/// The order of a reason serialised before the order was recorded: the first.
+fn first_order() -> usize {
+    1
 }
 
 impl NotCertified {

@@ -437,7 +437,12 @@ impl OrderNCertificate {
             let threshold = q * f_quantile(q, dof as f64, self.cfg.guard_risk);
             let statistic = test.statistic();
             if !(statistic <= threshold) {
-                return Err(NotCertified::HiddenDynamics { window: rows, statistic, threshold });
+                return Err(NotCertified::HiddenDynamics {
+                    window: rows,
+                    statistic,
+                    threshold,
+                    order: n,
+                });
             }
         }
         if self.cfg.nonlinearity {

@@ -21,7 +21,7 @@ pub fn reason_phrase(kind: &str) -> &str {
         "rate_below_margin" => "the newest data bound the rate below the margin",
         "varying_dynamics" => "the dynamics vary over the explored region (nonlinearity guard)",
         "hidden_dynamics" => {
-            "the output has dynamics the model does not hold (hidden-dynamics guard)"
+            "the output has dynamics beyond its model's order (hidden-dynamics guard)"
         }
         "order_untested" | "linearity_untested" => "the guards have not tested the window yet",
         "plant_changed" => "the plant changed (change guard)",

@@ -3,6 +3,7 @@
 
 use super::NotCertified;
 use crate::fixed::{Fixed, Sig};
+use streamcert_regression::MAX_ORDER;
 
 /// [`NotCertified::FirstOrderOnly`]'s text.
 const FIRST_ORDER_ONLY: &str = "not computed at this order: the paper's certificates are of the \
@@ -46,13 +47,7 @@ impl std::fmt::Display for NotCertified {
                 Fixed::<3>(*statistic),
                 Fixed::<3>(*threshold)
             ),
-            Self::HiddenDynamics { window, statistic, threshold } => write!(
-                f,
-                "the output has dynamics the model does not hold (window {window}: past \
-                 increment, Wald {} > {})",
-                Fixed::<3>(*statistic),
-                Fixed::<3>(*threshold)
-            ),
+            Self::HiddenDynamics { .. } => self.fmt_hidden(f),
             Self::OrderUntested { window } => {
                 write!(f, "window {window}: model order not yet tested (no larger fit)")
             }
@@ -94,6 +89,38 @@ impl std::fmt::Display for NotCertified {
 }
 
 impl NotCertified {
+    /// [`NotCertified::HiddenDynamics`]'s words: the order tried and what would be valid.
+    fn fmt_hidden(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let Self::HiddenDynamics { window, statistic, threshold, order } = self else {
+            return Ok(());
+        };
+        let (statistic, threshold) = (Fixed::<3>(*statistic), Fixed::<3>(*threshold));
+        match *order {
+            0 | 1 => write!(
+                f,
+                "the output has dynamics beyond its model's order (order 1, window {window}: \
+                 past increment, Wald {statistic} > {threshold}); a model of order 2 or 3 on \
+                 one output ([regression] order) may hold them (a second run on the same data \
+                 spends the risk δ again)"
+            ),
+            n if n < MAX_ORDER => write!(
+                f,
+                "the output has dynamics beyond its model's order (order {n}, window {window}: \
+                 past row, Wald {statistic} > {threshold}); a model of order {} ([regression] \
+                 order = {}) may hold them",
+                n + 1,
+                n + 1
+            ),
+            n => write!(
+                f,
+                "the output has dynamics beyond its model's order (order {n}, the largest \
+                 certified; window {window}: past row, Wald {statistic} > {threshold}); no \
+                 certificate of order {n} or below is valid for this loop: one is with the \
+                 unmeasured states logged as outputs (order 1 takes several)"
+            ),
+        }
+    }
+
     /// The nonlinear certificate's reasons in words ([`Display`](std::fmt::Display)'s).
     fn fmt_nonlinear(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -120,5 +147,42 @@ impl NotCertified {
             // Display sends only the nonlinear reasons here; any other is named by its kind.
             other => f.write_str(other.kind()),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::NotCertified;
+
+    fn hidden(order: usize) -> NotCertified {
+        NotCertified::HiddenDynamics { window: 150, statistic: 31.4, threshold: 9.2, order }
+    }
+
+    /// The words name the order tried and what would be valid at each order: the first
+    /// order names the models of order 2 and 3 and the risk a second run spends; order 2
+    /// names order 3; order 3, the largest, names none above it but the states as outputs.
+    #[test]
+    fn the_hidden_dynamics_words_name_the_order_and_what_would_be_valid() {
+        let one = hidden(1).to_string();
+        assert!(one.starts_with("the output has dynamics beyond its model's order (order 1,"));
+        assert!(one.contains("past increment"), "{one}");
+        assert!(one.contains("order 2 or 3 on one output") && one.contains("risk δ again"));
+        let two = hidden(2).to_string();
+        assert!(two.contains("(order 2, window 150") && two.contains("[regression] order = 3"));
+        assert!(two.contains("past row, Wald 31.400 > 9.200"), "{two}");
+        let three = hidden(3).to_string();
+        assert!(three.contains("(order 3, the largest certified;") && !three.contains("order = 4"));
+        assert!(three.contains("unmeasured states logged as outputs"), "{three}");
+    }
+
+    /// A reason serialised before the order was recorded reads as the first order's.
+    #[test]
+    fn a_reason_without_its_order_is_the_first_orders() {
+        let old = r#"{"reason":"hidden_dynamics","window":150,"statistic":31.4,"threshold":9.2}"#;
+        let read: NotCertified = serde_json::from_str(old).unwrap();
+        assert_eq!(read, hidden(1));
+        let round: NotCertified =
+            serde_json::from_str(&serde_json::to_string(&hidden(3)).unwrap()).unwrap();
+        assert_eq!(round, hidden(3));
     }
 }

@@ -292,6 +292,7 @@ impl ModelGuard {
                 window: self.fit.windows.window(v),
                 statistic: t.statistic,
                 threshold: t.threshold,
+                order: 1,
             });
         }
         if let Some((v, t)) = rejected(self.curvature_tests()) {

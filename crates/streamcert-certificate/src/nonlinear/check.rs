@@ -157,7 +157,7 @@ pub(super) fn refused(
     let (statistic, threshold) = (t.statistic, t.threshold);
     Some(match untested {
         NotCertified::OrderUntested { window } => {
-            NotCertified::HiddenDynamics { window, statistic, threshold }
+            NotCertified::HiddenDynamics { window, statistic, threshold, order: 1 }
         }
         NotCertified::LibraryUntested { window } => {
             NotCertified::LibraryMisfit { window, statistic, threshold }

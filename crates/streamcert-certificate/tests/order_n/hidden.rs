@@ -104,3 +104,62 @@ fn the_nonlinearity_guard_refuses_a_loop_certified_on_its_average_slope() {
     assert!(on.certified * 10 <= off.certified, "with the guard: {on:?}");
     assert!(on.varying * 2 >= on.looks, "with the guard: {on:?}");
 }
+
+/// The first hidden-dynamics refusal over the seeded runs `seeds` of `plant` at `order`.
+fn first_refusal(
+    plant: &Loop,
+    (order, horizon): (usize, usize),
+    seeds: std::ops::Range<u64>,
+) -> Option<NotCertified> {
+    let found = par_map(seeds, |seed| {
+        let model = LoopModel::of_order(order).unwrap();
+        let regression = OrderNConfig::new(model, 1, 2000, horizon);
+        let cfg = OrderNCertificateConfig::new(regression, vec![plant.gain], 0.05, 0.01);
+        let mut cert = OrderNCertificate::new(cfg).unwrap();
+        let mut refusal = None;
+        plant.run(seed, |t, y, u| {
+            if let Some(look) = cert.push(t, y, &[u]).unwrap()
+                && let Err(reason @ NotCertified::HiddenDynamics { .. }) = look.outcome
+            {
+                refusal = Some(reason);
+            }
+            refusal.is_none()
+        });
+        refusal
+    });
+    found.into_iter().flatten().next()
+}
+
+/// The refusal names the order it tried and what would be valid: beyond order 2, a model of
+/// order 3; beyond order 3, the largest, no certificate of this certifier, and the
+/// unmeasured states logged as outputs. Plants, closed just below the margin under a dither
+/// of `±1` (where a misfit shows best): three lags `(s + 1)³` at order 2 (`h = 50`); four lags
+/// `(s + 1)⁴` and a lag behind a transport delay of 10 samples at order 3, at `h = 25`
+/// (`ν = 14`): at `h = 50` a window of 2000 rows holds 12 spans of 151 samples after the
+/// first, and the guard's larger fit of 11 coefficients leaves its test `ν = 1` degree of
+/// freedom (a threshold of about 22 500 at `δ = 0.01`), too few to see either.
+#[test]
+fn the_hidden_dynamics_refusal_names_the_order_and_what_would_be_valid() {
+    let three = Loop { amplitude: 1.0, ..Loop::new(&[3.0, 3.0, 1.0], 0.955f64.powi(3)) };
+    let at_two = first_refusal(&three, (2, 50), 700..704).expect("order 2 refuses three lags");
+    assert!(matches!(at_two, NotCertified::HiddenDynamics { order: 2, .. }), "{at_two:?}");
+    let words = at_two.to_string();
+    assert!(words.contains("(order 2, window") && words.contains("order = 3"), "{words}");
+    let four = Loop { amplitude: 1.0, ..Loop::new(&[4.0, 6.0, 4.0, 1.0], 0.955f64.powi(4)) };
+    let delayed =
+        Loop { amplitude: 1.0, delay: 10, ..Loop::new(&[1.0], 0.955 * (-0.0045f64).exp()) };
+    for (name, plant, seeds) in [("four lags", four, 710..714), ("delayed", delayed, 720..724)] {
+        let at_three = first_refusal(&plant, (3, 25), seeds).expect(name);
+        assert!(
+            matches!(at_three, NotCertified::HiddenDynamics { order: 3, .. }),
+            "{name}: {at_three:?}"
+        );
+        let words = at_three.to_string();
+        assert!(
+            words.contains("(order 3, the largest certified;")
+                && words.contains("unmeasured states logged as outputs")
+                && !words.contains("order = 4"),
+            "{name}: {words}"
+        );
+    }
+}

@@ -253,9 +253,9 @@ mod tests {
             (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
                 NotCertified::LibraryMisfit { window, statistic, threshold }
             )),
-            (1usize..9, n(), n()).prop_map(|(window, statistic, threshold)| Some(
-                NotCertified::HiddenDynamics { window, statistic, threshold }
-            )),
+            (1usize..9, n(), n(), 1usize..=3).prop_map(|(window, statistic, threshold, order)| {
+                Some(NotCertified::HiddenDynamics { window, statistic, threshold, order })
+            }),
             (1usize..9, n(), n()).prop_map(|(window, beta_hat, newest_upper)| Some(
                 NotCertified::PlantChanged { window, beta_hat, newest_upper }
             )),

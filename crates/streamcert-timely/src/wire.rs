@@ -10,81 +10,28 @@ use streamcert_network::LocalSnapshot;
 #[derive(Serialize, Deserialize)]
 #[serde(remote = "NotCertified")]
 enum ReasonDef {
-    WarmingUp {
-        columns: usize,
-        needed: usize,
-    },
+    WarmingUp { columns: usize, needed: usize },
     InsufficientExcitation,
     WeakInstruments,
-    BelowMargin {
-        certificate: f64,
-        margin: f64,
-    },
-    Accumulating {
-        streak: usize,
-        needed: usize,
-    },
+    BelowMargin { certificate: f64, margin: f64 },
+    Accumulating { streak: usize, needed: usize },
     SkippedSample,
     NoAmbiguityModel,
     NoCalibration,
-    Gap {
-        dt: f64,
-        reference: f64,
-    },
-    RateBelowMargin {
-        window: usize,
-        upper: f64,
-    },
-    VaryingDynamics {
-        window: usize,
-        statistic: f64,
-        threshold: f64,
-    },
-    LinearityUntested {
-        window: usize,
-    },
-    HiddenDynamics {
-        window: usize,
-        statistic: f64,
-        threshold: f64,
-        #[serde(default = "first_order")]
-        order: usize,
-    },
-    OrderUntested {
-        window: usize,
-    },
-    PlantChanged {
-        window: usize,
-        beta_hat: f64,
-        newest_upper: f64,
-    },
+    Gap { dt: f64, reference: f64 },
+    RateBelowMargin { window: usize, upper: f64 },
+    VaryingDynamics { window: usize, statistic: f64, threshold: f64 },
+    LinearityUntested { window: usize },
+    HiddenDynamics { window: usize, statistic: f64, threshold: f64, order: usize },
+    OrderUntested { window: usize },
+    PlantChanged { window: usize, beta_hat: f64, newest_upper: f64 },
     NoNonlinearModel,
-    LibraryMisfit {
-        window: usize,
-        statistic: f64,
-        threshold: f64,
-    },
-    LibraryUntested {
-        window: usize,
-    },
-    WeaklyIdentified {
-        window: usize,
-        moves: f64,
-    },
-    InputFollowsOutputs {
-        window: usize,
-    },
-    OutsideRegion {
-        y: f64,
-        lo: f64,
-        hi: f64,
-    },
+    LibraryMisfit { window: usize, statistic: f64, threshold: f64 },
+    LibraryUntested { window: usize },
+    WeaklyIdentified { window: usize, moves: f64 },
+    InputFollowsOutputs { window: usize },
+    OutsideRegion { y: f64, lo: f64, hi: f64 },
     FirstOrderOnly,
-}
-
-/// The order of a reason sent before the order was recorded: the first.
-fn first_order() -> usize {
-    1
 }
 
 #[derive(Debug, Clone, Copy, Serialize, Deserialize)]

@@ -135,9 +135,11 @@ fn first_refusal(
 /// unmeasured states logged as outputs. Plants, closed just below the margin under a dither
 /// of `±1` (where a misfit shows best): three lags `(s + 1)³` at order 2 (`h = 50`); four lags
 /// `(s + 1)⁴` and a lag behind a transport delay of 10 samples at order 3, at `h = 25`
-/// (`ν = 14`): at `h = 50` a window of 2000 rows holds 12 spans of 151 samples after the
-/// first, and the guard's larger fit of 11 coefficients leaves its test `ν = 1` degree of
-/// freedom (a threshold of about 22 500 at `δ = 0.01`), too few to see either.
+/// (`ν = 14`), for the words only: at `h = 50` a window of 2000 rows holds 12 spans of 151
+/// samples after the first, and the guard's larger fit of 11 coefficients leaves its test
+/// `ν = 1` degree of freedom (a threshold of about 22 500 at `δ = 0.01`), too few to see
+/// either; at `h = 25` it refuses every look, those of loops order 3 holds included
+/// (docs/your-data.md), so these refusals say nothing of its power.
 #[test]
 fn the_hidden_dynamics_refusal_names_the_order_and_what_would_be_valid() {
     let three = Loop { amplitude: 1.0, ..Loop::new(&[3.0, 3.0, 1.0], 0.955f64.powi(3)) };

@@ -84,17 +84,25 @@
 //!
 //! ## Cost
 //! A sample is stored in rings of `M + n h` samples (`O(1 + m)`, no allocation). A look fits
-//! its window (`O(N n h d)`) and decides the exact test, paid once per look.
+//! its window and decides the exact test, paid once per look. On equally spaced samples the
+//! fits come from an [`OrderNWindow`](streamcert_regression::OrderNWindow), which keeps each
+//! row and the filtered rows' products over units of samples: a look computes what is new
+//! since the last (`O(P n h d)` for `P` samples), the two edges, the fits from sums
+//! (`O(N d²)`) and the residuals' autocovariances (`O(N n h)`); otherwise it fits the samples
+//! ([`OrderNRecord`](streamcert_regression::OrderNRecord), `O(N n h d)`). The same estimate
+//! up to rounding; what is kept is not checkpointed and a restored look is the same bits.
 
 use serde::{Deserialize, Serialize};
-use streamcert_regression::{OrderNConfig, OrderNRecord, RegressionError};
+use streamcert_regression::{OrderNConfig, RegressionError};
 
 use crate::look::hotelling::f_quantile;
 use crate::look::quantile::look_risk;
 use crate::rate::order_n::{Ellipsoid, robust_margin, robustly_stable};
 use crate::{CertifyError, NotCertified};
 
+mod fits;
 mod look;
+use fits::{Fits, Kept};
 pub use look::{OrderNLook, OrderNRegion};
 
 /// Configuration of [`OrderNCertificate`].
@@ -283,6 +291,9 @@ pub struct OrderNCertificate {
     since_first: Option<usize>,
     looks: u64,
     latest: Option<OrderNLook>,
+    /// The rows and filtered products kept across looks (not part of a checkpoint).
+    #[serde(skip)]
+    kept: Kept,
 }
 
 impl OrderNCertificate {
@@ -304,6 +315,7 @@ impl OrderNCertificate {
             since_first: None,
             looks: 0,
             latest: None,
+            kept: Kept::default(),
             cfg,
         })
     }
@@ -338,6 +350,7 @@ impl OrderNCertificate {
     pub fn reset(&mut self) {
         (self.head, self.held, self.previous, self.since_first) = (0, 0, None, None);
         self.latest = None;
+        self.kept.clear();
     }
 
     /// Whether the state is consistent with its configuration (what a restored checkpoint is
@@ -405,7 +418,7 @@ impl OrderNCertificate {
         OrderNLook { index: k, time: t, rows, risk, outcome }
     }
 
-    fn region(&self, rows: usize, risk: f64) -> Result<OrderNRegion, NotCertified> {
+    fn region(&mut self, rows: usize, risk: f64) -> Result<OrderNRegion, NotCertified> {
         let cfg = &self.cfg.regression;
         let (n, m, span, d) = (cfg.model.order(), cfg.inputs, cfg.span(), cfg.width());
         // The window's samples in time order (paid at the look).
@@ -423,12 +436,15 @@ impl OrderNCertificate {
             RegressionError::NotIdentified(_) => NotCertified::InsufficientExcitation,
             _ => NotCertified::WarmingUp { columns: rows, needed: cfg.min_rows },
         };
-        let record = OrderNRecord::new(cfg, &t, &y, &u).map_err(unidentified)?;
-        let fit = record.fit(0..record.rows()).map_err(unidentified)?;
+        // The window's first sample, counted from the start or the last reset: the samples
+        // held when the first look came (`min_rows + n h`) and one a sample since.
+        let total = (self.since_first.unwrap_or(0) + cfg.min_rows + span) as u64;
+        let first = total.saturating_sub(count as u64);
+        let mut fits = Fits::new(&mut self.kept, cfg, first, &t, &y, &u).map_err(unidentified)?;
+        let fit = fits.fit().map_err(unidentified)?;
         if self.cfg.hidden_dynamics {
-            let test = record
-                .past_row_test(0..record.rows())
-                .map_err(|_| NotCertified::OrderUntested { window: rows })?;
+            let test =
+                fits.past_row_test().map_err(|_| NotCertified::OrderUntested { window: rows })?;
             let q = test.coefficients.len() as f64;
             let dof = (test.rows / (span + 1)).saturating_sub(d + n + 1);
             if dof == 0 {
@@ -446,8 +462,8 @@ impl OrderNCertificate {
             }
         }
         if self.cfg.nonlinearity {
-            let test = record
-                .curvature_test(0..record.rows())
+            let test = fits
+                .curvature_test()
                 .map_err(|_| NotCertified::LinearityUntested { window: rows })?;
             let dof = (test.rows / (span + 1)).saturating_sub(d + 2);
             if dof == 0 {

@@ -80,7 +80,7 @@ pub use estimate::{Estimate, EstimateStatus};
 pub use loop_model::{FastPath, HiddenDynamicsTest, LoopModel};
 pub use order_n::{
     ClosedLoop, CurvatureTest, MAX_ORDER, OrderNConfig, OrderNFit, OrderNRecord, OrderNRegression,
-    PastRowTest, RegressorTest,
+    OrderNWindow, PastRowTest, RegressorTest, WindowLook,
 };
 pub use range::{Interval, SlidingRange};
 pub use sliding::SlidingRegression;

@@ -45,9 +45,13 @@
 //! - [`OrderNFit`] is the batch one, over every row of a record or any run of its rows
 //!   ([`OrderNRecord`], built once for many looks): least squares and the coefficients'
 //!   covariance from the residual's known structure ([`OrderNFit`] explains it).
+//! - [`OrderNWindow`] gives a sliding window's looks (the batch fit and its two model tests
+//!   over the window's rows) from what earlier looks computed: each row once and the filtered
+//!   rows' products in units, so that a look pays for what is new since the last, not for the
+//!   whole window.
 //!
-//! Both work on the samples relative to the record's first sample (the origin), which only the
-//! intercept sees; it is reported in the plant's own coordinates.
+//! They work on the samples relative to the record's (the window's) first sample, the origin,
+//! which only the intercept sees; it is reported in the plant's own coordinates.
 
 mod curvature;
 mod fit;
@@ -55,12 +59,14 @@ mod past;
 mod rows;
 mod spline;
 mod streaming;
+mod sums;
 mod variance;
 
 pub use curvature::CurvatureTest;
 pub use fit::{ClosedLoop, OrderNFit, OrderNRecord};
 pub use past::{PastRowTest, RegressorTest};
 pub use streaming::OrderNRegression;
+pub use sums::{OrderNWindow, WindowLook};
 
 use crate::{LoopModel, RegressionError};
 

@@ -62,14 +62,14 @@ use crate::linalg::{cholesky_in_place, cholesky_solve_in_place, eig_work_len, ps
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct OrderNFit {
-    n: usize,
-    m: usize,
-    rows: usize,
-    theta: Vec<f64>,
-    covariance: Vec<f64>,
-    sensor_variance: f64,
-    equation_variance: f64,
-    residual_rms: f64,
+    pub(super) n: usize,
+    pub(super) m: usize,
+    pub(super) rows: usize,
+    pub(super) theta: Vec<f64>,
+    pub(super) covariance: Vec<f64>,
+    pub(super) sensor_variance: f64,
+    pub(super) equation_variance: f64,
+    pub(super) residual_rms: f64,
 }
 
 /// The closed loop's characteristic coefficients under `u = K y` and their covariance: the
@@ -281,86 +281,117 @@ impl OrderNRecord {
         z: &[f64],
         d: usize,
     ) -> Result<(Vec<f64>, Vec<f64>), RegressionError> {
-        let n = self.n;
-
-        let mut g = vec![0.0; d * d];
-        let mut rhs = vec![0.0; d];
-        // The upper triangle over the rows in order, then mirrored (the same products).
-        for (row, zr) in phi.chunks_exact(d).zip(z) {
-            for (a, (ra, ga)) in row.iter().zip(g.chunks_exact_mut(d)).enumerate() {
-                rhs[a] += ra * zr;
-                for (gab, rb) in ga[a..].iter_mut().zip(&row[a..]) {
-                    *gab += ra * rb;
-                }
-            }
-        }
-        for a in 0..d {
-            for b in 0..a {
-                g[a * d + b] = g[b * d + a];
-            }
-        }
-        let scale: Vec<f64> = (0..d).map(|a| g[a * d + a].sqrt()).collect();
-        if scale.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
-            return Err(RegressionError::NotIdentified("a regressor is zero over the rows".into()));
-        }
-        let gs: Vec<f64> = (0..d * d).map(|i| g[i] / (scale[i / d] * scale[i % d])).collect();
-        let mut work = vec![0.0; eig_work_len(d)];
-        let (lo, hi) = psd_eig_extremes(&gs, d, &mut work);
-        if !(lo > self.min_excitation_ratio * hi) {
-            return Err(RegressionError::NotIdentified(format!(
-                "the column-scaled Gram matrix has λ_min/λ_max = {:.3e}, at most {:.1e}: the inputs do not excite every coefficient of order {n}",
-                lo / hi,
-                self.min_excitation_ratio
-            )));
-        }
-        let mut l = gs.clone();
-        if !cholesky_in_place(&mut l, d) {
-            return Err(RegressionError::NotIdentified(
-                "the Gram matrix is not positive definite".into(),
-            ));
-        }
-        let mut theta: Vec<f64> = (0..d).map(|a| rhs[a] / scale[a]).collect();
-        cholesky_solve_in_place(&l, d, &mut theta);
-        for (th, s) in theta.iter_mut().zip(&scale) {
-            *th /= s;
-        }
-        // G⁻¹ as columns, through the scaled factor: G⁻¹ = D⁻¹ Gs⁻¹ D⁻¹.
-        let mut ginv = vec![0.0; d * d];
-        for c in 0..d {
-            let mut e = vec![0.0; d];
-            e[c] = 1.0;
-            cholesky_solve_in_place(&l, d, &mut e);
-            for a in 0..d {
-                ginv[a * d + c] = e[a] / (scale[a] * scale[c]);
-            }
-        }
-
-        Ok((theta, ginv))
+        solve(phi, z, d, self.n, self.min_excitation_ratio)
     }
 
     /// `θ` and its covariance moved from the origin's coordinates to the plant's.
-    fn in_plant_coordinates(
-        &self,
-        mut theta: Vec<f64>,
-        covariance: &[f64],
-    ) -> (Vec<f64>, Vec<f64>) {
-        let (n, m, d) = (self.n, self.m, theta.len());
-        // Back to the plant's coordinates: c = c' + a_n y₀ − Σ_j b_{j,n} u₀_j.
-        let mut map = vec![0.0; d * d];
-        for a in 0..d {
-            map[a * d + a] = 1.0;
-        }
-        map[(d - 1) * d + (n - 1)] = self.origin[0];
-        for j in 0..m {
-            map[(d - 1) * d + n + j * n + n - 1] = -self.origin[1 + j];
-        }
-        let shifted = theta.clone();
-        for (a, th) in theta.iter_mut().enumerate() {
-            *th = (0..d).map(|b| map[a * d + b] * shifted[b]).sum();
-        }
-        let covariance = sandwich(&map, covariance, d);
-        (theta, covariance)
+    fn in_plant_coordinates(&self, theta: Vec<f64>, covariance: &[f64]) -> (Vec<f64>, Vec<f64>) {
+        in_plant_coordinates(&self.origin, self.n, self.m, theta, covariance)
     }
+}
+
+/// `θ̂` and `G⁻¹` by least squares of `z` on the rows `phi` (`d` columns, row-major) on the
+/// column-scaled Gram matrix, after the identification test
+/// (`λ_min > min_excitation_ratio · λ_max`; `n` the order, for the refusal's words).
+pub(super) fn solve(
+    phi: &[f64],
+    z: &[f64],
+    d: usize,
+    n: usize,
+    min_excitation_ratio: f64,
+) -> Result<(Vec<f64>, Vec<f64>), RegressionError> {
+    let mut g = vec![0.0; d * d];
+    let mut rhs = vec![0.0; d];
+    // The upper triangle over the rows in order, then mirrored (the same products).
+    for (row, zr) in phi.chunks_exact(d).zip(z) {
+        for (a, (ra, ga)) in row.iter().zip(g.chunks_exact_mut(d)).enumerate() {
+            rhs[a] += ra * zr;
+            for (gab, rb) in ga[a..].iter_mut().zip(&row[a..]) {
+                *gab += ra * rb;
+            }
+        }
+    }
+    for a in 0..d {
+        for b in 0..a {
+            g[a * d + b] = g[b * d + a];
+        }
+    }
+    solve_gram(&g, &rhs, d, n, min_excitation_ratio)
+}
+
+/// `θ̂ = G⁻¹ r` and `G⁻¹` from the Gram matrix `G = ΦᵀΦ` (`d × d`, symmetric) and `r = Φᵀz`,
+/// on the column-scaled matrix, after the identification test.
+pub(super) fn solve_gram(
+    g: &[f64],
+    rhs: &[f64],
+    d: usize,
+    n: usize,
+    min_excitation_ratio: f64,
+) -> Result<(Vec<f64>, Vec<f64>), RegressionError> {
+    let scale: Vec<f64> = (0..d).map(|a| g[a * d + a].sqrt()).collect();
+    if scale.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
+        return Err(RegressionError::NotIdentified("a regressor is zero over the rows".into()));
+    }
+    let gs: Vec<f64> = (0..d * d).map(|i| g[i] / (scale[i / d] * scale[i % d])).collect();
+    let mut work = vec![0.0; eig_work_len(d)];
+    let (lo, hi) = psd_eig_extremes(&gs, d, &mut work);
+    if !(lo > min_excitation_ratio * hi) {
+        return Err(RegressionError::NotIdentified(format!(
+            "the column-scaled Gram matrix has λ_min/λ_max = {:.3e}, at most {:.1e}: the inputs do not excite every coefficient of order {n}",
+            lo / hi,
+            min_excitation_ratio
+        )));
+    }
+    let mut l = gs.clone();
+    if !cholesky_in_place(&mut l, d) {
+        return Err(RegressionError::NotIdentified(
+            "the Gram matrix is not positive definite".into(),
+        ));
+    }
+    let mut theta: Vec<f64> = (0..d).map(|a| rhs[a] / scale[a]).collect();
+    cholesky_solve_in_place(&l, d, &mut theta);
+    for (th, s) in theta.iter_mut().zip(&scale) {
+        *th /= s;
+    }
+    // G⁻¹ as columns, through the scaled factor: G⁻¹ = D⁻¹ Gs⁻¹ D⁻¹.
+    let mut ginv = vec![0.0; d * d];
+    for c in 0..d {
+        let mut e = vec![0.0; d];
+        e[c] = 1.0;
+        cholesky_solve_in_place(&l, d, &mut e);
+        for a in 0..d {
+            ginv[a * d + c] = e[a] / (scale[a] * scale[c]);
+        }
+    }
+
+    Ok((theta, ginv))
+}
+
+/// `θ` and its covariance moved from the coordinates of the origin `[y₀; u₀]` to the plant's:
+/// `c = c' + a_n y₀ − Σ_j b_{j,n} u₀_j`.
+pub(super) fn in_plant_coordinates(
+    origin: &[f64],
+    n: usize,
+    m: usize,
+    mut theta: Vec<f64>,
+    covariance: &[f64],
+) -> (Vec<f64>, Vec<f64>) {
+    let d = theta.len();
+    // Back to the plant's coordinates: c = c' + a_n y₀ − Σ_j b_{j,n} u₀_j.
+    let mut map = vec![0.0; d * d];
+    for a in 0..d {
+        map[a * d + a] = 1.0;
+    }
+    map[(d - 1) * d + (n - 1)] = origin[0];
+    for j in 0..m {
+        map[(d - 1) * d + n + j * n + n - 1] = -origin[1 + j];
+    }
+    let shifted = theta.clone();
+    for (a, th) in theta.iter_mut().enumerate() {
+        *th = (0..d).map(|b| map[a * d + b] * shifted[b]).sum();
+    }
+    let covariance = sandwich(&map, covariance, d);
+    (theta, covariance)
 }
 
 impl OrderNFit {

@@ -10,6 +10,7 @@ use super::*;
 use crate::{InputIntegral, Model, RegressionConfig, SlidingRegression};
 
 mod curvature;
+mod window;
 
 /// Sample times from `0` with mean step `dt`, each step jittered by up to `±jitter · dt`.
 fn times(len: usize, dt: f64, jitter: f64, rng: &mut ChaCha8Rng) -> Vec<f64> {

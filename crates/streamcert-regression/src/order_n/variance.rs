@@ -56,33 +56,30 @@ fn shape_of(w: &[f64], lags: usize) -> Vec<f64> {
     (0..lags).map(|l| w.iter().zip(w.iter().skip(l)).map(|(a, b)| a * b).sum()).collect()
 }
 
-/// `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the lags `ℓ = 0..lags` (`lags <= N`), each sum taken
-/// over `k` in order; four lags at a time, their common terms first and then each one's last
-/// terms, so that each sum adds the same products in the same order.
+/// `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the lags `ℓ = 0..lags` (`lags <= N`), each sum in
+/// [`dot`]'s order.
 fn autocovariances(resid: &[f64], lags: usize) -> Vec<f64> {
     let len = resid.len();
-    let mut gamma = vec![0.0; lags];
-    for (l0, out) in (0..lags).step_by(4).zip(gamma.chunks_mut(4)) {
-        let width = out.len();
-        // Lag l0 + q has the terms k < len − l0 − q; the first len − l0 − (width − 1) are
-        // common to the four.
-        let common = len - l0 - (width - 1);
-        let mut acc = [0.0f64; 4];
-        for (k, rk) in resid[..common].iter().enumerate() {
-            let ahead = &resid[k + l0..k + l0 + width];
-            for (a, r) in acc.iter_mut().zip(ahead) {
-                *a += rk * r;
-            }
-        }
-        for (q, (o, a)) in out.iter_mut().zip(acc).enumerate() {
-            let mut sum = a;
-            for k in common..len - l0 - q {
-                sum += resid[k] * resid[k + l0 + q];
-            }
-            *o = sum / (len - l0 - q) as f64;
+    (0..lags).map(|l| dot(&resid[..len - l], &resid[l..]) / (len - l) as f64).collect()
+}
+
+/// `Σ a_i b_i` in four interleaved partial sums, `((s_0 + s_1) + (s_2 + s_3))` then the
+/// remainder in order: a fixed order, the same bits on every processor.
+#[inline]
+pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
+    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
+    let (ra, rb) = (ca.remainder(), cb.remainder());
+    let mut s = [0.0f64; 4];
+    for (x, y) in ca.zip(cb) {
+        for q in 0..4 {
+            s[q] += x[q] * y[q];
         }
     }
-    gamma
+    let mut total = (s[0] + s[1]) + (s[2] + s[3]);
+    for (x, y) in ra.iter().zip(rb) {
+        total += x * y;
+    }
+    total
 }
 
 /// `(σ_e², σ_v²) >= 0` minimising `Σ_ℓ (γ̂(ℓ) − σ_e² s_e(ℓ) − σ_v² s_v(ℓ))²` over the lags
@@ -119,6 +116,41 @@ fn fit_variances(resid: &[f64], kernel_e: &[f64], kernel_v: &[f64]) -> (f64, f64
 /// number: `(set, w, w / N, wv / N)`.
 type SetKernels = (usize, Vec<f64>, Vec<f64>, Vec<f64>);
 
+/// What the covariance needs of the filtered rows: `H_e = Ψ_eᵀΨ_e`, `H_v = Ψ_vᵀΨ_v` (`d × d`)
+/// and the rows' mean kernels `w̄_e`, `w̄_v`.
+pub(super) struct Filtered {
+    pub(super) he: Vec<f64>,
+    pub(super) hv: Vec<f64>,
+    pub(super) mean_e: Vec<f64>,
+    pub(super) mean_v: Vec<f64>,
+}
+
+/// The model-structured covariance from the filtered rows' products and the residuals:
+/// `(σ_e², σ_v²)` fitted to the residuals' autocovariances, then
+/// `V = G⁻¹ (σ_e² H_e + σ_v² H_v) G⁻¹ · N / (N − d)` (in the rows' coordinates).
+pub(super) fn finish_covariance(
+    filtered: &Filtered,
+    resid: &[f64],
+    ginv: &[f64],
+    d: usize,
+) -> (Vec<f64>, f64, f64) {
+    let count = resid.len();
+    let (sensor_variance, equation_variance) =
+        fit_variances(resid, &filtered.mean_e, &filtered.mean_v);
+    let middle: Vec<f64> = filtered
+        .he
+        .iter()
+        .zip(&filtered.hv)
+        .map(|(e, v)| sensor_variance * e + equation_variance * v)
+        .collect();
+    let dof = count as f64 / (count - d) as f64;
+    let mut covariance = sandwich(ginv, &middle, d);
+    for c in &mut covariance {
+        *c *= dof;
+    }
+    (covariance, sensor_variance, equation_variance)
+}
+
 impl OrderNRecord {
     /// The model-structured covariance of the rows from `first` (see [`OrderNFit`]), in the
     /// origin's coordinates, with the fitted `(σ_e², σ_v²)`.
@@ -130,7 +162,14 @@ impl OrderNRecord {
         resid: &[f64],
         ginv: &[f64],
     ) -> (Vec<f64>, f64, f64) {
-        let (n, span, d, count) = (self.n, self.span, theta.len(), resid.len());
+        let filtered = self.filtered(first, phi, theta, resid.len());
+        finish_covariance(&filtered, resid, ginv, theta.len())
+    }
+
+    /// The rows from `first` filtered by their own kernels, each row's contribution
+    /// scattered: `O(N n h d)`.
+    fn filtered(&self, first: usize, phi: &[f64], theta: &[f64], count: usize) -> Filtered {
+        let (n, span, d) = (self.n, self.span, theta.len());
         // The residual's kernel on the sensor noise (with â) and on the equation noise; their
         // filtered rows Ψ (indexed from the range's first sample; stored by column, each
         // `N + n h` long) and the rows' mean kernels.
@@ -170,16 +209,8 @@ impl OrderNRecord {
             }
             scatter(&mut psi_v, len, i, self.wv(r), row);
         }
-        let (sensor_variance, equation_variance) = fit_variances(resid, &mean_e, &mean_v);
         let he = gram_of_columns(&psi_e, len);
         let hv = gram_of_columns(&psi_v, len);
-        let middle: Vec<f64> =
-            he.iter().zip(&hv).map(|(e, v)| sensor_variance * e + equation_variance * v).collect();
-        let dof = count as f64 / (count - d) as f64;
-        let mut covariance = sandwich(ginv, &middle, d);
-        for c in &mut covariance {
-            *c *= dof;
-        }
-        (covariance, sensor_variance, equation_variance)
+        Filtered { he, hv, mean_e, mean_v }
     }
 }

@@ -1,0 +1,249 @@
+//! The filtered rows' products over a run of samples, and the change of origin they undergo.
+//!
+//! The look's rows are widened to the `D = d + 3 + n` columns every fit of a look draws from
+//! ([`Layout`]). A row's columns are linear in the samples relative to an origin, and the
+//! square and the cube are polynomials in it; a change of origin is a fixed sequence of column
+//! operations `x_t += α x_s` ([`shift_ops`]), exact in exact arithmetic because the kernels'
+//! sums are known: `Σ wy_k = 0` for `k < n`, `Σ wy_n = −L̄ⁿ`, `Σ wu_n = L̄ⁿ`, `Σ wz = 0`.
+
+use super::super::Shape;
+use super::super::rows::RowWeights;
+use super::super::variance::dot;
+
+/// Where the columns of a widened row lie: the certificate's `d` regressors
+/// (`φ^y_1..φ^y_n`, the inputs' `φ^u`, the intercept `L̄ⁿ`), then the square and the cube of
+/// the excursion (weighted as `φ^y_n`), the past row's regressand and its `n` output
+/// regressors.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) struct Layout {
+    pub(super) n: usize,
+    pub(super) m: usize,
+    pub(super) d: usize,
+}
+
+impl Layout {
+    pub(super) fn new(shape: Shape) -> Self {
+        Self { n: shape.n, m: shape.m, d: shape.width() }
+    }
+
+    /// `D = d + 3 + n`.
+    pub(super) fn wide(self) -> usize {
+        self.d + 3 + self.n
+    }
+
+    pub(super) fn intercept(self) -> usize {
+        self.d - 1
+    }
+
+    pub(super) fn square(self) -> usize {
+        self.d
+    }
+
+    pub(super) fn cube(self) -> usize {
+        self.d + 1
+    }
+
+    pub(super) fn past_z(self) -> usize {
+        self.d + 2
+    }
+
+    /// The columns of the certificate's fit, of the curvature test's and of the past-row
+    /// test's, in their regressors' order.
+    pub(super) fn certificate(self) -> Vec<usize> {
+        (0..self.d).collect()
+    }
+
+    pub(super) fn curvature(self) -> Vec<usize> {
+        (0..self.d + 2).collect()
+    }
+
+    pub(super) fn past(self) -> Vec<usize> {
+        (0..self.d).chain(self.past_z()..self.wide()).collect()
+    }
+}
+
+/// The column operations `(target, source, α)`, applied in order, that move a widened row's
+/// columns from the origin `from = [y; u]` to `to` (`dy = from_y − to_y`,
+/// `du = from_u − to_u`), into `ops`:
+///
+/// ```text
+/// cube += 3 dy sq + 3 dy² φ^y_n − dy³ L̄ⁿ      sq += 2 dy φ^y_n − dy² L̄ⁿ
+/// φ^y_n −= dy L̄ⁿ      φ^{u_j}_n += du_j L̄ⁿ      past φ^y_n −= dy L̄ⁿ (when `past`)
+/// ```
+///
+/// (the cube's and the square's read the old `sq` and `φ^y_n`, hence the order).
+pub(super) fn shift_ops(
+    lay: Layout,
+    from: &[f64],
+    to: &[f64],
+    past: bool,
+    ops: &mut Vec<(usize, usize, f64)>,
+) {
+    let (int, yn) = (lay.intercept(), lay.n - 1);
+    let (sq, cube) = (lay.square(), lay.cube());
+    let dy = from[0] - to[0];
+    ops.clear();
+    ops.extend([
+        (cube, sq, 3.0 * dy),
+        (cube, yn, 3.0 * dy * dy),
+        (cube, int, -dy * dy * dy),
+        (sq, yn, 2.0 * dy),
+        (sq, int, -dy * dy),
+        (yn, int, -dy),
+    ]);
+    for j in 0..lay.m {
+        ops.push((lay.n + j * lay.n + lay.n - 1, int, from[1 + j] - to[1 + j]));
+    }
+    if past {
+        ops.push((lay.wide() - 1, int, -dy));
+    }
+}
+
+/// `x_t += α x_s` for each operation, in order.
+pub(super) fn shift_row(x: &mut [f64], ops: &[(usize, usize, f64)]) {
+    for &(t, s, a) in ops {
+        x[t] += a * x[s];
+    }
+}
+
+/// `S ← T S Tᵀ` for the products `S` (`dim × dim`, row-major) of `groups` stacked copies of
+/// a widened row (`wide` columns each), `T` the column operations applied to every copy.
+pub(super) fn shift_products(
+    s: &mut [f64],
+    dim: usize,
+    groups: usize,
+    wide: usize,
+    ops: &[(usize, usize, f64)],
+) {
+    for &(t, src, a) in ops {
+        for p in 0..groups {
+            let (rt, rs) = ((p * wide + t) * dim, (p * wide + src) * dim);
+            for k in 0..dim {
+                s[rt + k] += a * s[rs + k];
+            }
+        }
+        for row in s.chunks_exact_mut(dim) {
+            for p in 0..groups {
+                row[p * wide + t] += a * row[p * wide + src];
+            }
+        }
+    }
+}
+
+/// The kernels a widened row is filtered by: on the sensor noise the regressand's `wz` and
+/// the output regressors' `wy_1..wy_n` (`n h + 1` taps each; the residual's kernel
+/// `wz − Σ_k a_k wy_k` is their combination), on the equation noise `wv` (`n h` taps). The
+/// dense ones are kept reversed (`rev[k] = w[n h − k]`), so that a filtered value is a dot
+/// product of contiguous runs; `wz` is nonzero on the `n + 1` knots only.
+pub(super) struct Kernels {
+    /// `(offset, weight)` of `wz`'s nonzero taps.
+    pub(super) wz: Vec<(usize, f64)>,
+    /// `wy_1..wy_n` reversed.
+    pub(super) wy: Vec<Vec<f64>>,
+    /// `wv` reversed (`rev[k] = wv[n h − 1 − k]`).
+    pub(super) wv: Vec<f64>,
+    pub(super) groups: usize,
+    pub(super) span: usize,
+}
+
+impl Kernels {
+    pub(super) fn new(w: &RowWeights, shape: Shape) -> Self {
+        let (n, span) = (shape.n, shape.span());
+        let wz = w.wz.iter().copied().enumerate().filter(|(_, v)| *v != 0.0).collect();
+        let wy = (0..n)
+            .map(|k| w.wy[k * (span + 1)..(k + 1) * (span + 1)].iter().rev().copied().collect())
+            .collect();
+        let wv = w.wv.iter().rev().copied().collect();
+        Self { wz, wy, wv, groups: n + 1, span }
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+/// Products of the filtered rows, upper triangles: `e` over the `groups · wide` sensor-noise
+/// series, `v` over the `wide` equation-noise ones.
+pub(super) struct Products {
+    pub(super) e: Vec<f64>,
+    pub(super) v: Vec<f64>,
+}
+
+impl Products {
+    pub(super) fn zero(groups: usize, wide: usize) -> Self {
+        let de = groups * wide;
+        Self { e: vec![0.0; de * de], v: vec![0.0; wide * wide] }
+    }
+
+    /// The lower triangles from the upper ones.
+    pub(super) fn mirror(&mut self, groups: usize, wide: usize) {
+        for (s, dim) in [(&mut self.e, groups * wide), (&mut self.v, wide)] {
+            for a in 0..dim {
+                for b in 0..a {
+                    s[a * dim + b] = s[b * dim + a];
+                }
+            }
+        }
+    }
+
+    pub(super) fn add(&mut self, other: &Self) {
+        for (a, b) in self.e.iter_mut().zip(&other.e).chain(self.v.iter_mut().zip(&other.v)) {
+            *a += b;
+        }
+    }
+}
+
+/// Add to `out`'s upper triangles `Σ_J Ψ_J Ψ_Jᵀ` over the samples `js`, with
+/// `Ψ_J = Σ_I w_{J − I} x_I` over the rows `I ∈ rows` that reach `J` (`J − n h <= I <= J`;
+/// row `I` starts at sample `I`). `x` holds the widened rows from row `x_first` by column:
+/// column `c` is `x[c · len..(c + 1) · len]`.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn accumulate(
+    x: &[f64],
+    x_first: u64,
+    len: usize,
+    k: &Kernels,
+    rows: std::ops::Range<u64>,
+    js: std::ops::Range<u64>,
+    out: &mut Products,
+    psi: &mut Vec<f64>,
+) {
+    let (groups, span) = (k.groups, k.span as u64);
+    let wide = x.len() / len.max(1);
+    let de = groups * wide;
+    psi.clear();
+    psi.resize(de + wide, 0.0);
+    for j in js {
+        let lo = rows.start.max(j.saturating_sub(span));
+        let hi = rows.end.min(j + 1);
+        let (i0, i1) = ((lo - x_first) as usize, (hi - x_first) as usize);
+        let k0 = (span + lo - j) as usize;
+        // `wv` reaches the rows from `J − n h + 1`.
+        let lv = lo.max((j + 1).saturating_sub(span));
+        let (v0, kv) = ((lv - x_first) as usize, (span + lv - j - 1) as usize);
+        for (c, col) in x.chunks_exact(len).enumerate() {
+            let mut z = 0.0;
+            for &(o, w) in &k.wz {
+                if let Some(i) = j.checked_sub(o as u64).filter(|i| (lo..hi).contains(i)) {
+                    z += w * col[(i - x_first) as usize];
+                }
+            }
+            psi[c] = z;
+            let run = &col[i0..i1];
+            for (p, wy) in k.wy.iter().enumerate() {
+                psi[(p + 1) * wide + c] = dot(&wy[k0..k0 + run.len()], run);
+            }
+            psi[de + c] = if v0 < i1 { dot(&k.wv[kv..kv + (i1 - v0)], &col[v0..i1]) } else { 0.0 };
+        }
+        let (pe, pv) = psi.split_at(de);
+        for a in 0..de {
+            let pa = pe[a];
+            for (s, pb) in out.e[a * de + a..(a + 1) * de].iter_mut().zip(&pe[a..]) {
+                *s += pa * pb;
+            }
+        }
+        for a in 0..wide {
+            let pa = pv[a];
+            for (s, pb) in out.v[a * wide + a..(a + 1) * wide].iter_mut().zip(&pv[a..]) {
+                *s += pa * pb;
+            }
+        }
+    }
+}

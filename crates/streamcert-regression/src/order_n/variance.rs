@@ -1,7 +1,10 @@
 //! The model-structured covariance ([`OrderNFit`](super::OrderNFit)): the filtered rows, the
 //! two noise variances fitted to the residual's autocovariances, and the sandwich.
 
+use pulp::{Arch, Simd, WithSimd};
+
 use super::OrderNRecord;
+use crate::linalg::dot;
 
 /// `Σ_j x_j x_jᵀ` over the rows of `x`, given by its columns (`x` holds them one after the
 /// other, each `len` long): entry `(a, b)` is the sum over `j` in order of `x_a[j] x_b[j]`,
@@ -56,30 +59,25 @@ fn shape_of(w: &[f64], lags: usize) -> Vec<f64> {
     (0..lags).map(|l| w.iter().zip(w.iter().skip(l)).map(|(a, b)| a * b).sum()).collect()
 }
 
-/// `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the lags `ℓ = 0..lags` (`lags <= N`), each sum in
-/// [`dot`]'s order.
+/// `γ̂(ℓ) = Σ_k r_k r_{k+ℓ} / (N − ℓ)` at the lags `ℓ = 0..lags` (`lags <= N`), each sum a
+/// [`dot`] (its fixed four-lane order), compiled for the widest vectors the processor offers
+/// (the same numbers on every width).
 fn autocovariances(resid: &[f64], lags: usize) -> Vec<f64> {
-    let len = resid.len();
-    (0..lags).map(|l| dot(&resid[..len - l], &resid[l..]) / (len - l) as f64).collect()
-}
-
-/// `Σ a_i b_i` in four interleaved partial sums, `((s_0 + s_1) + (s_2 + s_3))` then the
-/// remainder in order: a fixed order, the same bits on every processor.
-#[inline]
-pub(super) fn dot(a: &[f64], b: &[f64]) -> f64 {
-    let (ca, cb) = (a.chunks_exact(4), b.chunks_exact(4));
-    let (ra, rb) = (ca.remainder(), cb.remainder());
-    let mut s = [0.0f64; 4];
-    for (x, y) in ca.zip(cb) {
-        for q in 0..4 {
-            s[q] += x[q] * y[q];
+    struct Lags<'a>(&'a [f64], usize);
+    impl WithSimd for Lags<'_> {
+        type Output = Vec<f64>;
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, _: S) -> Vec<f64> {
+            // A loop, not a closure: a closure is not compiled with the vectors' features.
+            let (resid, len) = (self.0, self.0.len());
+            let mut gamma = vec![0.0; self.1];
+            for (l, g) in gamma.iter_mut().enumerate() {
+                *g = dot(&resid[..len - l], &resid[l..]) / (len - l) as f64;
+            }
+            gamma
         }
     }
-    let mut total = (s[0] + s[1]) + (s[2] + s[3]);
-    for (x, y) in ra.iter().zip(rb) {
-        total += x * y;
-    }
-    total
+    Arch::new().dispatch(Lags(resid, lags))
 }
 
 /// `(σ_e², σ_v²) >= 0` minimising `Σ_ℓ (γ̂(ℓ) − σ_e² s_e(ℓ) − σ_v² s_v(ℓ))²` over the lags

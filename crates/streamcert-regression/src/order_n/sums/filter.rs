@@ -8,7 +8,8 @@
 
 use super::super::Shape;
 use super::super::rows::RowWeights;
-use super::super::variance::dot;
+use crate::linalg::dot;
+use pulp::{Arch, Simd, WithSimd};
 
 /// Where the columns of a widened row lie: the certificate's `d` regressors
 /// (`φ^y_1..φ^y_n`, the inputs' `φ^u`, the intercept `L̄ⁿ`), then the square and the cube of
@@ -193,7 +194,8 @@ impl Products {
 /// Add to `out`'s upper triangles `Σ_J Ψ_J Ψ_Jᵀ` over the samples `js`, with
 /// `Ψ_J = Σ_I w_{J − I} x_I` over the rows `I ∈ rows` that reach `J` (`J − n h <= I <= J`;
 /// row `I` starts at sample `I`). `x` holds the widened rows from row `x_first` by column:
-/// column `c` is `x[c · len..(c + 1) · len]`.
+/// column `c` is `x[c · len..(c + 1) · len]`. The filtered values of every `J` are formed
+/// first (series by series, `psi`: scratch), then each product is one [`dot`] over the `J`s.
 #[allow(clippy::too_many_arguments)]
 pub(super) fn accumulate(
     x: &[f64],
@@ -205,44 +207,68 @@ pub(super) fn accumulate(
     out: &mut Products,
     psi: &mut Vec<f64>,
 ) {
-    let (groups, span) = (k.groups, k.span as u64);
-    let wide = x.len() / len.max(1);
-    let de = groups * wide;
-    psi.clear();
-    psi.resize(de + wide, 0.0);
-    for j in js {
-        let lo = rows.start.max(j.saturating_sub(span));
-        let hi = rows.end.min(j + 1);
-        let (i0, i1) = ((lo - x_first) as usize, (hi - x_first) as usize);
-        let k0 = (span + lo - j) as usize;
-        // `wv` reaches the rows from `J − n h + 1`.
-        let lv = lo.max((j + 1).saturating_sub(span));
-        let (v0, kv) = ((lv - x_first) as usize, (span + lv - j - 1) as usize);
-        for (c, col) in x.chunks_exact(len).enumerate() {
-            let mut z = 0.0;
-            for &(o, w) in &k.wz {
-                if let Some(i) = j.checked_sub(o as u64).filter(|i| (lo..hi).contains(i)) {
-                    z += w * col[(i - x_first) as usize];
+    Arch::new().dispatch(Accumulate { x, x_first, len, k, rows, js, out, psi });
+}
+
+/// [`accumulate`]'s arguments, compiled for the widest vectors the processor offers: every
+/// sum is a [`dot`] in its fixed four-lane order, so the numbers are the same on every width.
+struct Accumulate<'a> {
+    x: &'a [f64],
+    x_first: u64,
+    len: usize,
+    k: &'a Kernels,
+    rows: std::ops::Range<u64>,
+    js: std::ops::Range<u64>,
+    out: &'a mut Products,
+    psi: &'a mut Vec<f64>,
+}
+
+impl WithSimd for Accumulate<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _: S) {
+        let Accumulate { x, x_first, len, k, rows, js, out, psi } = self;
+        let (groups, span) = (k.groups, k.span as u64);
+        let wide = x.len() / len.max(1);
+        let de = groups * wide;
+        let count = (js.end - js.start) as usize;
+        if count == 0 {
+            return;
+        }
+        psi.clear();
+        psi.resize((de + wide) * count, 0.0);
+        for (t, j) in js.enumerate() {
+            let lo = rows.start.max(j.saturating_sub(span));
+            let hi = rows.end.min(j + 1);
+            let (i0, i1) = ((lo - x_first) as usize, (hi - x_first) as usize);
+            let k0 = (span + lo - j) as usize;
+            // `wv` reaches the rows from `J − n h + 1`.
+            let lv = lo.max((j + 1).saturating_sub(span));
+            let (v0, kv) = ((lv - x_first) as usize, (span + lv - j - 1) as usize);
+            for (c, col) in x.chunks_exact(len).enumerate() {
+                let mut z = 0.0;
+                for &(o, w) in &k.wz {
+                    if let Some(i) = j.checked_sub(o as u64).filter(|i| (lo..hi).contains(i)) {
+                        z += w * col[(i - x_first) as usize];
+                    }
                 }
-            }
-            psi[c] = z;
-            let run = &col[i0..i1];
-            for (p, wy) in k.wy.iter().enumerate() {
-                psi[(p + 1) * wide + c] = dot(&wy[k0..k0 + run.len()], run);
-            }
-            psi[de + c] = if v0 < i1 { dot(&k.wv[kv..kv + (i1 - v0)], &col[v0..i1]) } else { 0.0 };
-        }
-        let (pe, pv) = psi.split_at(de);
-        for a in 0..de {
-            let pa = pe[a];
-            for (s, pb) in out.e[a * de + a..(a + 1) * de].iter_mut().zip(&pe[a..]) {
-                *s += pa * pb;
+                psi[c * count + t] = z;
+                let run = &col[i0..i1];
+                for (p, wy) in k.wy.iter().enumerate() {
+                    psi[((p + 1) * wide + c) * count + t] = dot(&wy[k0..k0 + run.len()], run);
+                }
+                psi[(de + c) * count + t] =
+                    if v0 < i1 { dot(&k.wv[kv..kv + (i1 - v0)], &col[v0..i1]) } else { 0.0 };
             }
         }
-        for a in 0..wide {
-            let pa = pv[a];
-            for (s, pb) in out.v[a * wide + a..(a + 1) * wide].iter_mut().zip(&pv[a..]) {
-                *s += pa * pb;
+        let (pe, pv) = psi.split_at(de * count);
+        for (series, out, dim) in [(pe, &mut out.e, de), (pv, &mut out.v, wide)] {
+            for a in 0..dim {
+                let sa = &series[a * count..(a + 1) * count];
+                for b in a..dim {
+                    out[a * dim + b] += dot(sa, &series[b * count..(b + 1) * count]);
+                }
             }
         }
     }

@@ -2,11 +2,12 @@
 
 use super::super::fit::{in_plant_coordinates, solve_gram};
 use super::super::rows::RowWeights;
-use super::super::variance::{Filtered, dot, finish_covariance};
+use super::super::variance::{Filtered, finish_covariance};
 use super::super::{OrderNFit, RegressorTest, Shape};
 use super::filter::{Kernels, Layout, Products, accumulate, shift_ops, shift_products};
 use super::{OrderNWindow, UNIT};
 use crate::RegressionError;
+use crate::linalg::dot;
 
 /// One look of an [`OrderNWindow`]: the window's fit and its two model tests, each the same
 /// estimate as [`OrderNRecord`](super::super::OrderNRecord)'s over the window's samples (the

@@ -197,6 +197,8 @@ impl Certifier {
     /// [`BadSamplePolicy::Skip`] a bad sample is not an error: it is [`skip`](Self::skip)ped.
     ///
     /// [`RegressionError::Overflow`]: streamcert_regression::RegressionError::Overflow
+    /// [`BadSamplePolicy::Reject`]: crate::BadSamplePolicy::Reject
+    /// [`BadSamplePolicy::Skip`]: crate::BadSamplePolicy::Skip
     pub fn push(&mut self, t: f64, y: &[f64], u: &[f64]) -> Result<Evidence, CertifyError> {
         if let Some(w) = &self.cfg.metric {
             // The outputs in the metric's units, `w_i y_i` (a wrong length is the

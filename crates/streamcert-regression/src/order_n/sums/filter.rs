@@ -184,6 +184,12 @@ impl Products {
         }
     }
 
+    /// `self ← other`, reusing `self`'s storage.
+    pub(super) fn copy_from(&mut self, other: &Self) {
+        self.e.copy_from_slice(&other.e);
+        self.v.copy_from_slice(&other.v);
+    }
+
     pub(super) fn add(&mut self, other: &Self) {
         for (a, b) in self.e.iter_mut().zip(&other.e).chain(self.v.iter_mut().zip(&other.v)) {
             *a += b;
@@ -236,8 +242,12 @@ impl WithSimd for Accumulate<'_> {
         if count == 0 {
             return;
         }
-        psi.clear();
-        psi.resize((de + wide) * count, 0.0);
+        // Every entry of `psi[..need]` is written below before it is read.
+        let need = (de + wide) * count;
+        if psi.len() < need {
+            psi.resize(need, 0.0);
+        }
+        let psi = &mut psi[..need];
         for (t, j) in js.enumerate() {
             let lo = rows.start.max(j.saturating_sub(span));
             let hi = rows.end.min(j + 1);

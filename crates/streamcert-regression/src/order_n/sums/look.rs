@@ -235,6 +235,7 @@ impl<'a> WindowLook<'a> {
         let (wide, groups) = (lay.wide(), kernels.groups);
         let mut total = Products::zero(groups, wide);
         let mut fresh = Products::zero(groups, wide);
+        let mut sums = Products::zero(groups, wide);
         let (mut psi, mut ops) = (Vec::new(), Vec::new());
         let mut pos = js.start;
         while pos < js.end {
@@ -244,7 +245,7 @@ impl<'a> WindowLook<'a> {
                     _ => self.window.keep_unit(pos, self.first, self.key),
                 };
                 let unit = &self.window.units[at];
-                let mut sums = unit.sums.clone();
+                sums.copy_from(&unit.sums);
                 shift_ops(lay, &unit.origin, &self.origin, true, &mut ops);
                 shift_products(&mut sums.e, groups * wide, groups, wide, &ops);
                 shift_products(&mut sums.v, wide, 1, wide, &ops);

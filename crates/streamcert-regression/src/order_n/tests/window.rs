@@ -9,6 +9,11 @@ use super::{prbs, simulate};
 
 /// An equally spaced closed-loop record at 100 Hz with sensor noise and an offset.
 fn record(n: usize, len: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    record_with(n, len, seed, 0.2)
+}
+
+/// The same with the output drifting by `drift · sin(t / 10 s)`.
+fn record_with(n: usize, len: usize, seed: u64, drift: f64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let a: &[f64] = if n == 2 { &[1.2, 1.0] } else { &[3.5, 3.5, 1.0] };
     let b: &[f64] = if n == 2 { &[0.0, 1.0] } else { &[0.0, 0.5, 2.0] };
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
@@ -17,7 +22,7 @@ fn record(n: usize, len: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     let mut y = simulate(a, b, 0.1, &t, &u);
     for (k, v) in y.iter_mut().enumerate() {
         // A drift of the output, so that the window's origin moves between looks.
-        *v += 0.02 * (rng.random::<f64>() - 0.5) + 5.0 + 0.2 * (k as f64 * 1e-3).sin();
+        *v += 0.02 * (rng.random::<f64>() - 0.5) + 5.0 + drift * (k as f64 * 1e-3).sin();
     }
     (t, y, u)
 }
@@ -139,4 +144,39 @@ fn an_unequally_spaced_window_is_left_to_the_batch_fit() {
     assert!(window.prepare(901, &t[901..], &y[901..], &u[901..]).is_some());
     // Too few samples for a row.
     assert!(window.prepare(0, &t[..20], &y[..20], &u[..20]).is_none());
+}
+
+/// The looks agree with the batch fits with two inputs (each input's `φ^u_n` moved with its
+/// own origin, the second input offset by 3) and an output drifting by `50 sin(t / 10 s)`, so
+/// that each unit's square and cube are moved across a wide range to the window's origin.
+#[test]
+fn the_window_looks_agree_with_two_inputs_and_a_far_drift() {
+    let n = 2;
+    let (t, y, u1) = record_with(n, 3600, 9, 50.0);
+    let mut rng = ChaCha8Rng::seed_from_u64(10);
+    let u2 = prbs(&t, 0.4, &mut rng);
+    let u: Vec<f64> = u1.iter().zip(&u2).flat_map(|(a, b)| [*a, 3.0 + *b]).collect();
+    let cfg = OrderNConfig::new(LoopModel::of_order(n).unwrap(), 2, 1500, 12);
+    let span = cfg.span();
+    let mut window = OrderNWindow::new(&cfg).unwrap();
+    let mut checked = 0;
+    for (s, e) in looks(t.len(), span, 900, 1500, 170) {
+        let mut look = window.prepare(s as u64, &t[s..e], &y[s..e], &u[2 * s..2 * e]).unwrap();
+        let record = OrderNRecord::new(&cfg, &t[s..e], &y[s..e], &u[2 * s..2 * e]).unwrap();
+        let all = 0..record.rows();
+        let (fast, slow) = (look.fit().unwrap(), record.fit(all.clone()).unwrap());
+        let d = slow.theta().len();
+        for i in 0..d {
+            let (a, b) = (fast.theta()[i], slow.theta()[i]);
+            assert!(close(a, b, 1e-7, 1.0 + b.abs()), "look {s}: θ_{i} {a} {b}");
+            let scale = slow.covariance()[i * d + i];
+            let (a, b) = (fast.covariance()[i * d + i], scale);
+            assert!(close(a, b, 1e-5, scale), "look {s}: V_{i}{i} {a} {b}");
+        }
+        let (fast, slow) = (look.curvature_test().unwrap(), record.curvature_test(all).unwrap());
+        let (a, b) = (fast.statistic(), slow.statistic());
+        assert!(close(a, b, 1e-5, 1.0 + b), "look {s}: W {a} {b}");
+        checked += 1;
+    }
+    assert!(checked >= 10, "{checked}");
 }

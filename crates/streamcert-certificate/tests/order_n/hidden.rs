@@ -23,12 +23,29 @@ struct Tally {
     varying: usize,
 }
 
-/// One seeded run of `plant`, certified at `order` with both guards, or with the
-/// nonlinearity guard as `nonlinearity` says.
-fn run(plant: &Loop, (order, nonlinearity): (usize, bool), seed: u64) -> Tally {
-    let regression = OrderNConfig::new(LoopModel::of_order(order).unwrap(), 1, 2000, 50);
+/// How the runs are certified: the order, the window and horizon, and whether the
+/// nonlinearity guard is on (the hidden-dynamics guard always is).
+#[derive(Debug, Clone, Copy)]
+struct Setup {
+    order: usize,
+    window: usize,
+    horizon: usize,
+    nonlinearity: bool,
+}
+
+impl Setup {
+    /// `order` with the defaults: `M = 2000`, `h = 50`, both guards.
+    fn of(order: usize) -> Self {
+        Self { order, window: 2000, horizon: 50, nonlinearity: true }
+    }
+}
+
+/// One seeded run of `plant`, certified as `setup` says.
+fn run(plant: &Loop, setup: Setup, seed: u64) -> Tally {
+    let model = LoopModel::of_order(setup.order).unwrap();
+    let regression = OrderNConfig::new(model, 1, setup.window, setup.horizon);
     let mut cfg = OrderNCertificateConfig::new(regression, vec![plant.gain], 0.05, 0.01);
-    cfg.nonlinearity = nonlinearity;
+    cfg.nonlinearity = setup.nonlinearity;
     let mut cert = OrderNCertificate::new(cfg).unwrap();
     let mut tally = Tally::default();
     plant.run(seed, |t, y, u| {
@@ -47,12 +64,12 @@ fn run(plant: &Loop, (order, nonlinearity): (usize, bool), seed: u64) -> Tally {
 
 /// The tallies of the seeded runs `seeds`, summed, at `order` with both guards.
 fn cell(plant: &Loop, order: usize, seeds: std::ops::Range<u64>) -> Tally {
-    cell_with(plant, (order, true), seeds)
+    cell_with(plant, Setup::of(order), seeds)
 }
 
-/// The same, the nonlinearity guard on or off.
-fn cell_with(plant: &Loop, how: (usize, bool), seeds: std::ops::Range<u64>) -> Tally {
-    par_map(seeds, |s| run(plant, how, s)).into_iter().fold(Tally::default(), |t, r| Tally {
+/// The same, certified as `setup` says.
+fn cell_with(plant: &Loop, setup: Setup, seeds: std::ops::Range<u64>) -> Tally {
+    par_map(seeds, |s| run(plant, setup, s)).into_iter().fold(Tally::default(), |t, r| Tally {
         looks: t.looks + r.looks,
         certified: t.certified + r.certified,
         hidden: t.hidden + r.hidden,
@@ -97,8 +114,10 @@ fn beyond_the_order_the_guard_refuses_two_looks_in_three_or_more() {
 fn the_nonlinearity_guard_refuses_a_loop_certified_on_its_average_slope() {
     let plant = Loop { cubic: 2.0, ..Loop::new(&[1.2, 1.0], 0.97) };
     assert!(plant.rate() < 0.05, "{}", plant.rate());
-    let (on, off) =
-        (cell_with(&plant, (2, true), 500..520), cell_with(&plant, (2, false), 500..520));
+    let (on, off) = (
+        cell_with(&plant, Setup::of(2), 500..520),
+        cell_with(&plant, Setup { nonlinearity: false, ..Setup::of(2) }, 500..520),
+    );
     eprintln!("stiffening loop: guard on {on:?}, guard off {off:?}");
     assert!(off.certified * 2 >= off.looks, "without the guard: {off:?}");
     assert!(on.certified * 10 <= off.certified, "with the guard: {on:?}");
@@ -215,26 +234,5 @@ fn order_3_refusals_come_from_the_noise_not_the_approximation() {
 /// The looks of order 3 (`window`, `horizon`, margin 0.05, `δ = 0.01`, both guards) over the
 /// seeded runs of `plant`, summed.
 fn order_3(plant: &Loop, horizon: usize, window: usize, seeds: std::ops::Range<u64>) -> Tally {
-    let tallies = par_map(seeds, |seed| {
-        let regression = OrderNConfig::new(LoopModel::of_order(3).unwrap(), 1, window, horizon);
-        let cfg = OrderNCertificateConfig::new(regression, vec![plant.gain], 0.05, 0.01);
-        let mut cert = OrderNCertificate::new(cfg).unwrap();
-        let mut tally = Tally::default();
-        plant.run(seed, |t, y, u| {
-            if let Some(look) = cert.push(t, y, &[u]).unwrap() {
-                tally.looks += 1;
-                tally.certified += usize::from(look.certified());
-                tally.hidden +=
-                    usize::from(matches!(look.outcome, Err(NotCertified::HiddenDynamics { .. })));
-            }
-            true
-        });
-        tally
-    });
-    tallies.into_iter().fold(Tally::default(), |t, r| Tally {
-        looks: t.looks + r.looks,
-        certified: t.certified + r.certified,
-        hidden: t.hidden + r.hidden,
-        varying: 0,
-    })
+    cell_with(plant, Setup { window, horizon, ..Setup::of(3) }, seeds)
 }

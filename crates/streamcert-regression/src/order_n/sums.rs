@@ -6,14 +6,15 @@
 //!
 //! - **Rows.** Each row is computed once, from its own samples, relative to its own first
 //!   sample, with the weights of its spacing `Δ` rounded to 36 bits (the rows of an equally
-//!   spaced stream share them, or one of two neighbours'). At a look every row is moved to the window's origin by
-//!   [`shift_ops`](filter::shift_ops).
+//!   spaced stream share them, or one of two neighbours'). At a look every row is moved to
+//!   the window's origin by [`shift_ops`](filter::shift_ops).
 //! - **Filtered products in units.** The covariance needs `H = Σ_J Ψ_J Ψ_Jᵀ` of the rows
 //!   filtered by the residual's kernel; that kernel is `wz − Σ_k â_k wy_k`, so `H` is a
 //!   quadratic form in `(1, −â)` over the products of the rows filtered by the fixed kernels
 //!   `wz, wy_1..wy_n` (and `wv` for the equation noise). Those products are summed over units
-//!   of [`UNIT`] samples aligned on the sample count, each relative to its own origin (its first
-//!   row's first sample), and moved to the window's origin at a look.
+//!   of [`UNIT`] samples aligned on the sample count, each relative to its own origin (the
+//!   first sample of the first row it reaches, `n h` before it), and moved to the window's
+//!   origin at a look.
 //!
 //! Everything kept is a function of the samples it was computed from, never of when it was
 //! computed: a look gives the same bits whether its rows and units were kept from earlier
@@ -27,9 +28,8 @@
 //!
 //! The shared kernels need every row of the window to be equally spaced (the offsets of its
 //! samples from its first within `10⁻¹²` of its span of `i Δ`) with spacings that agree to
-//! `10⁻⁹`. A window with any other
-//! row is not taken ([`OrderNWindow::prepare`] returns `None`) and the caller fits the samples
-//! ([`OrderNRecord`](super::OrderNRecord)).
+//! `10⁻⁹`. A window with any other row is not taken ([`OrderNWindow::prepare`] returns
+//! `None`) and the caller fits the samples ([`OrderNRecord`](super::OrderNRecord)).
 
 mod filter;
 mod look;

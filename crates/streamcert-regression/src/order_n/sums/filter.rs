@@ -159,9 +159,9 @@ impl Kernels {
     }
 }
 
-#[derive(Debug, Clone, PartialEq)]
 /// Products of the filtered rows, upper triangles: `e` over the `groups · wide` sensor-noise
 /// series, `v` over the `wide` equation-noise ones.
+#[derive(Debug, Clone, PartialEq)]
 pub(super) struct Products {
     pub(super) e: Vec<f64>,
     pub(super) v: Vec<f64>,

@@ -10,7 +10,8 @@ use streamcert_regression::{
 
 /// A look's fits.
 pub(super) enum Fits<'a> {
-    Window(WindowLook<'a>),
+    /// Boxed: a look's kept state is several times the size of a record's handle.
+    Window(Box<WindowLook<'a>>),
     Record(OrderNRecord),
 }
 
@@ -29,7 +30,7 @@ impl<'a> Fits<'a> {
             kept.0 = OrderNWindow::new(cfg).ok();
         }
         if let Some(look) = kept.0.as_mut().and_then(|w| w.prepare(first, t, y, u)) {
-            return Ok(Self::Window(look));
+            return Ok(Self::Window(Box::new(look)));
         }
         OrderNRecord::new(cfg, t, y, u).map(Self::Record)
     }

@@ -37,8 +37,9 @@ mod look;
 use super::rows::RowWeights;
 use super::{OrderNConfig, Shape};
 use crate::RegressionError;
-use filter::{Kernels, Layout, Products, accumulate, shift_ops, shift_row};
+use filter::{Kernels, Layout, Products, accumulate, input_column, output_steps};
 pub use look::WindowLook;
+use std::mem::take;
 
 /// Samples per unit of kept filtered products.
 pub(crate) const UNIT: u64 = 32;
@@ -55,6 +56,29 @@ struct Unit {
     sums: Products,
 }
 
+/// Buffers reused from look to look (their contents are never read before written): not part
+/// of the window's state, so they take no part in equality.
+#[derive(Clone, Default)]
+struct Scratch {
+    x: Vec<f64>,
+    a: Vec<f64>,
+    psi: Vec<f64>,
+    ys: Vec<f64>,
+    us: Vec<f64>,
+}
+
+impl PartialEq for Scratch {
+    fn eq(&self, _: &Self) -> bool {
+        true
+    }
+}
+
+impl std::fmt::Debug for Scratch {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("Scratch")
+    }
+}
+
 /// The sliding window's looks of order `n` from kept rows and filtered products (module docs).
 /// Feed it each look's window of samples with the count of the samples before it
 /// ([`prepare`](Self::prepare)); [`clear`](Self::clear) it after a gap.
@@ -62,8 +86,8 @@ struct Unit {
 pub struct OrderNWindow {
     shape: Shape,
     min_excitation_ratio: f64,
-    /// The weights of the spacings seen last, by their key (at most four).
-    weights: Vec<(u64, RowWeights)>,
+    /// The weights of the spacings seen last, by their key (at most four), and their kernels.
+    weights: Vec<(u64, RowWeights, Kernels)>,
     /// Kept rows from row `rows_first`: `d + 3` values each (`φ`, `z`, the square, the cube)
     /// relative to the row's first sample, that sample's `[y; u]`, the row's spacing key.
     rows_first: u64,
@@ -71,6 +95,7 @@ pub struct OrderNWindow {
     origins: Vec<f64>,
     keys: Vec<Option<u64>>,
     units: Vec<Unit>,
+    scratch: Scratch,
 }
 
 /// A row's weights' key: the spacing `Δ` of its span rounded to 36 significant bits (rows of
@@ -110,6 +135,7 @@ impl OrderNWindow {
             origins: Vec::new(),
             keys: Vec::new(),
             units: Vec::new(),
+            scratch: Scratch::default(),
         })
     }
 
@@ -126,7 +152,7 @@ impl OrderNWindow {
     }
 
     fn weights_of(&mut self, key: u64) -> usize {
-        if let Some(i) = self.weights.iter().position(|(k, _)| *k == key) {
+        if let Some(i) = self.weights.iter().position(|(k, ..)| *k == key) {
             return i;
         }
         let span = self.shape.span();
@@ -137,7 +163,8 @@ impl OrderNWindow {
         if self.weights.len() == 4 {
             self.weights.remove(0);
         }
-        self.weights.push((key, w));
+        let kernels = Kernels::new(&w, self.shape);
+        self.weights.push((key, w, kernels));
         self.weights.len() - 1
     }
 
@@ -148,16 +175,17 @@ impl OrderNWindow {
         let s = i..i + span + 1;
         let key = spacing_key(&t[s.clone()]);
         let (y0, u0) = (y[i], &u[i * m..(i + 1) * m]);
-        let mut row = vec![0.0; d + 3];
+        let at = self.rows.len();
+        self.rows.resize(at + d + 3, 0.0);
         if let Some(key) = key {
-            let ys: Vec<f64> = y[s.clone()].iter().map(|v| v - y0).collect();
-            let us: Vec<f64> = u[i * m..(i + span + 1) * m]
-                .iter()
-                .enumerate()
-                .map(|(k, v)| v - u0[k % m])
-                .collect();
-            let at = self.weights_of(key);
-            let w = &self.weights[at].1;
+            let (mut ys, mut us) = (take(&mut self.scratch.ys), take(&mut self.scratch.us));
+            ys.clear();
+            ys.extend(y[s.clone()].iter().map(|v| v - y0));
+            us.clear();
+            us.extend(u[i * m..(i + span + 1) * m].iter().enumerate().map(|(k, v)| v - u0[k % m]));
+            let w = self.weights_of(key);
+            let w = &self.weights[w].1;
+            let row = &mut self.rows[at..];
             row[d] = w.apply(self.shape, &ys, &us, &mut row[..d]);
             let wn = &w.wy[(n - 1) * (span + 1)..n * (span + 1)];
             let (mut square, mut cube) = (0.0, 0.0);
@@ -167,8 +195,8 @@ impl OrderNWindow {
                 cube += wi * e2 * e;
             }
             (row[d + 1], row[d + 2]) = (square, cube);
+            (self.scratch.ys, self.scratch.us) = (ys, us);
         }
-        self.rows.extend_from_slice(&row);
         self.origins.push(y0);
         self.origins.extend_from_slice(u0);
         self.keys.push(key);
@@ -223,53 +251,77 @@ impl OrderNWindow {
         Some(WindowLook::new(self, first, end, key))
     }
 
-    /// Row `r`'s widened columns relative to `origin` into `x`, its past columns from row
-    /// `r − n h − 1` when `past` (else zero). `ops`: scratch.
-    fn widened(
-        &self,
-        r: u64,
-        origin: &[f64],
-        past: bool,
-        x: &mut [f64],
-        ops: &mut Vec<(usize, usize, f64)>,
-    ) {
-        let lay = Layout::new(self.shape);
-        let (d, n, m, base) = (lay.d, lay.n, lay.m, self.base());
-        let at = |r: u64| (r - self.rows_first) as usize;
-        let (row, o) = (&self.rows[at(r) * base..][..base], &self.origins[at(r) * (1 + m)..]);
-        x[..d].copy_from_slice(&row[..d]);
-        (x[lay.square()], x[lay.cube()]) = (row[d + 1], row[d + 2]);
-        shift_ops(lay, &o[..1 + m], origin, false, ops);
-        shift_row(x, ops);
-        x[lay.past_z()..].fill(0.0);
-        if past {
-            let p = r - (self.shape.span() as u64 + 1);
-            let (prow, po) = (&self.rows[at(p) * base..][..base], &self.origins[at(p) * (1 + m)..]);
-            x[lay.past_z()] = prow[d];
-            x[lay.past_z() + 1..].copy_from_slice(&prow[..n]);
-            x[lay.wide() - 1] -= (po[0] - origin[0]) * prow[lay.intercept()];
-        }
-    }
-
     /// The rows `rows` widened relative to `origin`, by column (`wide` columns of
-    /// `rows.len()`), their past columns when `past`.
+    /// `rows.len()`), into `x`; their past columns (from row `r − n h − 1`) where `past(r)`,
+    /// else zero. Column by column, each row's entries take [`shift_ops`]'s operations in
+    /// their order (the same numbers as moving each row by itself). `a`: scratch.
     fn widened_columns(
         &self,
         rows: std::ops::Range<u64>,
         origin: &[f64],
         past: impl Fn(u64) -> bool,
-    ) -> Vec<f64> {
-        let wide = Layout::new(self.shape).wide();
+        x: &mut Vec<f64>,
+        a: &mut Vec<f64>,
+    ) {
+        let lay = Layout::new(self.shape);
+        let (d, n, m, base, wide) = (lay.d, lay.n, lay.m, self.base(), lay.wide());
         let len = (rows.end - rows.start) as usize;
-        let mut x = vec![0.0; wide * len];
-        let (mut row, mut ops) = (vec![0.0; wide], Vec::new());
-        for (i, r) in rows.enumerate() {
-            self.widened(r, origin, past(r), &mut row, &mut ops);
-            for (c, v) in row.iter().enumerate() {
-                x[c * len + i] = *v;
+        let at0 = (rows.start - self.rows_first) as usize;
+        x.clear();
+        x.resize(wide * len, 0.0);
+        let kept = &self.rows[at0 * base..(at0 + len) * base];
+        for (i, row) in kept.chunks_exact(base).enumerate() {
+            for c in 0..d {
+                x[c * len + i] = row[c];
             }
+            x[lay.square() * len + i] = row[d + 1];
+            x[lay.cube() * len + i] = row[d + 2];
         }
-        x
+        let origins = &self.origins[at0 * (1 + m)..(at0 + len) * (1 + m)];
+        // `x_t += a x_s` down two columns, `a` per row.
+        let axpy = |x: &mut [f64], t: usize, s: usize, a: &[f64]| {
+            let (target, source) = if t < s {
+                let (lo, hi) = x.split_at_mut(s * len);
+                (&mut lo[t * len..(t + 1) * len], &hi[..len])
+            } else {
+                let (lo, hi) = x.split_at_mut(t * len);
+                (&mut hi[..len], &lo[s * len..(s + 1) * len])
+            };
+            for ((xt, xs), ai) in target.iter_mut().zip(source).zip(a) {
+                *xt += ai * xs;
+            }
+        };
+        a.clear();
+        a.resize(2 * len, 0.0);
+        let (dy, coef) = a.split_at_mut(len);
+        for (dy, o) in dy.iter_mut().zip(origins.chunks_exact(1 + m)) {
+            *dy = o[0] - origin[0];
+        }
+        for (t, s, f) in output_steps(lay) {
+            for (c, dy) in coef.iter_mut().zip(dy.iter()) {
+                *c = f(*dy);
+            }
+            axpy(x, t, s, coef);
+        }
+        for j in 0..m {
+            for (c, o) in coef.iter_mut().zip(origins.chunks_exact(1 + m)) {
+                *c = o[1 + j] - origin[1 + j];
+            }
+            axpy(x, input_column(lay, j), lay.intercept(), coef);
+        }
+        let l1 = self.shape.span() as u64 + 1;
+        for (i, r) in rows.enumerate() {
+            if !past(r) {
+                continue;
+            }
+            let p = (r - l1 - self.rows_first) as usize;
+            let (prow, po) = (&self.rows[p * base..][..base], &self.origins[p * (1 + m)..]);
+            x[lay.past_z() * len + i] = prow[d];
+            for k in 0..n {
+                x[(lay.past_z() + 1 + k) * len + i] = prow[k];
+            }
+            x[(wide - 1) * len + i] -= (po[0] - origin[0]) * prow[lay.intercept()];
+        }
     }
 
     /// The unit of samples `j..j + UNIT` (the window's first row is `first`), relative to the
@@ -293,16 +345,101 @@ impl OrderNWindow {
         let at = (lo - self.rows_first) as usize;
         let origin = self.origins[at * (1 + m)..(at + 1) * (1 + m)].to_vec();
         let rows = lo..j + UNIT;
-        let x = self.widened_columns(rows.clone(), &origin, |_| past);
+        let (mut x, mut a, mut psi) =
+            (take(&mut self.scratch.x), take(&mut self.scratch.a), take(&mut self.scratch.psi));
+        self.widened_columns(rows.clone(), &origin, |_| past, &mut x, &mut a);
         // The unit's weights are its first row's (every row of a window taken has a key).
         let key = self.keys[at].unwrap_or(window_key);
         let w = self.weights_of(key);
-        let kernels = Kernels::new(&self.weights[w].1, self.shape);
+        let kernels = &self.weights[w].2;
         let mut sums = Products::zero(kernels.groups, wide);
-        let mut psi = Vec::new();
         let len = (span + UNIT) as usize;
-        accumulate(&x, lo, len, &kernels, rows, j..j + UNIT, &mut sums, &mut psi);
+        accumulate(&x, lo, len, kernels, rows, j..j + UNIT, &mut sums, &mut psi);
         sums.mirror(kernels.groups, wide);
+        self.scratch = Scratch { x, a, psi, ..take(&mut self.scratch) };
         Unit { first: j, origin, past, sums }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::filter::{shift_ops, shift_products};
+    use super::*;
+    use crate::LoopModel;
+
+    /// The widened columns, moved column by column, are the kept rows moved one at a time by
+    /// [`shift_ops`] in its order, bit for bit, past columns included.
+    #[test]
+    fn widened_columns_are_each_row_moved_by_itself() {
+        for (n, m) in [(2, 1), (3, 2)] {
+            let cfg = OrderNConfig::new(LoopModel::of_order(n).unwrap(), m, 400, 5);
+            let len = 600;
+            let t: Vec<f64> = (0..len).map(|k| k as f64 * 0.01).collect();
+            let y: Vec<f64> =
+                t.iter().map(|t| 3.0 + (1.3 * t).sin() + 0.2 * (7.1 * t).cos()).collect();
+            let u: Vec<f64> =
+                (0..len * m).map(|k| ((k / m) as f64 * 0.037 + k as f64).sin()).collect();
+            let mut window = OrderNWindow::new(&cfg).unwrap();
+            assert!(window.prepare(0, &t, &y, &u).is_some());
+            let lay = Layout::new(window.shape);
+            let (d, base, wide) = (lay.d, window.base(), lay.wide());
+            let origin = vec![2.5; 1 + m];
+            let l1 = window.shape.span() as u64 + 1;
+            let rows = 3..len as u64 - window.shape.span() as u64;
+            let past = |r: u64| r >= 3 + l1;
+            let (mut x, mut a, mut ops) = (Vec::new(), Vec::new(), Vec::new());
+            window.widened_columns(rows.clone(), &origin, past, &mut x, &mut a);
+            let count = (rows.end - rows.start) as usize;
+            for (i, r) in rows.enumerate() {
+                let at = |r: u64| r as usize;
+                let (row, o) =
+                    (&window.rows[at(r) * base..][..base], &window.origins[at(r) * (1 + m)..]);
+                let mut want = vec![0.0; wide];
+                want[..d].copy_from_slice(&row[..d]);
+                (want[lay.square()], want[lay.cube()]) = (row[d + 1], row[d + 2]);
+                shift_ops(lay, &o[..1 + m], &origin, false, &mut ops);
+                for &(t, s, a) in &ops {
+                    want[t] += a * want[s];
+                }
+                if past(r) {
+                    let p = at(r - l1);
+                    let (prow, po) =
+                        (&window.rows[p * base..][..base], &window.origins[p * (1 + m)..]);
+                    want[lay.past_z()] = prow[d];
+                    want[lay.past_z() + 1..].copy_from_slice(&prow[..n]);
+                    want[wide - 1] -= (po[0] - origin[0]) * prow[lay.intercept()];
+                }
+                for (c, w) in want.iter().enumerate() {
+                    assert_eq!(x[c * count + i].to_bits(), w.to_bits(), "n {n} row {r} column {c}");
+                }
+            }
+        }
+    }
+
+    /// The units' move, along rows, is each operation's rows then its columns, one entry at a
+    /// time, bit for bit.
+    #[test]
+    fn shift_products_is_each_operation_rows_then_columns() {
+        let (groups, wide) = (3, 10);
+        let dim = groups * wide;
+        let s: Vec<f64> =
+            (0..dim * dim).map(|k| ((k * 7919) % 1000) as f64 / 37.0 - 13.0).collect();
+        let ops = vec![(7, 5, 0.3), (7, 1, -1.7), (6, 4, 2.9), (1, 4, -0.11), (9, 4, 5.5)];
+        let mut want = s.clone();
+        for &(t, src, a) in &ops {
+            for p in 0..groups {
+                for k in 0..dim {
+                    want[(p * wide + t) * dim + k] += a * want[(p * wide + src) * dim + k];
+                }
+            }
+            for row in 0..dim {
+                for p in 0..groups {
+                    want[row * dim + p * wide + t] += a * want[row * dim + p * wide + src];
+                }
+            }
+        }
+        let mut got = s;
+        shift_products(&mut got, dim, groups, wide, &ops);
+        assert!(got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()));
     }
 }

@@ -63,6 +63,30 @@ impl Layout {
     }
 }
 
+/// The output's part of a change of origin by `dy`, as `(target, source, α(dy))` in the order
+/// they apply (see [`shift_ops`]).
+pub(super) type Step = (usize, usize, fn(f64) -> f64);
+
+/// [`shift_ops`]' operations on the output's columns, each with its coefficient as a function
+/// of `dy`.
+pub(super) fn output_steps(lay: Layout) -> [Step; 6] {
+    let (int, yn) = (lay.intercept(), lay.n - 1);
+    let (sq, cube) = (lay.square(), lay.cube());
+    [
+        (cube, sq, |dy| 3.0 * dy),
+        (cube, yn, |dy| 3.0 * dy * dy),
+        (cube, int, |dy| -dy * dy * dy),
+        (sq, yn, |dy| 2.0 * dy),
+        (sq, int, |dy| -dy * dy),
+        (yn, int, |dy| -dy),
+    ]
+}
+
+/// The column `φ^{u_j}_n` input `j`'s change of origin moves (by `du_j L̄ⁿ`).
+pub(super) fn input_column(lay: Layout, j: usize) -> usize {
+    lay.n + j * lay.n + lay.n - 1
+}
+
 /// The column operations `(target, source, α)`, applied in order, that move a widened row's
 /// columns from the origin `from = [y; u]` to `to` (`dy = from_y − to_y`,
 /// `du = from_u − to_u`), into `ops`:
@@ -80,35 +104,21 @@ pub(super) fn shift_ops(
     past: bool,
     ops: &mut Vec<(usize, usize, f64)>,
 ) {
-    let (int, yn) = (lay.intercept(), lay.n - 1);
-    let (sq, cube) = (lay.square(), lay.cube());
+    let int = lay.intercept();
     let dy = from[0] - to[0];
     ops.clear();
-    ops.extend([
-        (cube, sq, 3.0 * dy),
-        (cube, yn, 3.0 * dy * dy),
-        (cube, int, -dy * dy * dy),
-        (sq, yn, 2.0 * dy),
-        (sq, int, -dy * dy),
-        (yn, int, -dy),
-    ]);
+    ops.extend(output_steps(lay).map(|(t, s, a)| (t, s, a(dy))));
     for j in 0..lay.m {
-        ops.push((lay.n + j * lay.n + lay.n - 1, int, from[1 + j] - to[1 + j]));
+        ops.push((input_column(lay, j), int, from[1 + j] - to[1 + j]));
     }
     if past {
         ops.push((lay.wide() - 1, int, -dy));
     }
 }
 
-/// `x_t += α x_s` for each operation, in order.
-pub(super) fn shift_row(x: &mut [f64], ops: &[(usize, usize, f64)]) {
-    for &(t, s, a) in ops {
-        x[t] += a * x[s];
-    }
-}
-
 /// `S ← T S Tᵀ` for the products `S` (`dim × dim`, row-major) of `groups` stacked copies of
-/// a widened row (`wide` columns each), `T` the column operations applied to every copy.
+/// a widened row (`wide` columns each), `T` the column operations applied to every copy: for
+/// each operation in order, its rows (`S_t += α S_s`, every copy), then its columns.
 pub(super) fn shift_products(
     s: &mut [f64],
     dim: usize,
@@ -116,16 +126,43 @@ pub(super) fn shift_products(
     wide: usize,
     ops: &[(usize, usize, f64)],
 ) {
-    for &(t, src, a) in ops {
-        for p in 0..groups {
-            let (rt, rs) = ((p * wide + t) * dim, (p * wide + src) * dim);
-            for k in 0..dim {
-                s[rt + k] += a * s[rs + k];
-            }
-        }
-        for row in s.chunks_exact_mut(dim) {
+    Arch::new().dispatch(ShiftProducts { s, dim, groups, wide, ops });
+}
+
+/// [`shift_products`]' arguments, compiled for the widest vectors (element-wise operations:
+/// the same numbers on every width).
+struct ShiftProducts<'a> {
+    s: &'a mut [f64],
+    dim: usize,
+    groups: usize,
+    wide: usize,
+    ops: &'a [(usize, usize, f64)],
+}
+
+impl WithSimd for ShiftProducts<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _: S) {
+        let ShiftProducts { s, dim, groups, wide, ops } = self;
+        for &(t, src, a) in ops {
             for p in 0..groups {
-                row[p * wide + t] += a * row[p * wide + src];
+                let (rt, rs) = (p * wide + t, p * wide + src);
+                let (target, source) = if rt < rs {
+                    let (lo, hi) = s.split_at_mut(rs * dim);
+                    (&mut lo[rt * dim..(rt + 1) * dim], &hi[..dim])
+                } else {
+                    let (lo, hi) = s.split_at_mut(rt * dim);
+                    (&mut hi[..dim], &lo[rs * dim..(rs + 1) * dim])
+                };
+                for (x, y) in target.iter_mut().zip(source) {
+                    *x += a * y;
+                }
+            }
+            // Every row's copies in order: the matrix as runs of `wide`.
+            assert!(t < wide && src < wide);
+            for copy in s.chunks_exact_mut(wide) {
+                copy[t] += a * copy[src];
             }
         }
     }
@@ -136,6 +173,7 @@ pub(super) fn shift_products(
 /// `wz − Σ_k a_k wy_k` is their combination), on the equation noise `wv` (`n h` taps). The
 /// dense ones are kept reversed (`rev[k] = w[n h − k]`), so that a filtered value is a dot
 /// product of contiguous runs; `wz` is nonzero on the `n + 1` knots only.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub(super) struct Kernels {
     /// `(offset, weight)` of `wz`'s nonzero taps.
     pub(super) wz: Vec<(usize, f64)>,
@@ -191,7 +229,10 @@ impl Products {
     }
 
     pub(super) fn add(&mut self, other: &Self) {
-        for (a, b) in self.e.iter_mut().zip(&other.e).chain(self.v.iter_mut().zip(&other.v)) {
+        for (a, b) in self.e.iter_mut().zip(&other.e) {
+            *a += b;
+        }
+        for (a, b) in self.v.iter_mut().zip(&other.v) {
             *a += b;
         }
     }

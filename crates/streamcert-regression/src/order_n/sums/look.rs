@@ -8,6 +8,8 @@ use super::filter::{Kernels, Layout, Products, accumulate, shift_ops, shift_prod
 use super::{OrderNWindow, UNIT};
 use crate::RegressionError;
 use crate::linalg::dot;
+use pulp::{Arch, Simd, WithSimd};
+use std::mem::take;
 
 /// One look of an [`OrderNWindow`]: the window's fit and its two model tests, each the same
 /// estimate as [`OrderNRecord`](super::super::OrderNRecord)'s over the window's samples (the
@@ -20,6 +22,9 @@ pub struct WindowLook<'a> {
     end: u64,
     key: u64,
     weights: RowWeights,
+    /// The window's kernels, and scratch for the filtered rows.
+    kernels: Kernels,
+    psi: Vec<f64>,
     /// `[y; u]` of the window's first sample, which its rows are taken relative to.
     origin: Vec<f64>,
     /// The window's rows widened ([`Layout`]), by column, and their regressands.
@@ -45,10 +50,11 @@ impl<'a> WindowLook<'a> {
         let lay = Layout::new(window.shape);
         let (m, d, base) = (lay.m, lay.d, window.base());
         let w = window.weights_of(key);
-        let weights = window.weights[w].1.clone();
+        let (weights, kernels) = (window.weights[w].1.clone(), window.weights[w].2.clone());
         let origin = window.origins[..1 + m].to_vec();
         let l1 = window.shape.span() as u64 + 1;
-        let x = window.widened_columns(first..end, &origin, |r| r >= first + l1);
+        let (mut x, mut a) = (Vec::new(), Vec::new());
+        window.widened_columns(first..end, &origin, |r| r >= first + l1, &mut x, &mut a);
         let z: Vec<f64> = (0..(end - first) as usize).map(|i| window.rows[i * base + d]).collect();
         let split = (l1 as usize).min(z.len());
         let gram_tail = gram(&x, &z, split..z.len());
@@ -60,6 +66,8 @@ impl<'a> WindowLook<'a> {
             end,
             key,
             weights,
+            kernels,
+            psi: Vec::new(),
             origin,
             x,
             z,
@@ -194,15 +202,14 @@ impl<'a> WindowLook<'a> {
     fn products(&mut self, first: u64, past: bool) -> Products {
         let lay = Layout::new(self.shape());
         let (wide, span, end) = (lay.wide(), self.shape().span() as u64, self.end);
-        let kernels = Kernels::new(&self.weights, self.window.shape);
+        let (kernels, mut psi) = (take(&mut self.kernels), take(&mut self.psi));
         let groups = kernels.groups;
         let shared_from = self.first + 2 * span + 1;
         let mut total = Products::zero(groups, wide);
         let mut fresh = Products::zero(groups, wide);
-        let mut psi = Vec::new();
         if shared_from < end {
             if self.tail.is_none() {
-                let mut tail = self.complete(shared_from..end, true, &kernels);
+                let mut tail = self.complete(shared_from..end, true, &kernels, &mut psi);
                 let mut trail = Products::zero(groups, wide);
                 let rows = end - span..end;
                 self.fresh(rows, end..end + span, &kernels, &mut trail, &mut psi);
@@ -214,10 +221,10 @@ impl<'a> WindowLook<'a> {
                 total.add(tail);
             }
             if first + span < shared_from {
-                total.add(&self.complete(first + span..shared_from, past, &kernels));
+                total.add(&self.complete(first + span..shared_from, past, &kernels, &mut psi));
             }
         } else {
-            total.add(&self.complete((first + span).min(end)..end, past, &kernels));
+            total.add(&self.complete((first + span).min(end)..end, past, &kernels, &mut psi));
             let trail = end.max(first + span)..end + span;
             self.fresh(first..end, trail, &kernels, &mut fresh, &mut psi);
         }
@@ -225,18 +232,25 @@ impl<'a> WindowLook<'a> {
         self.fresh(first..end, lead, &kernels, &mut fresh, &mut psi);
         fresh.mirror(groups, wide);
         total.add(&fresh);
+        (self.kernels, self.psi) = (kernels, psi);
         total
     }
 
     /// The products of the complete filtered rows at the samples `js`: the units wholly
     /// inside, kept or computed and kept, moved to the window's origin; the rest computed here.
-    fn complete(&mut self, js: std::ops::Range<u64>, past: bool, kernels: &Kernels) -> Products {
+    fn complete(
+        &mut self,
+        js: std::ops::Range<u64>,
+        past: bool,
+        kernels: &Kernels,
+        psi: &mut Vec<f64>,
+    ) -> Products {
         let lay = Layout::new(self.shape());
         let (wide, groups) = (lay.wide(), kernels.groups);
         let mut total = Products::zero(groups, wide);
         let mut fresh = Products::zero(groups, wide);
         let mut sums = Products::zero(groups, wide);
-        let (mut psi, mut ops) = (Vec::new(), Vec::new());
+        let mut ops = Vec::new();
         let mut pos = js.start;
         while pos < js.end {
             if pos.is_multiple_of(UNIT) && pos + UNIT <= js.end {
@@ -253,7 +267,7 @@ impl<'a> WindowLook<'a> {
                 pos += UNIT;
             } else {
                 let next = (pos - pos % UNIT + UNIT).min(js.end);
-                self.fresh(self.first..self.end, pos..next, kernels, &mut fresh, &mut psi);
+                self.fresh(self.first..self.end, pos..next, kernels, &mut fresh, psi);
                 pos = next;
             }
         }
@@ -309,20 +323,30 @@ impl<'a> WindowLook<'a> {
 }
 
 /// The Gram matrix of the columns of `x` (by column, `len` rows each) and `z` over the rows
-/// `rows`: `(D + 1) × (D + 1)`, each entry a [`dot`].
+/// `rows`: `(D + 1) × (D + 1)`, each entry a [`dot`] (compiled for the widest vectors).
 fn gram(x: &[f64], z: &[f64], rows: std::ops::Range<usize>) -> Vec<f64> {
-    let len = z.len();
-    let columns: Vec<&[f64]> =
-        x.chunks_exact(len.max(1)).chain([z]).map(|c| &c[rows.clone()]).collect();
-    let dim = columns.len();
-    let mut g = vec![0.0; dim * dim];
-    for a in 0..dim {
-        for b in a..dim {
-            let v = dot(columns[a], columns[b]);
-            (g[a * dim + b], g[b * dim + a]) = (v, v);
+    struct Gram<'a>(&'a [f64], &'a [f64], std::ops::Range<usize>);
+    impl WithSimd for Gram<'_> {
+        type Output = Vec<f64>;
+        #[inline(always)]
+        fn with_simd<S: Simd>(self, _: S) -> Vec<f64> {
+            let Gram(x, z, rows) = self;
+            let len = z.len();
+            let columns: Vec<&[f64]> =
+                x.chunks_exact(len.max(1)).chain([z]).map(|c| &c[rows.clone()]).collect();
+            let dim = columns.len();
+            let mut g = vec![0.0; dim * dim];
+            // A loop, not a closure: a closure is not compiled with the vectors' features.
+            for a in 0..dim {
+                for b in a..dim {
+                    let v = dot(columns[a], columns[b]);
+                    (g[a * dim + b], g[b * dim + a]) = (v, v);
+                }
+            }
+            g
         }
     }
-    g
+    Arch::new().dispatch(Gram(x, z, rows))
 }
 
 /// A model test from its larger fit: the coefficients beyond the first `d`, their covariance.

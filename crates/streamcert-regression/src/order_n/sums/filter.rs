@@ -297,12 +297,16 @@ impl WithSimd for Accumulate<'_> {
             // `wv` reaches the rows from `J − n h + 1`.
             let lv = lo.max((j + 1).saturating_sub(span));
             let (v0, kv) = ((lv - x_first) as usize, (span + lv - j - 1) as usize);
+            // `wz`'s taps that reach a row in `lo..hi` (offsets `j + 1 − hi ..= j − lo`, in
+            // order), and where their rows lie in `x`.
+            let (near, far) = ((j + 1 - hi) as usize, (j - lo) as usize);
+            let taps = &k.wz[k.wz.partition_point(|(o, _)| *o < near)..];
+            let taps = &taps[..taps.partition_point(|(o, _)| *o <= far)];
+            let at = (j - x_first) as usize;
             for (c, col) in x.chunks_exact(len).enumerate() {
                 let mut z = 0.0;
-                for &(o, w) in &k.wz {
-                    if let Some(i) = j.checked_sub(o as u64).filter(|i| (lo..hi).contains(i)) {
-                        z += w * col[(i - x_first) as usize];
-                    }
+                for &(o, w) in taps {
+                    z += w * col[at - o];
                 }
                 psi[c * count + t] = z;
                 let run = &col[i0..i1];

@@ -10,6 +10,7 @@
 
 use super::spline::{Kernel, Poly, divided_difference_weights, eval};
 use super::{MAX_ORDER, Shape};
+use crate::linalg::dot;
 
 /// Three-point Gauss–Legendre nodes on `[−1, 1]` and their weights (exact to degree five).
 const GL_NODES: [f64; 3] = [-0.774_596_669_241_483_4, 0.0, 0.774_596_669_241_483_4];
@@ -107,21 +108,37 @@ impl RowWeights {
 
     /// The row `[φ^y_1..φ^y_n, φ^{u_1}_1..φ^{u_1}_n, …, L̄ⁿ]` and its regressand `z` from the
     /// span's outputs `y` (`n h + 1`) and inputs `u` (`(n h + 1) × m`, row-major; the last
-    /// sample's input is not used: it is held after the span).
+    /// sample's input is not used: it is held after the span). Each sum of weights times
+    /// samples is in [`dot`]'s four-lane order.
+    #[inline(always)]
     pub(crate) fn apply(&self, shape: Shape, y: &[f64], u: &[f64], row: &mut [f64]) -> f64 {
         let (n, m, span) = (shape.n, shape.m, shape.span());
         for k in 0..n {
             let w = &self.wy[k * (span + 1)..(k + 1) * (span + 1)];
-            row[k] = w.iter().zip(y).map(|(w, y)| w * y).sum();
+            row[k] = dot(w, y);
             let w = &self.wu[k * span..(k + 1) * span];
             for input in 0..m {
                 row[n + input * n + k] =
-                    w.iter().enumerate().map(|(i, w)| w * u[i * m + input]).sum();
+                    if m == 1 { dot(w, u) } else { dot_strided(w, &u[input..], m) };
             }
         }
         row[shape.width() - 1] = self.intercept;
-        self.wz.iter().zip(y).map(|(w, y)| w * y).sum()
+        dot(&self.wz, y)
     }
+}
+
+/// [`dot`] of `w` with every `stride`-th entry of `x` from the first, in the same order.
+fn dot_strided(w: &[f64], x: &[f64], stride: usize) -> f64 {
+    let n = w.len().min(x.len().div_ceil(stride));
+    let mut lanes = [0.0f64; 4];
+    for i in 0..n / 4 * 4 {
+        lanes[i % 4] += w[i] * x[i * stride];
+    }
+    let mut tail = 0.0;
+    for i in n / 4 * 4..n {
+        tail += w[i] * x[i * stride];
+    }
+    (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]) + tail
 }
 
 /// Whether the times `b` have the offsets from their first that `a` has, each to within
@@ -130,4 +147,23 @@ pub(super) fn same_offsets(a: &[f64], b: &[f64]) -> bool {
     let (a0, b0) = (a[0], b[0]);
     let tol = 1e-12 * (a[a.len() - 1] - a0);
     a.iter().zip(b).all(|(x, y)| ((x - a0) - (y - b0)).abs() <= tol)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    proptest! {
+        /// A strided dot product is the dot product of the entries it takes, bit for bit.
+        #[test]
+        fn a_strided_dot_is_the_dot_of_its_entries(
+            w in prop::collection::vec(-1e3f64..1e3, 0..60),
+            x in prop::collection::vec(-1e3f64..1e3, 0..200),
+            stride in 1usize..4,
+        ) {
+            let taken: Vec<f64> = x.iter().step_by(stride).copied().collect();
+            prop_assert_eq!(dot_strided(&w, &x, stride).to_bits(), dot(&w, &taken).to_bits());
+        }
+    }
 }

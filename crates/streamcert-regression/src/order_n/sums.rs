@@ -37,8 +37,9 @@ mod look;
 use super::rows::RowWeights;
 use super::{OrderNConfig, Shape};
 use crate::RegressionError;
-use filter::{Kernels, Layout, Products, accumulate, input_column, output_steps};
+use filter::{Kernels, Layout, Products, accumulate, input_column, output_steps, two_runs};
 pub use look::WindowLook;
+use pulp::{Arch, Simd, WithSimd};
 use std::mem::take;
 
 /// Samples per unit of kept filtered products.
@@ -169,6 +170,7 @@ impl OrderNWindow {
     }
 
     /// Row `first + i`'s kept values from the window's samples (`i` its first sample).
+    #[inline(always)]
     fn push_row(&mut self, i: usize, t: &[f64], y: &[f64], u: &[f64]) {
         let Shape { n, m, .. } = self.shape;
         let (span, d) = (self.shape.span(), self.shape.width());
@@ -203,6 +205,30 @@ impl OrderNWindow {
     }
 }
 
+/// The rows `new` kept from the window's samples (whose first is sample `first`), compiled
+/// for the widest vectors (the same numbers on every width).
+struct PushRows<'a> {
+    window: &'a mut OrderNWindow,
+    first: u64,
+    new: std::ops::Range<u64>,
+    t: &'a [f64],
+    y: &'a [f64],
+    u: &'a [f64],
+}
+
+impl WithSimd for PushRows<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    fn with_simd<S: Simd>(self, _: S) {
+        let PushRows { window, first, new, t, y, u } = self;
+        // A loop, not a closure: a closure is not compiled with the vectors' features.
+        for r in new {
+            window.push_row((r - first) as usize, t, y, u);
+        }
+    }
+}
+
 impl OrderNWindow {
     /// Take a look's window: the samples `t`, `y`, `u` (`u` row-major, `m` per sample), the
     /// first of them the `first`-th sample since the start or the last [`clear`](Self::clear).
@@ -233,9 +259,8 @@ impl OrderNWindow {
             self.keys.drain(..gone);
             self.rows_first = first;
         }
-        for r in self.rows_first + self.keys.len() as u64..end {
-            self.push_row((r - first) as usize, t, y, u);
-        }
+        let new = self.rows_first + self.keys.len() as u64..end;
+        Arch::new().dispatch(PushRows { window: self, first, new, t, y, u });
         let key = self.keys[0]?;
         if !self.keys.iter().all(|k| k.is_some_and(|k| alike(k, key))) {
             return None;
@@ -280,13 +305,7 @@ impl OrderNWindow {
         let origins = &self.origins[at0 * (1 + m)..(at0 + len) * (1 + m)];
         // `x_t += a x_s` down two columns, `a` per row.
         let axpy = |x: &mut [f64], t: usize, s: usize, a: &[f64]| {
-            let (target, source) = if t < s {
-                let (lo, hi) = x.split_at_mut(s * len);
-                (&mut lo[t * len..(t + 1) * len], &hi[..len])
-            } else {
-                let (lo, hi) = x.split_at_mut(t * len);
-                (&mut hi[..len], &lo[s * len..(s + 1) * len])
-            };
+            let (target, source) = two_runs(x, len, t, s);
             for ((xt, xs), ai) in target.iter_mut().zip(source).zip(a) {
                 *xt += ai * xs;
             }
@@ -298,9 +317,7 @@ impl OrderNWindow {
             *dy = o[0] - origin[0];
         }
         for (t, s, f) in output_steps(lay) {
-            for (c, dy) in coef.iter_mut().zip(dy.iter()) {
-                *c = f(*dy);
-            }
+            f.fill(dy, coef);
             axpy(x, t, s, coef);
         }
         for j in 0..m {

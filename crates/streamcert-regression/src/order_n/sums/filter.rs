@@ -63,22 +63,68 @@ impl Layout {
     }
 }
 
-/// The output's part of a change of origin by `dy`, as `(target, source, α(dy))` in the order
-/// they apply (see [`shift_ops`]).
-pub(super) type Step = (usize, usize, fn(f64) -> f64);
+/// The coefficient of an operation of the output's part of a change of origin by `dy`.
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Coef {
+    /// `3 dy`
+    ThreeDy,
+    /// `3 dy²`
+    ThreeDy2,
+    /// `−dy³`
+    MinusDy3,
+    /// `2 dy`
+    TwoDy,
+    /// `−dy²`
+    MinusDy2,
+    /// `−dy`
+    MinusDy,
+}
 
-/// [`shift_ops`]' operations on the output's columns, each with its coefficient as a function
-/// of `dy`.
-pub(super) fn output_steps(lay: Layout) -> [Step; 6] {
+impl Coef {
+    /// Its value at `dy`.
+    #[inline(always)]
+    pub(super) fn of(self, dy: f64) -> f64 {
+        match self {
+            Self::ThreeDy => 3.0 * dy,
+            Self::ThreeDy2 => 3.0 * dy * dy,
+            Self::MinusDy3 => -dy * dy * dy,
+            Self::TwoDy => 2.0 * dy,
+            Self::MinusDy2 => -dy * dy,
+            Self::MinusDy => -dy,
+        }
+    }
+
+    /// `out[i] = self.of(dy[i])`, the variant's expression compiled into the loop.
+    #[inline(always)]
+    pub(super) fn fill(self, dy: &[f64], out: &mut [f64]) {
+        fn each(dy: &[f64], out: &mut [f64], f: impl Fn(f64) -> f64) {
+            for (o, d) in out.iter_mut().zip(dy) {
+                *o = f(*d);
+            }
+        }
+        match self {
+            Self::ThreeDy => each(dy, out, |d| Self::ThreeDy.of(d)),
+            Self::ThreeDy2 => each(dy, out, |d| Self::ThreeDy2.of(d)),
+            Self::MinusDy3 => each(dy, out, |d| Self::MinusDy3.of(d)),
+            Self::TwoDy => each(dy, out, |d| Self::TwoDy.of(d)),
+            Self::MinusDy2 => each(dy, out, |d| Self::MinusDy2.of(d)),
+            Self::MinusDy => each(dy, out, |d| Self::MinusDy.of(d)),
+        }
+    }
+}
+
+/// [`shift_ops`]' operations on the output's columns, `(target, source, coefficient)` in the
+/// order they apply.
+pub(super) fn output_steps(lay: Layout) -> [(usize, usize, Coef); 6] {
     let (int, yn) = (lay.intercept(), lay.n - 1);
     let (sq, cube) = (lay.square(), lay.cube());
     [
-        (cube, sq, |dy| 3.0 * dy),
-        (cube, yn, |dy| 3.0 * dy * dy),
-        (cube, int, |dy| -dy * dy * dy),
-        (sq, yn, |dy| 2.0 * dy),
-        (sq, int, |dy| -dy * dy),
-        (yn, int, |dy| -dy),
+        (cube, sq, Coef::ThreeDy),
+        (cube, yn, Coef::ThreeDy2),
+        (cube, int, Coef::MinusDy3),
+        (sq, yn, Coef::TwoDy),
+        (sq, int, Coef::MinusDy2),
+        (yn, int, Coef::MinusDy),
     ]
 }
 
@@ -107,12 +153,24 @@ pub(super) fn shift_ops(
     let int = lay.intercept();
     let dy = from[0] - to[0];
     ops.clear();
-    ops.extend(output_steps(lay).map(|(t, s, a)| (t, s, a(dy))));
+    ops.extend(output_steps(lay).map(|(t, s, a)| (t, s, a.of(dy))));
     for j in 0..lay.m {
         ops.push((input_column(lay, j), int, from[1 + j] - to[1 + j]));
     }
     if past {
         ops.push((lay.wide() - 1, int, -dy));
+    }
+}
+
+/// The runs `t` (to write) and `s` (to read), `t ≠ s`, of `x` cut in runs of `len`.
+#[inline(always)]
+pub(super) fn two_runs(x: &mut [f64], len: usize, t: usize, s: usize) -> (&mut [f64], &[f64]) {
+    if t < s {
+        let (lo, hi) = x.split_at_mut(s * len);
+        (&mut lo[t * len..(t + 1) * len], &hi[..len])
+    } else {
+        let (lo, hi) = x.split_at_mut(t * len);
+        (&mut hi[..len], &lo[s * len..(s + 1) * len])
     }
 }
 
@@ -147,14 +205,7 @@ impl WithSimd for ShiftProducts<'_> {
         let ShiftProducts { s, dim, groups, wide, ops } = self;
         for &(t, src, a) in ops {
             for p in 0..groups {
-                let (rt, rs) = (p * wide + t, p * wide + src);
-                let (target, source) = if rt < rs {
-                    let (lo, hi) = s.split_at_mut(rs * dim);
-                    (&mut lo[rt * dim..(rt + 1) * dim], &hi[..dim])
-                } else {
-                    let (lo, hi) = s.split_at_mut(rt * dim);
-                    (&mut hi[..dim], &lo[rs * dim..(rs + 1) * dim])
-                };
+                let (target, source) = two_runs(s, dim, p * wide + t, p * wide + src);
                 for (x, y) in target.iter_mut().zip(source) {
                     *x += a * y;
                 }

@@ -22,9 +22,8 @@ pub struct WindowLook<'a> {
     end: u64,
     key: u64,
     weights: RowWeights,
-    /// The window's kernels, and scratch for the filtered rows.
+    /// The window's kernels.
     kernels: Kernels,
-    psi: Vec<f64>,
     /// `[y; u]` of the window's first sample, which its rows are taken relative to.
     origin: Vec<f64>,
     /// The window's rows widened ([`Layout`]), by column, and their regressands.
@@ -53,8 +52,9 @@ impl<'a> WindowLook<'a> {
         let (weights, kernels) = (window.weights[w].1.clone(), window.weights[w].2.clone());
         let origin = window.origins[..1 + m].to_vec();
         let l1 = window.shape.span() as u64 + 1;
-        let (mut x, mut a) = (Vec::new(), Vec::new());
+        let (mut x, mut a) = (Vec::new(), take(&mut window.scratch.a));
         window.widened_columns(first..end, &origin, |r| r >= first + l1, &mut x, &mut a);
+        window.scratch.a = a;
         let z: Vec<f64> = (0..(end - first) as usize).map(|i| window.rows[i * base + d]).collect();
         let split = (l1 as usize).min(z.len());
         let gram_tail = gram(&x, &z, split..z.len());
@@ -67,7 +67,6 @@ impl<'a> WindowLook<'a> {
             key,
             weights,
             kernels,
-            psi: Vec::new(),
             origin,
             x,
             z,
@@ -202,7 +201,7 @@ impl<'a> WindowLook<'a> {
     fn products(&mut self, first: u64, past: bool) -> Products {
         let lay = Layout::new(self.shape());
         let (wide, span, end) = (lay.wide(), self.shape().span() as u64, self.end);
-        let (kernels, mut psi) = (take(&mut self.kernels), take(&mut self.psi));
+        let (kernels, mut psi) = (take(&mut self.kernels), take(&mut self.window.scratch.psi));
         let groups = kernels.groups;
         let shared_from = self.first + 2 * span + 1;
         let mut total = Products::zero(groups, wide);
@@ -232,7 +231,7 @@ impl<'a> WindowLook<'a> {
         self.fresh(first..end, lead, &kernels, &mut fresh, &mut psi);
         fresh.mirror(groups, wide);
         total.add(&fresh);
-        (self.kernels, self.psi) = (kernels, psi);
+        (self.kernels, self.window.scratch.psi) = (kernels, psi);
         total
     }
 

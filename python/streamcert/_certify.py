@@ -27,8 +27,8 @@ class CertifyResult:
     ``beta_hat`` (eq. betahat), ``rho`` (eq. rho), ``eps`` (eq. eps_est), ``kurtosis``,
     ``spike_fraction``, ``cert_gauss`` (``β̂ − ρ``), ``cert_wass`` (``β̂ − ρ(1 + 2ε)``),
     ``rho_calibrated``, ``cert_calibrated`` (``β̂_w − ρ_w``), ``calibrated_window``,
-    ``calibrated_horizon``, ``cert_nonlinear``, ``nonlinear_window``, ``nonlinear_y_lo``,
-    ``nonlinear_y_hi``; per gate ``g`` in ``GATES`` the boolean ``<g>_open`` and the reason code
+    ``calibrated_horizon``, ``calibrated_order``, ``cert_nonlinear``, ``nonlinear_window``,
+    ``nonlinear_y_lo``, ``nonlinear_y_hi``; per gate ``g`` in ``GATES`` the boolean ``<g>_open`` and the reason code
     ``reason_code_<g>`` (0 open, else ``REASON_KINDS[code - 1]``); the region columns
     ``region_lo_<channel>``, ``region_hi_<channel>``. ``reason_text(g)`` gives the reasons'
     texts, and ``to_pandas()`` the CSV's table.

@@ -243,3 +243,38 @@ fn a_time_far_ahead_is_refused_and_changes_nothing() {
     assert_eq!(a, b);
     assert_eq!(clean, hit);
 }
+
+/// A subsystem of order `n > 1`, or with `order = "auto"`, is refused by name: its
+/// certificate bounds a spectral abscissa, not a contraction rate in a shared metric, which
+/// Lemma 1 needs. The same subsystem at the first order composes.
+#[test]
+fn a_subsystem_of_higher_order_is_refused_naming_why() {
+    use streamcert::certificate::{Calibration, OrderLadder};
+    use streamcert::regression::LoopModel;
+    let first = || {
+        let mut c = local(-2.0);
+        c.regression.window = 2000;
+        c.regression.horizon = 50;
+        c.calibration = Some(Calibration::new(0.01));
+        c
+    };
+    let build = |c: CertifierConfig| {
+        let subsystems = vec![SubsystemSpec::new("a", c), SubsystemSpec::new("b", local(-2.0))];
+        NetworkCertifier::new(NetworkConfig::new(subsystems, vec![(0, 1, 0.1)], 0.1))
+    };
+    assert!(build(first()).is_ok());
+    let mut two = first();
+    two.regression.order = LoopModel::of_order(2).unwrap();
+    let mut auto = first();
+    auto.orders = Some(OrderLadder::automatic());
+    for (c, says) in [(two, "order 2"), (auto, "order \"auto\"")] {
+        match build(c) {
+            Err(streamcert::network::NetworkError::InvalidConfig { field, reason }) => {
+                assert_eq!(field, "subsystems");
+                assert!(reason.contains(says) && reason.contains("Lemma 1"), "{reason}");
+                assert!(reason.contains("order = 1"), "{reason}");
+            }
+            other => panic!("not refused: {other:?}"),
+        }
+    }
+}

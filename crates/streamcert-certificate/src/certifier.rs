@@ -247,7 +247,7 @@ impl Certifier {
         };
         let gauss_gate = self.gauss.update(t, cert_gauss);
         let wass_gate = self.wass.update(t, cert_wass);
-        let ((mut calibrated, calibrated_window, calibrated_horizon), nl) =
+        let ((mut calibrated, calibrated_window, calibrated_horizon, calibrated_order), nl) =
             self.calibrated_step(t, y, u);
         let (nonlinear_gate, mut nonlinear_reason, nl_best) = nl;
         let mut reason = closed_reason(blocked, cert_gauss, &gauss_gate, &self.gauss);
@@ -285,6 +285,7 @@ impl Certifier {
             calibrated,
             calibrated_window,
             calibrated_horizon,
+            calibrated_order,
             nonlinear: Verdict {
                 value: nl_best.map(|b| b.value),
                 radius: nl_best.map(|b| b.radius),

@@ -74,6 +74,11 @@ pub struct CertifierConfig {
     /// ([`HorizonLadder`](crate::HorizonLadder)); `None`: at the regression's horizon only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ladder: Option<crate::HorizonLadder>,
+    /// The calibrated certificate at several model orders side by side, the risk split over
+    /// them ([`OrderLadder`](crate::OrderLadder), `order = "auto"`); `None`: at the
+    /// regression's order only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub orders: Option<crate::OrderLadder>,
 }
 
 fn default_gap_factor() -> f64 {
@@ -108,6 +113,7 @@ impl CertifierConfig {
             couplings: None,
             metric: None,
             ladder: None,
+            orders: None,
         }
     }
 
@@ -215,6 +221,15 @@ impl CertifierConfig {
                 self.rung(h).validate().map_err(|e| CertifyError::InvalidConfig {
                     field: "horizon",
                     reason: format!("the ladder's rung at h = {h}: {e}"),
+                })?;
+            }
+        }
+        if let Some(l) = &self.orders {
+            l.validate(self)?;
+            for &n in l.orders.iter().filter(|&&n| n > 1) {
+                self.order_rung(n).validate().map_err(|e| CertifyError::InvalidConfig {
+                    field: "regression.order",
+                    reason: format!("the order ladder's rung at order {n}: {e}"),
                 })?;
             }
         }

@@ -396,6 +396,10 @@ pub struct Evidence {
     /// The horizon `h` (samples per column) of that look: the regression's, or with a
     /// [`HorizonLadder`](crate::HorizonLadder) the standing rung's.
     pub calibrated_horizon: Option<usize>,
+    /// The model order `n` of that look: the regression's (`1` for the paper's first-order
+    /// model), or with an [`OrderLadder`](crate::OrderLadder) (`order = "auto"`) the standing
+    /// rung's.
+    pub calibrated_order: Option<usize>,
     /// Nonlinear certificate `min_y β̂(y) − c s(y)` over the region of the largest standing
     /// nonlinear look (see the [`nonlinear`](crate::nonlinear) module).
     pub nonlinear: Verdict,

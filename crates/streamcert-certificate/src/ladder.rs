@@ -28,6 +28,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::{CertifierConfig, CertifyError};
 
+mod orders;
+pub use orders::OrderLadder;
+
 /// The calibrated certificate at several horizons, the risk split equally over them (see the
 /// module docs for the rule and why its risk holds).
 #[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
@@ -126,11 +129,14 @@ impl HorizonLadder {
 
 impl CertifierConfig {
     /// The calibration the certifier runs at: the configured one, with risk `δ / K` when a
-    /// [`HorizonLadder`] splits it over `K` rungs.
+    /// [`HorizonLadder`] or an [`OrderLadder`] splits it over `K` rungs.
     #[must_use]
     pub fn calibration_in_effect(&self) -> Option<crate::Calibration> {
         let mut c = self.calibration?;
         if let Some(l) = &self.ladder {
+            c.delta = l.rung_delta(c.delta);
+        }
+        if let Some(l) = &self.orders {
             c.delta = l.rung_delta(c.delta);
         }
         Some(c)
@@ -165,6 +171,7 @@ impl CertifierConfig {
         c.ambiguity = None;
         c.nonlinear = None;
         c.ladder = None;
+        c.orders = None;
         c
     }
 }

@@ -100,7 +100,7 @@ pub use error::CertifyError;
 pub use evidence::{AmbiguityLevel, CertificateKind, Evidence, Fit, NotCertified, Verdict};
 pub use fixed::{Sig, SigRange};
 pub use gate::{Gate, GateState};
-pub use ladder::HorizonLadder;
+pub use ladder::{HorizonLadder, OrderLadder};
 pub use nonlinear::{
     Feature, FeatureSet, NonlinearConfig, NonlinearLook, NonlinearityTest, RegionBound,
 };

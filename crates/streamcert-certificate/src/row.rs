@@ -16,14 +16,15 @@ pub enum ColumnKind {
     Gate,
     /// Why a gate is closed (text).
     Reason,
-    /// A count that describes a look: its window length `M_w` (columns), or for
-    /// `calibrated_horizon` its horizon `h` (samples per column); absent before a look.
+    /// A count that describes a look: its window length `M_w` (columns), for
+    /// `calibrated_horizon` its horizon `h` (samples per column), for `calibrated_order` its
+    /// model order `n`; absent before a look.
     Window,
 }
 
 /// Every evidence column with what it holds, in the order of [`EvidenceRow`] and the CSV
 /// header: the one list the header, the Python package's arrays and their kinds come from.
-pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 24] = {
+pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 25] = {
     use ColumnKind::{Gate, Number, Reason, Window};
     [
         ("t", Number),
@@ -42,6 +43,7 @@ pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 24] = {
         ("cert_calibrated", Number),
         ("calibrated_window", Window),
         ("calibrated_horizon", Window),
+        ("calibrated_order", Window),
         ("calibrated_open", Gate),
         ("reason_calibrated", Reason),
         ("cert_nonlinear", Number),
@@ -54,13 +56,13 @@ pub const EVIDENCE_COLUMN_KINDS: [(&str, ColumnKind); 24] = {
 };
 
 /// The column names of [`EvidenceRow`], in order (the CSV header).
-pub const EVIDENCE_COLUMNS: [&str; 24] = of_kind(None);
+pub const EVIDENCE_COLUMNS: [&str; 25] = of_kind(None);
 
 /// The [`ColumnKind::Number`] columns, in order ([`EvidenceRow::numbers`] gives their values).
 pub const NUMBER_COLUMNS: [&str; 13] = of_kind(Some(ColumnKind::Number));
 
 /// The [`ColumnKind::Window`] columns, in order.
-pub const WINDOW_COLUMNS: [&str; 3] = of_kind(Some(ColumnKind::Window));
+pub const WINDOW_COLUMNS: [&str; 4] = of_kind(Some(ColumnKind::Window));
 
 /// The names of the columns of `kind` (every column for `None`), in order; a count that is
 /// not `N` fails the build.
@@ -165,6 +167,8 @@ pub struct EvidenceRow {
     pub calibrated_window: Option<usize>,
     /// `h` of the standing calibrated look ([`Evidence::calibrated_horizon`]).
     pub calibrated_horizon: Option<usize>,
+    /// The model order `n` of the standing calibrated look ([`Evidence::calibrated_order`]).
+    pub calibrated_order: Option<usize>,
     /// Calibrated gate, 0 or 1.
     pub calibrated_open: u8,
     /// Why the calibrated gate is closed.
@@ -225,6 +229,7 @@ impl From<&Evidence> for EvidenceRow {
             cert_calibrated: e.calibrated.value,
             calibrated_window: e.calibrated_window,
             calibrated_horizon: e.calibrated_horizon,
+            calibrated_order: e.calibrated_order,
             calibrated_open: u8::from(e.calibrated.open),
             reason_calibrated: e.calibrated.reason.map(ReasonText),
             cert_nonlinear: e.nonlinear.value,
@@ -265,6 +270,7 @@ mod tests {
             reason_wass: Some(ReasonText(NotCertified::WarmingUp { columns: 3, needed: 150 })),
             calibrated_window: Some(600),
             calibrated_horizon: Some(5),
+            calibrated_order: Some(2),
             calibrated_open: 1,
             reason_calibrated: None,
             nonlinear_window: None,
@@ -285,6 +291,9 @@ mod tests {
         let kinds = |k: ColumnKind| EVIDENCE_COLUMN_KINDS.iter().filter(move |c| c.1 == k);
         assert!(kinds(ColumnKind::Gate).all(|(n, _)| n.ends_with("_open")));
         assert!(kinds(ColumnKind::Reason).all(|(n, _)| n.starts_with("reason_")));
-        assert_eq!(WINDOW_COLUMNS, ["calibrated_window", "calibrated_horizon", "nonlinear_window"]);
+        assert_eq!(
+            WINDOW_COLUMNS,
+            ["calibrated_window", "calibrated_horizon", "calibrated_order", "nonlinear_window"]
+        );
     }
 }

@@ -58,8 +58,8 @@ fn hidden(a: [f64; 4]) -> LinearScenario {
 /// Three plants that never change, 20 seeded runs each: no verdict leads with "the plant
 /// changed", and fewer than 1 % of their rows carry `plant_changed`; at least 18 of each
 /// plant's 20 verdicts are led by the hidden-dynamics guard (measured: 20), and those name
-/// the order tried (1) and the models of order 2 and 3, with the risk a second run on the
-/// same data spends.
+/// the order tried (1), the models of order 2 and 3 and `order = "auto"`, which tries them
+/// within the run's risk, with the risk a second run on the same data spends.
 #[test]
 fn plants_with_a_hidden_state_are_never_blamed_on_a_change() {
     let plants = [
@@ -93,7 +93,8 @@ fn plants_with_a_hidden_state_are_never_blamed_on_a_change() {
                 hidden_led += 1;
                 for named in [
                     "(order 1, window",
-                    "a model of order 2 or 3 on one output ([regression] order)",
+                    "a model of order 2 or 3 on one output may hold them",
+                    "[regression] order = \"auto\" runs orders 1 to 3 within one risk δ",
                     "a second run on the same data spends the risk δ again",
                 ] {
                     assert!(verdict.contains(named), "{name}: {named:?} not in {verdict}");
@@ -158,4 +159,55 @@ fn a_plant_that_changes_is_still_named_as_changed() {
         assert!(closed > 0, "3 -> {to}: no run closed");
         assert!(10 * named >= 9 * closed, "3 -> {to}: {named} of {closed}: {missed:#?}");
     }
+}
+
+/// `order = "auto"` from the command line's defaults: a damped second-order plant read by its
+/// position (`ÿ + 1.2 ẏ + y = u + 0.1`, `K = 0.7625`, closed loop `(s + 0.25)(s + 0.95)`,
+/// five times the margin 0.05; sensor noise, 40 s at 100 Hz; `h = 50`, `M = 2000`) is
+/// certified, and the verdict, the summary's counts and the rows name order 2; at `order = 1`
+/// the same record is refused by the hidden-dynamics guard, whose words name `order = "auto"`.
+#[test]
+fn order_auto_certifies_a_hidden_state_and_names_its_order() {
+    let plant = streamcert_dynamics::ObservableLoop::new(&[1.2, 1.0], 0.7625);
+    let mut data = String::from("t,y_b,u_b\n");
+    plant.run(11, |t, y, u| {
+        data.push_str(&format!("{t},{y},{u}\n"));
+        true
+    });
+    let text = |order: &str| {
+        config::g5_node_b()
+            .replacen("gain = [[-4.0]]", "gain = [[0.7625]]", 1)
+            .replacen("\norder = 1\n", &format!("\norder = {order}\n"), 1)
+            .replacen("window = 150 ", "window = 2000 ", 1)
+            .replacen("horizon = 5 ", "horizon = 50 ", 1)
+    };
+    let auto = config::parse(&text("\"auto\""), "auto.toml").expect("order = \"auto\"");
+    let mut rows = Vec::new();
+    let s = certify::run(&auto, data.as_bytes(), "plant.csv", &mut rows, &Options::default())
+        .expect("a run");
+    let verdict = s.verdict_line(&auto.certifier, &auto.columns.outputs);
+    assert!(verdict.starts_with("verdict: CERTIFIED"), "{verdict}");
+    assert!(verdict.contains("(calibrated certificate of order 2, risk delta = 0.01"), "{verdict}");
+    assert_eq!(s.calibrated_order, Some(2));
+    let line = s.horizons_line().expect("the orders' line");
+    assert!(line.starts_with("orders (each at risk delta/3"), "{line}");
+    assert!(line.contains("order 2 (h = 50, M = 2000) open"), "{line}");
+    assert!(line.contains("order 1 (h = 50, M = 2000) never opened"), "{line}");
+    let rows = String::from_utf8(rows).expect("utf-8");
+    let header: Vec<&str> = rows.lines().next().expect("a header").split(',').collect();
+    let at = header.iter().position(|&c| c == "calibrated_order").expect("the column");
+    let open = header.iter().position(|&c| c == "calibrated_open").expect("the gate");
+    let open_orders: Vec<&str> = rows
+        .lines()
+        .skip(1)
+        .map(|r| r.split(',').collect::<Vec<_>>())
+        .filter(|r| r[open] == "1")
+        .map(|r| r[at])
+        .collect();
+    assert!(!open_orders.is_empty() && open_orders.iter().all(|&n| n == "2"), "{open_orders:?}");
+    let one = config::parse(&text("1"), "one.toml").expect("order = 1");
+    let s = certify(&one, &data);
+    let verdict = s.verdict_line(&one.certifier, &one.columns.outputs);
+    assert!(verdict.starts_with("verdict: NOT CERTIFIED"), "{verdict}");
+    assert!(verdict.contains("order = \"auto\" runs orders 1 to 3"), "{verdict}");
 }

@@ -45,21 +45,23 @@ fn the_calibrated_certificate_is_the_default_verdict() {
     assert!(out.status.success(), "{}", text(&out.stderr));
     let lines: Vec<String> = text(&out.stdout).lines().map(String::from).collect();
     assert!(lines[0].contains(
-        ",rho_calibrated,cert_calibrated,calibrated_window,calibrated_horizon,calibrated_open,\
-         reason_calibrated,"
+        ",rho_calibrated,cert_calibrated,calibrated_window,calibrated_horizon,calibrated_order,\
+         calibrated_open,reason_calibrated,"
     ));
     assert!(lines[0].ends_with(",region_lo_calibrated_y_b,region_hi_calibrated_y_b"));
     let last: Vec<&str> = lines.last().expect("rows").split(',').collect();
-    assert_eq!(last.len(), 24 + 6);
+    assert_eq!(last.len(), 25 + 6);
     let rho_cal: f64 = last[12].parse().expect("rho_calibrated");
     let cert_cal: f64 = last[13].parse().expect("cert_calibrated");
     let window: usize = last[14].parse().expect("calibrated_window");
     let h: usize = last[15].parse().expect("calibrated_horizon");
-    // The default horizon, h = 5, and one of its windows (M = 150 doubling to 16 M).
-    assert_eq!(h, 5, "{last:?}");
+    let order: usize = last[16].parse().expect("calibrated_order");
+    // The default horizon, h = 5, the first order, and one of its windows (M = 150 doubling
+    // to 16 M).
+    assert_eq!((h, order), (5, 1), "{last:?}");
     assert!(rho_cal > 0.0 && cert_cal.is_finite() && [150, 300, 600, 1200, 2400].contains(&window));
     // The gate is open exactly when no reason is given.
-    assert_eq!(last[16] == "1", last[17].is_empty(), "{last:?}");
+    assert_eq!(last[17] == "1", last[18].is_empty(), "{last:?}");
     // The summary's first line is the calibrated verdict, with its risk.
     let stderr = text(&out.stderr);
     let first = stderr.lines().next().expect("a summary");

@@ -190,6 +190,25 @@ impl NetworkConfig {
             }
         }
         self.check_estimated()?;
+        if let Some(s) = self.subsystems.iter().find(|s| {
+            !s.certifier.regression.order.is_first_order() || s.certifier.orders.is_some()
+        }) {
+            return bad(
+                "subsystems",
+                format!(
+                    "subsystem `{}` runs order {}: a certificate of order n > 1 bounds the \
+                     closed loop's spectral abscissa, not a contraction rate in a metric its \
+                     neighbours share, so Lemma 1 does not compose it; set its order = 1 (the \
+                     first-order rate composes)",
+                    s.name,
+                    if s.certifier.orders.is_some() {
+                        "\"auto\"".to_string()
+                    } else {
+                        s.certifier.regression.order.order().to_string()
+                    }
+                ),
+            );
+        }
         if self.certificate == CertificateKind::Calibrated
             && let Some(s) = self.subsystems.iter().find(|s| s.certifier.calibration.is_none())
         {

@@ -5,7 +5,7 @@ use streamcert_ambiguity::{AmbiguityConfig, SpikeScale};
 use streamcert_certificate::{
     Calibration, Certifier, CertifierConfig, GuardVariance, ResidualSource, RiskSplit,
 };
-use streamcert_regression::{Estimator, InputIntegral, LoopModel, Model, RegressionConfig};
+use streamcert_regression::{Estimator, InputIntegral, Model, RegressionConfig};
 
 use crate::CliError;
 
@@ -13,7 +13,7 @@ mod choice;
 mod nonlinear;
 mod required;
 
-use choice::Choice;
+use choice::{Choice, OrderChoice};
 use nonlinear::NonlinearSection;
 use required::required_message;
 pub use required::{REQUIRED_KEYS, REQUIRED_VALUE, g5_node_b, unset_required};
@@ -223,7 +223,7 @@ fn default_consecutive() -> usize {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 struct Regression {
-    order: LoopModel,
+    order: OrderChoice,
     model: Model,
     window: Choice,
     horizon: Choice,
@@ -236,7 +236,7 @@ struct Regression {
 impl Default for Regression {
     fn default() -> Self {
         Self {
-            order: LoopModel::FirstOrder,
+            order: OrderChoice::default(),
             model: Model::Affine,
             window: Choice::Fixed(150),
             horizon: Choice::Fixed(5),
@@ -359,12 +359,13 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
     let (p, m) = check_shape(&f).map_err(&bad)?;
     let r = &f.regression;
     let (window, horizon, ladder) = choice::resolve(r.window, r.horizon, f.calibration.enabled);
+    let (order, orders) = choice::resolve_order(r.order, f.calibration.enabled);
     let reg = RegressionConfig {
         min_columns: r.min_columns.unwrap_or(window),
         input_integral: r.input_integral,
         estimator: r.estimator,
         model: r.model,
-        order: r.order,
+        order,
         ..RegressionConfig::new(p, m, window, horizon, r.ridge)
     };
     let mut certifier = CertifierConfig::new(
@@ -385,6 +386,7 @@ pub fn parse_placed(text: &str, path: &str, place: ErrorPlace) -> Result<Config,
         certifier.calibration = Some(f.calibration.calibration());
     }
     certifier.ladder = ladder;
+    certifier.orders = orders;
     certifier.nonlinear = f.nonlinear.config().map_err(&bad)?;
     f.columns.delimiter_byte().map_err(&bad)?;
     // Validate everything by building a certifier once.

@@ -113,6 +113,10 @@ pub struct Summary {
     /// the last row.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibrated_horizon: Option<usize>,
+    /// With an order ladder (`order = "auto"`), the order `n` whose look the open calibrated
+    /// verdict was at the last row.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibrated_order: Option<usize>,
 }
 
 impl Summary {
@@ -325,7 +329,7 @@ impl Summary {
                     .collect();
                 // The risk is stated for one Jacobian over the region; the nonlinearity guard
                 // tests that, it does not bound a rate that varies (NONLINEAR.md).
-                let order = cfg.regression.order.order();
+                let order = self.calibrated_order.unwrap_or(cfg.regression.order.order());
                 let scope = if order > 1 && cal.nonlinearity {
                     "the nonlinearity guard of order n tests the curvature of the plant's static \
                      term over it, not a nonlinearity of its damping terms"
@@ -341,7 +345,12 @@ impl Summary {
                     "the nonlinearity guard is off"
                 };
                 let at = self.calibrated_horizon.map_or(String::new(), |h| format!(" at h = {h}"));
-                let of = if order > 1 { format!(" of order {order}") } else { String::new() };
+                let at = if cfg.ladder.is_some() { at } else { String::new() };
+                let of = if order > 1 || cfg.orders.is_some() {
+                    format!(" of order {order}")
+                } else {
+                    String::new()
+                };
                 format!(
                     "verdict: CERTIFIED {candidate} from {} to the end (calibrated certificate{of}{at}, \
                      risk delta = {} over the run), over the region {}; the risk assumes dynamics \
@@ -456,6 +465,7 @@ impl Summary {
             "source": self.source,
             "horizons": self.horizons,
             "calibrated_horizon": self.calibrated_horizon,
+            "calibrated_order": self.calibrated_order,
         })
     }
 }

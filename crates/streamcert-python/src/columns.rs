@@ -79,7 +79,8 @@ impl EvidenceColumns {
             open.push(g.open);
             reason.push(g.reason);
         }
-        let windows = [r.calibrated_window, r.calibrated_horizon, r.nonlinear_window];
+        let windows =
+            [r.calibrated_window, r.calibrated_horizon, r.calibrated_order, r.nonlinear_window];
         for (col, w) in self.windows.iter_mut().zip(windows) {
             col.push(w.map_or(f64::NAN, |w| w as f64));
         }

@@ -9,8 +9,8 @@ use crate::{GateState, NotCertified, Verdict};
 
 pub(super) type NonlinearStep = (GateState, Option<NotCertified>, Option<Standing>);
 
-/// The calibrated verdict the evidence reports, with its look's window and horizon.
-pub(super) type CalibratedStep = (Verdict, Option<usize>, Option<usize>);
+/// The calibrated verdict the evidence reports, with its look's window, horizon and order.
+pub(super) type CalibratedStep = (Verdict, Option<usize>, Option<usize>, Option<usize>);
 
 /// What the evidence needs of a standing look: its certificate, radius, window length and,
 /// for the nonlinear certificate, region (not the whole look, which is copied otherwise).
@@ -44,8 +44,8 @@ impl Certifier {
         };
         let window = best.map(|b| b.window);
         if self.rungs.is_empty() {
-            let h = self.cfg.regression.horizon;
-            return ((own, window, own.value.map(|_| h)), nl);
+            let (h, n) = (self.cfg.regression.horizon, self.cfg.regression.order.order());
+            return ((own, window, own.value.map(|_| h), own.value.map(|_| n)), nl);
         }
         (self.ladder_step(t, y, u, (own, window)), nl)
     }

@@ -91,6 +91,7 @@ impl Certifier {
             calibrated: closed,
             calibrated_window: None,
             calibrated_horizon: None,
+            calibrated_order: None,
             nonlinear: closed,
             nonlinear_window: None,
             nonlinear_region: None,

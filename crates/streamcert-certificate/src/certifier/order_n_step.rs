@@ -59,6 +59,7 @@ impl Certifier {
         let (value, blocked, window) = look_value(cert);
         let columns = cert.rows();
         let horizon = cert.config().regression.horizon;
+        let order = cert.config().regression.model.order();
         let state = self.calibrated_gate.update(t, value);
         let mut reason = closed_reason(blocked, value, &state, &self.calibrated_gate);
         if let Some(g) = gap {
@@ -76,6 +77,7 @@ impl Certifier {
             calibrated: Verdict { value, radius: None, open: state.open, reason },
             calibrated_window: window,
             calibrated_horizon: window.map(|_| horizon),
+            calibrated_order: window.map(|_| order),
             nonlinear: Verdict::closed(NotCertified::NoNonlinearModel),
             nonlinear_window: None,
             nonlinear_region: None,

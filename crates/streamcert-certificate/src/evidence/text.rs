@@ -100,8 +100,8 @@ impl NotCertified {
                 f,
                 "the output has dynamics beyond its model's order (order 1, window {window}: \
                  past increment, Wald {statistic} > {threshold}); a model of order 2 or 3 on \
-                 one output ([regression] order) may hold them (a second run on the same data \
-                 spends the risk δ again)"
+                 one output may hold them: [regression] order = \"auto\" runs orders 1 to 3 \
+                 within one risk δ (a second run on the same data spends the risk δ again)"
             ),
             n if n < MAX_ORDER => write!(
                 f,
@@ -159,7 +159,8 @@ mod tests {
     }
 
     /// The words name the order tried and what would be valid at each order: the first
-    /// order names the models of order 2 and 3 and the risk a second run spends; order 2
+    /// order names the models of order 2 and 3, `order = "auto"` that tries them within the
+    /// run's risk, and the risk a second run spends; order 2
     /// names order 3; order 3, the largest, names none above it but the states as outputs.
     #[test]
     fn the_hidden_dynamics_words_name_the_order_and_what_would_be_valid() {
@@ -167,6 +168,7 @@ mod tests {
         assert!(one.starts_with("the output has dynamics beyond its model's order (order 1,"));
         assert!(one.contains("past increment"), "{one}");
         assert!(one.contains("order 2 or 3 on one output") && one.contains("risk δ again"));
+        assert!(one.contains("order = \"auto\" runs orders 1 to 3 within one risk δ"), "{one}");
         let two = hidden(2).to_string();
         assert!(two.contains("(order 2, window 150") && two.contains("[regression] order = 3"));
         assert!(two.contains("past row, Wald 31.400 > 9.200"), "{two}");

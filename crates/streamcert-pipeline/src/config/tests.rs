@@ -318,3 +318,23 @@ fn order_selects_the_certificate_of_order_n() {
         assert!(parse(&text, "x").is_err(), "{bad}");
     }
 }
+
+/// `order = "auto"` is the first order with the order ladder at risk `δ / 3` per rung; with
+/// `horizon = "auto"` too it is refused, naming both; without the calibrated certificate it is
+/// the first order (the paper's certificates are of the first order).
+#[test]
+fn order_auto_is_the_order_ladder() {
+    let auto = base().replace("order = 1", "order = \"auto\"");
+    let c = parse(&auto, "x").unwrap().certifier;
+    assert!(c.regression.order.is_first_order());
+    assert_eq!(c.orders.as_ref().map(|l| l.orders.clone()), Some(vec![1, 2, 3]));
+    let delta = c.calibration.unwrap().delta;
+    assert_eq!(c.calibration_in_effect().unwrap().delta, delta / 3.0);
+    let both = auto.replace("horizon = 5 ", "horizon = \"auto\" ");
+    assert_ne!(both, auto, "the horizon key");
+    let err = parse(&both, "x").unwrap_err().to_string();
+    assert!(err.contains("order = \"auto\" and horizon = \"auto\""), "{err}");
+    let bare = auto.replacen("\nenabled = true\n", "\nenabled = false\n", 1);
+    let c = parse(&bare, "x").unwrap().certifier;
+    assert!(c.regression.order.is_first_order() && c.orders.is_none());
+}

@@ -190,6 +190,8 @@ impl CsvRows {
         sep(self);
         self.uint(row.calibrated_horizon);
         sep(self);
+        self.uint(row.calibrated_order);
+        sep(self);
         self.uint(Some(usize::from(row.calibrated_open)));
         sep(self);
         self.reason(2, row.reason_calibrated.map(|r| r.0));
@@ -293,6 +295,7 @@ mod tests {
                 cert_calibrated: b.5,
                 calibrated_window: c.0,
                 calibrated_horizon: c.4,
+                calibrated_order: c.4.map(|h| 1 + h % 3),
                 calibrated_open: u8::from(c.1),
                 reason_calibrated: c.2,
                 cert_nonlinear: c.3,

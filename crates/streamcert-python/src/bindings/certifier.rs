@@ -285,6 +285,11 @@ impl PyEvidence {
     fn calibrated_horizon(&self) -> Option<usize> {
         self.row.calibrated_horizon
     }
+    /// The calibrated look's model order `n` (with `order = "auto"`, the standing order's).
+    #[getter]
+    fn calibrated_order(&self) -> Option<usize> {
+        self.row.calibrated_order
+    }
     /// The nonlinear certificate.
     #[getter]
     fn cert_nonlinear(&self) -> Option<f64> {
@@ -333,6 +338,7 @@ impl PyEvidence {
         }
         d.set_item("calibrated_window", r.calibrated_window)?;
         d.set_item("calibrated_horizon", r.calibrated_horizon)?;
+        d.set_item("calibrated_order", r.calibrated_order)?;
         d.set_item("nonlinear_window", r.nonlinear_window)?;
         Ok(d)
     }

@@ -24,8 +24,10 @@
 //! refuses every look, so the later fit and the bisection are not paid), `order2_loop` (the
 //! same on an exactly simulated order-2 loop at five times the margin, whose looks pass
 //! both guards, fit three times and bisect the margin; at most [`LOOP_SAMPLES`] samples, the
-//! record simulated whole before the loop whatever their number), all for
-//! `p = m = 1`; `wide` (`Certifier::push`,
+//! record simulated whole before the loop whatever their number), `orders_loop` (the same
+//! record under `order = "auto"`: orders 1, 2 and 3 side by side), `order1_loop` (the same
+//! record at the first order with the same `M = 2000`, `h = 50`: the ladder's own first
+//! rung alone, at `δ`), all for `p = m = 1`; `wide` (`Certifier::push`,
 //! Gaussian, `p = m = 10`, gain `−I`, the bench's `gaussian/p10_m10_M150`); `M = 150`, `h = 5`,
 //! on the stream of `benches/regression.rs`.
 
@@ -35,7 +37,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use streamcert::ambiguity::{AmbiguityConfig, AmbiguityRadius};
 use streamcert::certificate::{
-    Calibration, Certifier, CertifierConfig, HorizonLadder, NonlinearConfig, RiskSplit,
+    Calibration, Certifier, CertifierConfig, HorizonLadder, NonlinearConfig, OrderLadder, RiskSplit,
 };
 use streamcert::regression::{LoopModel, Model, RegressionConfig, SlidingRegression};
 
@@ -74,10 +76,15 @@ fn calibrated(
             cfg.ladder = Some(HorizonLadder::automatic());
             default
         }
-        "order2" | "order2_loop" => {
-            cfg.regression.order = LoopModel::Order(2);
-            (cfg.regression.window, cfg.regression.horizon) = (2000, 50);
-            if mode == "order2_loop" {
+        "order2" | "order2_loop" | "orders_loop" | "order1_loop" => {
+            if mode.starts_with("order2") {
+                cfg.regression.order = LoopModel::Order(2);
+            }
+            cfg.regression = RegressionConfig { order: cfg.regression.order, ..reg(2000, 50) };
+            if mode == "orders_loop" {
+                cfg.orders = Some(OrderLadder::automatic());
+            }
+            if mode.ends_with("_loop") {
                 cfg.gain = vec![LOOP_GAIN];
             }
             default
@@ -86,6 +93,11 @@ fn calibrated(
     };
     cfg.calibration = Some(cal);
     Ok(Some(Certifier::new(cfg)?))
+}
+
+/// The first-order regression at window `m` and horizon `h` (the bench's ridge).
+fn reg(m: usize, h: usize) -> RegressionConfig {
+    RegressionConfig::new(1, 1, m, h, 1e-4)
 }
 
 /// The `order2_loop` record's length, and its loop's gain: `ÿ + 1.2 ẏ + y = u + 0.1` under
@@ -115,9 +127,9 @@ type Record = (Vec<f64>, Vec<f64>);
 /// simulation cancels in the difference of two runs); empty for the other modes.
 fn loop_record(mode: &str, samples: usize) -> Result<Record, Box<dyn std::error::Error>> {
     let mut record = (Vec::new(), Vec::new());
-    if mode == "order2_loop" {
+    if mode.ends_with("_loop") {
         if samples > LOOP_SAMPLES {
-            return Err(format!("order2_loop runs at most {LOOP_SAMPLES} samples").into());
+            return Err(format!("{mode} runs at most {LOOP_SAMPLES} samples").into());
         }
         let plant = streamcert::dynamics::ObservableLoop {
             samples: LOOP_SAMPLES,
@@ -186,7 +198,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 black_box((ev.calibrated.value, ev.nonlinear.value, ev.nonlinear.open));
             }
             "calibrated" | "baseline" | "unguarded" | "without_change" | "without_model"
-            | "auto" | "order2" | "order2_loop" => {
+            | "auto" | "order2" | "order2_loop" | "orders_loop" | "order1_loop" => {
                 let Some(cert) = cal.as_mut() else { unreachable!("built for these modes") };
                 let ev = cert.push(black_box(t), y, u)?;
                 black_box((ev.gaussian.value, ev.calibrated.value, ev.calibrated.open));

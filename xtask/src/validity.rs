@@ -17,6 +17,7 @@ mod cells;
 mod change;
 mod held;
 mod order;
+mod order_auto;
 pub(crate) use cells::set_horizon_auto;
 use cells::{Cell, near_margin_cells, power_cells};
 pub(crate) use order::order_only;

@@ -32,9 +32,10 @@ pub struct Trace {
 }
 
 /// Values per kept row: `certify` keeps `β̂`, the calibrated certificate, `β̂_w`, the
-/// Gaussian certificate, the two gates, `ε`, the calibrated reason's code and the newest
-/// window's upper bound when it closes the gate; `network` its own.
-const VALUES: usize = 9;
+/// Gaussian certificate, the two gates, `ε`, the calibrated reason's code, the newest
+/// window's upper bound when it closes the gate and the standing look's order; `network` its
+/// own.
+const VALUES: usize = 10;
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Row {
@@ -106,6 +107,7 @@ impl Trace {
                     Some(NotCertified::RateBelowMargin { upper, .. }) => upper,
                     _ => nan,
                 },
+                ev.calibrated_order.map_or(nan, |n| n as f64),
             ],
         );
     }

@@ -24,7 +24,8 @@ function gate(s) {
     text("gate-words", "The run ended: " + s.ended + ". Nothing is vouched for after its last sample.");
   } else if (s.open) {
     text("gate-words", "CERTIFIED: the candidate may be deployed (" + s.certificate + " certificate" +
-      (s.order === null || s.order === 1 ? "" : " of order " + s.order) +
+      (s.orders.length > 0 ? " of order " + s.look_order + ", chosen from the data" :
+        s.order === null || s.order === 1 ? "" : " of order " + s.order) +
       (s.risk === null ? ", no stated risk" : ", risk " + s.risk + " over the run") + ").");
   } else {
     text("gate-words", "NOT CERTIFIED: do not deploy the candidate.");
@@ -102,7 +103,10 @@ function draw(s) {
   document.title = (s.open ? "OPEN" : "CLOSED") + " · " + s.name + " · streamcert";
   // The loop model's order: 1 is the paper's first-order model; 2 and 3 read a closed loop of
   // that order through one output.
-  const order = s.order === null ? "" : " with a loop model of order " + s.order;
+  const order = s.orders.length > 0
+    ? " with the loop model's order chosen from the data (orders " + s.orders.join(", ") +
+      " side by side, each at risk δ/" + s.orders.length + ")"
+    : s.order === null ? "" : " with a loop model of order " + s.order;
   text("candidate", "Candidate judged at the margin " + s.margin + " /s" + order +
     "; deciding certificate: " + s.certificate + ".");
   gate(s);

@@ -8,7 +8,7 @@
 //! | `streamcert_rate_estimate_per_second` | gauge | loop, certificate | the rate estimate it bounds: `β̂` (paper's), `β̂_w` (calibrated) |
 //! | `streamcert_radius_per_second` | gauge | loop, certificate | the radius subtracted |
 //! | `streamcert_margin_per_second` | gauge | loop | the margin the certificate must clear |
-//! | `streamcert_model_order` | gauge | loop | the loop model's order (`[regression] order`: 1, 2 or 3) |
+//! | `streamcert_model_order` | gauge | loop | the loop model's order (`[regression] order`: 1, 2 or 3; with `"auto"` the standing look's, 0 before one) |
 //! | `streamcert_gate_open` | gauge | loop, certificate | 1 while the gate is open |
 //! | `streamcert_gate_reason` | gauge (state set) | loop, certificate, reason | 1 for the reason the gate is closed (`none` when open), 0 for the others |
 //! | `streamcert_network_rate_per_second` | gauge | loop | the network rate (NaN while there is none) |
@@ -240,7 +240,8 @@ impl Metrics {
         s
     }
 
-    /// Run `name`'s loop model order, set once: `[regression] order`.
+    /// Run `name`'s loop model order: `[regression] order`, set once; with `order = "auto"`
+    /// the standing look's order, set as it changes (0 before a look).
     pub(crate) fn model_order(&self, name: &str, order: usize) {
         self.order.get_or_create(&labels(&[("loop", name)])).set(order as f64);
     }

@@ -33,9 +33,14 @@ pub struct Status {
     pub risk: Option<f64>,
     /// The margin (1/s).
     pub margin: f64,
-    /// The loop model's order (`[regression] order`; `None` for a network): the verdict is
-    /// the certificate of that order.
+    /// The loop model's order (`[regression] order`; `None` for a network and with
+    /// `order = "auto"`): the verdict is the certificate of that order.
     pub order: Option<usize>,
+    /// With `order = "auto"`, the orders run side by side (`[1, 2, 3]`); empty otherwise.
+    pub orders: Vec<usize>,
+    /// The order of the look `value` is from (with `order = "auto"` the standing one;
+    /// `None` before a look and for a network).
+    pub look_order: Option<usize>,
     /// Whether the deciding gate is open.
     pub open: bool,
     /// The sample time from which it has been in this state (seconds).
@@ -111,6 +116,8 @@ impl Status {
             risk: None,
             margin: 0.0,
             order: None,
+            orders: Vec::new(),
+            look_order: None,
             open: false,
             since: None,
             since_text: None,

@@ -5,7 +5,7 @@
 //! {"schema": "streamcert.verdict/1", "sequence": 3, "name": "loop7", "kind": "loop",
 //!  "certificate": "calibrated", "candidate": {"gain": [[0.5]], "margin": 0.001, "order": 1},
 //!  "open": true, "since": 12.5, "t": 12.5, "since_text": "12.5", "t_text": "12.5",
-//!  "value": 0.0021, "reason": null, "risk": {"delta": 0.05}, "ended": false,
+//!  "value": 0.0021, "look_order": 1, "reason": null, "risk": {"delta": 0.05}, "ended": false,
 //!  "counters": {"samples": 626, "epochs": 0, "gaps": 0, "skipped": 0, "bad": 0,
 //!               "reconnects": 0, "reconnect_attempts": 0, "late": 0}}
 //! ```
@@ -58,6 +58,10 @@ pub struct VerdictMessage {
     pub t_text: Option<String>,
     /// The certificate at `t` (1/s; the network rate for a network).
     pub value: Option<f64>,
+    /// The loop model's order of the look `value` is from: the configured order, or with
+    /// `order = "auto"` the order whose look stands (`None` before a look and for a
+    /// network).
+    pub look_order: Option<usize>,
     /// Why the gate is closed (`None` exactly when it is open).
     pub reason: Option<Reason>,
     /// The risk stated for the run (`None`: the paper's certificates, no stated risk).
@@ -78,8 +82,13 @@ pub struct Candidate {
     pub margin: f64,
     /// The loop model's order, `[regression] order`: 1 the paper's first-order model (the
     /// output's rate a function of the output and the input), 2 or 3 a closed loop
-    /// `sⁿ + β_1 sⁿ⁻¹ + … + β_n` read through one output; `None` for a network.
+    /// `sⁿ + β_1 sⁿ⁻¹ + … + β_n` read through one output; `None` for a network and with
+    /// `order = "auto"` (then `orders`).
     pub order: Option<usize>,
+    /// With `order = "auto"`, the orders run side by side (`[1, 2, 3]`, each at risk `δ/3`);
+    /// left out otherwise.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub orders: Vec<usize>,
 }
 
 /// Counts of a run.

@@ -205,7 +205,11 @@ impl CertifyWatch {
             .map(|k| (k, shared.metrics.certificate(&name, kind_name(k), &reasons)))
             .collect();
         let series = LoopSeries { certificates, run: shared.metrics.run(&name, cfg.margin) };
-        shared.metrics.model_order(&name, cfg.regression.order.order());
+        // With `order = "auto"` the gauge follows the standing look (0 before one).
+        let auto = cfg.orders.as_ref().map(|l| l.orders.clone());
+        shared
+            .metrics
+            .model_order(&name, if auto.is_some() { 0 } else { cfg.regression.order.order() });
         *shared.loop_series.lock().unwrap_or_else(std::sync::PoisonError::into_inner) =
             Some(series);
         let message = VerdictMessage {
@@ -217,7 +221,8 @@ impl CertifyWatch {
             candidate: Candidate {
                 gain: cfg.gain.chunks(cfg.regression.outputs.max(1)).map(<[f64]>::to_vec).collect(),
                 margin: cfg.margin,
-                order: Some(cfg.regression.order.order()),
+                order: auto.is_none().then(|| cfg.regression.order.order()),
+                orders: auto.unwrap_or_default(),
             },
             open: false,
             since: None,
@@ -225,6 +230,7 @@ impl CertifyWatch {
             since_text: None,
             t_text: None,
             value: None,
+            look_order: None,
             reason: Some(Reason::new("starting", "no sample yet")),
             risk: cfg.calibration.as_ref().map(|c| Risk { delta: c.delta }),
             ended: false,
@@ -278,6 +284,18 @@ impl Watch for CertifyWatch {
         let d = ev.verdict(self.deciding);
         let due = shown.due(now);
         let why = d.reason.map(|r| (r.kind(), move || r.to_string()));
+        // The order of the look the value is from (the paper's Gaussian certificate is of the
+        // first order), in the message before it may be sent.
+        let look_order = match self.deciding {
+            CertificateKind::Calibrated => ev.calibrated_order,
+            _ => d.value.map(|_| 1),
+        };
+        if look_order != shown.gate.message.look_order
+            && !shown.gate.message.candidate.orders.is_empty()
+        {
+            self.shared.metrics.model_order(&self.shared.name, look_order.unwrap_or(0));
+        }
+        shown.gate.message.look_order = look_order;
         let (changed, _) = shown.gate.set(ev.t, d.open, d.value, why, reason_words, false);
         if shown.chart.due(ev.t, d.open) {
             shown.pending.push((ev.t, d.value, d.open));

@@ -473,3 +473,42 @@ fn the_loop_models_order_is_in_the_message_the_status_and_the_metrics() {
         assert_eq!(monitor.status().order, Some(order));
     }
 }
+
+/// With `order = "auto"` the candidate names the orders run side by side instead of one, and
+/// the message, the status document and the metrics follow the order of the standing look:
+/// the evidence's own `calibrated_order` at every sample.
+#[test]
+fn with_order_auto_the_standing_order_is_shown() {
+    let text =
+        streamcert_pipeline::config::g5_node_b().replace("\norder = 1\n", "\norder = \"auto\"\n");
+    let cfg = streamcert_pipeline::config::parse(&text, "g5_node_b").unwrap();
+    let (monitor, server) = started("node_b");
+    let (tx, rx) = std::sync::mpsc::channel::<VerdictMessage>();
+    let sink = move |m: &VerdictMessage| tx.send(m.clone()).unwrap();
+    let mut watch = monitor.certify(&cfg.certifier, &cfg.columns.outputs, vec![Box::new(sink)]);
+    let mut seen = None;
+    let out = run_paused(&cfg, &g5_rows(None), &mut watch, |k| {
+        if k == 400 {
+            seen = Some((get(server.addr(), "/api/status"), get(server.addr(), "/metrics")));
+        }
+    });
+    drop(watch);
+    let messages: Vec<VerdictMessage> = rx.try_iter().collect();
+    assert!(
+        messages.iter().all(|m| m.candidate.order.is_none() && m.candidate.orders == [1, 2, 3])
+    );
+    // Every message sent while the gate was open names the order it stood at.
+    assert!(messages.iter().any(|m| m.open), "the gate opened");
+    assert!(messages.iter().filter(|m| m.open).all(|m| matches!(m.look_order, Some(1..=3))));
+    let (status, metrics) = seen.unwrap();
+    let doc: serde_json::Value = serde_json::from_str(&status.body).unwrap();
+    assert_eq!(doc["orders"], serde_json::json!([1, 2, 3]), "{}", status.body);
+    assert!(doc["order"].is_null(), "{}", status.body);
+    let look = doc["look_order"].as_u64().map_or(0.0, |n| n as f64);
+    let m = parse(&metrics.body);
+    assert_eq!(value(&m, "streamcert_model_order", &[("loop", "node_b")]), look);
+    // The evidence's standing order is what was shown: row 400's, the last before the look.
+    let rows = evidence(&out);
+    let want = rows[399]["calibrated_order"].parse::<usize>().ok();
+    assert_eq!(doc["look_order"].as_u64().map(|n| n as usize), want, "{}", status.body);
+}

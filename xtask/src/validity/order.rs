@@ -8,7 +8,7 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use anyhow::Result;
-use streamcert_certificate::{Calibration, Certifier, CertifierConfig, NotCertified};
+use streamcert_certificate::{Calibration, Certifier, CertifierConfig, NotCertified, OrderLadder};
 use streamcert_dynamics::ObservableLoop;
 use streamcert_regression::{LoopModel, RegressionConfig};
 
@@ -22,45 +22,50 @@ const HORIZON: usize = 50;
 const CHANGE_AT: usize = 3000;
 const CHANGE_SAMPLES: usize = 7000;
 
-/// One cell: a loop, the order certified, and the units `y` and `u` are read in (`y · scale.0`,
-/// `u · scale.1`; the gain is given to the certifier in those units).
+/// One cell: a loop, the order certified (or with `auto`, `order = "auto"`: orders 1 to 3),
+/// and the units `y` and `u` are read in (`y · scale.0`, `u · scale.1`; the gain is given to
+/// the certifier in those units).
 #[derive(Clone)]
-struct Cell {
-    name: String,
-    order: usize,
-    plant: ObservableLoop,
-    scale: (f64, f64),
+pub(super) struct Cell {
+    pub(super) name: String,
+    pub(super) order: usize,
+    pub(super) plant: ObservableLoop,
+    pub(super) scale: (f64, f64),
+    pub(super) auto: bool,
 }
 
 impl Cell {
     /// The plant `a` under `gain` at `order`, with sensor noise `σ = 0.01` or, with
     /// `process`, process noise `σ_p = 0.05` on the unmeasured last state and no sensor noise.
-    fn new(name: &str, order: usize, a: &[f64], gain: f64, process: bool) -> Self {
+    pub(super) fn new(name: &str, order: usize, a: &[f64], gain: f64, process: bool) -> Self {
         let mut plant = ObservableLoop::new(a, gain);
         if process {
             (plant.sensor, plant.process) = (0.0, 0.05);
         }
         let noise = if process { "process noise" } else { "sensor noise" };
-        Self { name: format!("{name}, {noise}"), order, plant, scale: (1.0, 1.0) }
+        Self { name: format!("{name}, {noise}"), order, plant, scale: (1.0, 1.0), auto: false }
     }
 
     /// The certifier a user gets with `[regression] order = n`, `window = 2000`, `horizon =
     /// 50`, `[calibration] delta = 0.01` (every default of the certificate of order `n`: its
-    /// look period, the hidden-dynamics guard), margin 0.05, a one-sample gate.
-    fn config(&self) -> Result<CertifierConfig> {
+    /// look period, the hidden-dynamics guard), margin 0.05, a one-sample gate; with `auto`,
+    /// `order = "auto"` instead.
+    pub(super) fn config(&self) -> Result<CertifierConfig> {
+        let order = if self.auto { 1 } else { self.order };
         let regression = RegressionConfig {
-            order: LoopModel::of_order(self.order)
-                .ok_or_else(|| anyhow::anyhow!("order {} is not 1, 2 or 3", self.order))?,
+            order: LoopModel::of_order(order)
+                .ok_or_else(|| anyhow::anyhow!("order {order} is not 1, 2 or 3"))?,
             ..RegressionConfig::new(1, 1, WINDOW, HORIZON, 0.0)
         };
         let gain = self.plant.gain * self.scale.1 / self.scale.0;
         let mut cfg = CertifierConfig::new(regression, vec![gain], 1.0, MARGIN, 1);
         cfg.calibration = Some(Calibration::new(DELTA));
+        cfg.orders = self.auto.then(OrderLadder::automatic);
         Ok(cfg)
     }
 
     /// The true rate before and after the cell's plant change (the same without one).
-    fn truth(&self) -> (f64, f64) {
+    pub(super) fn truth(&self) -> (f64, f64) {
         let before = self.plant.rate();
         let after = self.plant.change.as_ref().map_or(before, |(_, a)| {
             ObservableLoop { a: a.clone(), change: None, ..self.plant.clone() }.rate()
@@ -71,10 +76,12 @@ impl Cell {
 
 /// What one run shows.
 #[derive(Default)]
-struct Run {
+pub(super) struct Run {
     /// The first and the last sample the gate was open at.
-    first_open: Option<f64>,
+    pub(super) first_open: Option<f64>,
     last_open: Option<f64>,
+    /// Samples the gate was open at, by the standing look's order (1 to 3).
+    pub(super) open_at_order: [usize; 3],
     /// Open at some sample before the plant change (the whole run without one).
     open_before_change: bool,
     /// Some look stated a margin above the true rate (an overstated rate, whether or not the
@@ -102,6 +109,9 @@ fn one(cell: &Cell, seed: u64) -> Result<Run> {
             }
         };
         if ev.calibrated.open {
+            if let Some(n) = ev.calibrated_order.filter(|n| (1..=3).contains(n)) {
+                run.open_at_order[n - 1] += 1;
+            }
             run.first_open.get_or_insert(t);
             run.last_open = Some(t);
             run.open_before_change |= t < change_time;
@@ -128,7 +138,12 @@ fn one(cell: &Cell, seed: u64) -> Result<Run> {
 }
 
 /// `runs` seeds of a cell from `base`, on two threads.
-fn runs_of(cell: &Cell, base: u64, runs: usize, bar: &indicatif::ProgressBar) -> Result<Vec<Run>> {
+pub(super) fn runs_of(
+    cell: &Cell,
+    base: u64,
+    runs: usize,
+    bar: &indicatif::ProgressBar,
+) -> Result<Vec<Run>> {
     let half = runs / 2;
     std::thread::scope(|s| {
         let a =
@@ -147,7 +162,7 @@ fn runs_of(cell: &Cell, base: u64, runs: usize, bar: &indicatif::ProgressBar) ->
 
 /// The loops just below the margin: each order-2 and order-3 plant with sensor noise and with
 /// process noise, the input held 10 s and 30 s, and the units of `y` and `u`.
-fn near_cells() -> Vec<Cell> {
+pub(super) fn near_cells() -> Vec<Cell> {
     let real = |name: &str| Cell::new(name, 2, &[1.2, 1.0], 0.948_025, false);
     let mut cells = Vec::new();
     for process in [false, true] {
@@ -189,7 +204,7 @@ fn near_cells() -> Vec<Cell> {
 /// order 3, and at order 2 the same with three lags, and four lags under a dither ten times
 /// larger (a higher signal-to-noise ratio, where a misfit is seen best and a biased fit is
 /// most confident); and beyond linearity, a loop whose static term stiffens at order 2.
-fn beyond_cells() -> Vec<Cell> {
+pub(super) fn beyond_cells() -> Vec<Cell> {
     // (s + 1)ᴺ − 0.955ᴺ: rightmost root −0.045.
     let lags = |count: i32, order: usize| {
         let a: Vec<f64> = (1..=count as u64)
@@ -219,7 +234,7 @@ fn beyond_cells() -> Vec<Cell> {
 }
 
 /// Loops of order 2 at 2×, 5× and 20× the margin.
-fn power_cells() -> Vec<Cell> {
+pub(super) fn power_cells() -> Vec<Cell> {
     vec![
         // (s + 0.1)(s + 1.1), (s + 0.25)(s + 0.95), (s + 1)(s + 2).
         Cell::new("order 2, 2× the margin", 2, &[1.2, 1.0], 0.89, false),
@@ -237,7 +252,7 @@ fn change_cell() -> Cell {
     cell
 }
 
-fn share(k: usize, n: usize) -> String {
+pub(super) fn share(k: usize, n: usize) -> String {
     format!("{:.1} %", 100.0 * k as f64 / n.max(1) as f64)
 }
 
@@ -369,11 +384,18 @@ pub(crate) fn order_only(runs: usize, out: &Path) -> Result<()> {
     let beyond_runs = runs.min(200);
     let power_runs = (runs / 5).clamp(20, 400);
     let change_runs = (runs / 10).clamp(20, 200);
+    // The order ladder runs three orders a sample: a quarter of the runs at the boundary
+    // (at least 200, whose 0 openings bound the rate below 2δ).
+    let auto_runs = (runs / 4).max(20);
+    let (auto_near, auto_beyond, auto_power) = super::order_auto::counts();
     let bar = progress(
         near_cells().len() * runs
             + beyond_cells().len() * beyond_runs
             + power_cells().len() * power_runs
-            + change_runs,
+            + change_runs
+            + auto_near * auto_runs
+            + auto_beyond * beyond_runs
+            + auto_power * power_runs,
         "order n",
     );
     let mut s = format!(
@@ -384,6 +406,7 @@ pub(crate) fn order_only(runs: usize, out: &Path) -> Result<()> {
     s.push_str(&beyond_table(beyond_runs, &bar)?);
     s.push_str(&power_table(power_runs, &bar)?);
     s.push_str(&change_table(change_runs, &bar)?);
+    s.push_str(&super::order_auto::tables((auto_runs, beyond_runs, power_runs), &bar)?);
     bar.finish_and_clear();
     let _ = writeln!(
         s,

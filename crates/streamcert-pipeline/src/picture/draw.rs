@@ -61,8 +61,18 @@ impl Trace {
         }
         rate.hlines.push((margin, format!("margin {margin}")));
         rate.vlines.clone_from(&self.gaps);
+        // Where a look of order 2 or 3 stood (order = 2 | 3, or "auto"), the open stretches
+        // name the order they stood at.
+        let orders = self.rows.iter().any(|r| r.values[9] > 1.5);
         rate.spans = self.spans(|r| {
-            (r.values[4] > 0.5).then(|| ("calibrated gate open (the verdict)".into(), BLUE))
+            (r.values[4] > 0.5).then(|| {
+                let label = if orders && r.values[9].is_finite() {
+                    format!("calibrated gate open at order {} (the verdict)", r.values[9])
+                } else {
+                    "calibrated gate open (the verdict)".into()
+                };
+                (label, BLUE)
+            })
         });
         rate.y_range = Some(self.rate_axis(margin));
         let why = Panel::strip(
@@ -191,7 +201,7 @@ mod tests {
         let mut trace = Trace::new();
         let open = |on: bool| {
             let g = f64::from(u8::from(on));
-            [1.0, 0.5, 1.5, 0.2, g, g, 0.01, if on { 0.0 } else { 4.0 }, 0.3]
+            [1.0, 0.5, 1.5, 0.2, g, g, 0.01, if on { 0.0 } else { 4.0 }, 0.3, 1.0]
         };
         for k in 0..50_000u32 {
             let t = f64::from(k) * 0.01;
@@ -228,7 +238,7 @@ mod tests {
                 _ => (true, 0.0),
             };
             let g = f64::from(u8::from(open));
-            trace.keep(t, [1.0, 0.5, 1.5, 0.2, g, 0.0, 0.01, code, f64::NAN]);
+            trace.keep(t, [1.0, 0.5, 1.5, 0.2, g, 0.0, 0.01, code, f64::NAN, 1.0]);
         }
         let fig = trace.certify_figure(0.05, "level");
         let axis = Some((0.0, 3.99));
@@ -260,7 +270,7 @@ mod tests {
             let t = f64::from(k) * 0.1;
             let wobble = 0.02 * (f64::from(k) * 0.1).sin();
             let beta = -0.2 + wobble;
-            trace.keep(t, [beta, nan, nan, beta - 0.03, 0.0, 0.0, 0.015, 10.0, beta + 0.02]);
+            trace.keep(t, [beta, nan, nan, beta - 0.03, 0.0, 0.0, 0.015, 10.0, beta + 0.02, nan]);
         }
         let fig = trace.certify_figure(0.05, "y");
         let (lo, hi) = fig.panels[0].y_range.expect("a rate axis");
@@ -297,5 +307,32 @@ mod tests {
                 assert!(distance >= 60.0, "{a} and {b}: {distance:.0} apart");
             }
         }
+    }
+
+    /// With looks of order 2 or 3 standing (`order = "auto"`), each open stretch names the
+    /// order it stood at; a first-order run's stretches keep their plain words.
+    #[test]
+    fn the_open_stretches_name_the_standing_order() {
+        let mut trace = Trace::new();
+        for k in 0..300u32 {
+            let t = f64::from(k) * 0.01;
+            let (open, order) = match k {
+                0..100 => (false, f64::NAN),
+                100..200 => (true, 1.0),
+                _ => (true, 2.0),
+            };
+            let g = f64::from(u8::from(open));
+            let code = if open { 0.0 } else { 1.0 };
+            trace.keep(t, [1.0, 0.5, 1.5, 0.2, g, 0.0, 0.01, code, f64::NAN, order]);
+        }
+        let fig = trace.certify_figure(0.05, "level");
+        let open: Vec<&str> = fig.panels[0].spans.iter().map(|s| s.label.as_str()).collect();
+        assert_eq!(
+            open,
+            [
+                "calibrated gate open at order 1 (the verdict)",
+                "calibrated gate open at order 2 (the verdict)"
+            ]
+        );
     }
 }

@@ -42,6 +42,7 @@ impl Shown {
             st.certificate = message.certificate;
             st.margin = message.candidate.margin;
             st.order = message.candidate.order;
+            st.orders.clone_from(&message.candidate.orders);
             st.risk = message.risk.map(|r| r.delta);
             st.reason.clone_from(&message.reason);
         }
@@ -76,6 +77,7 @@ impl Shown {
     ) {
         let m = &self.gate.message;
         (st.open, st.since, st.t, st.value) = (m.open, m.since, m.t, m.value);
+        st.look_order = m.look_order;
         (st.counters, st.step) = (m.counters, self.gate.step);
         st.arrived = self.arrived;
         if gate_reason {

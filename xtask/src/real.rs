@@ -23,6 +23,7 @@ use streamcert_pipeline::config::parse;
 use crate::common::{markdown, median, write};
 
 mod grid;
+mod orders;
 
 /// One record: the original's file name under `DIR` and its SHA-256, the committed
 /// conversion and its SHA-256, its configuration and the conversion.
@@ -278,6 +279,7 @@ pub(crate) fn run(from: Option<&Path>, out: &Path) -> Result<()> {
             units.push_str(&units_check(&auto, &csv, &certify_text(&auto, &csv, rec.name)?)?);
         }
         grids.push_str(&grid::grid(rec.name, &config, &csv)?);
+        grids.push_str(&orders::section(rec.name, &config, &csv)?);
     }
     let mut s = String::from(
         "# Real plant records\n\nProduced by `cargo xtask real` (the records' sources, hashes and configurations: examples/real/README.md).\n\n",

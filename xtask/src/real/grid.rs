@@ -21,6 +21,15 @@ const WINDOWS: [usize; 5] = [40, 60, 100, 150, 300];
 /// The record's configuration reduced to its `[columns]` section, its `gain` and its
 /// `margin`, with `window = m` and `horizon = h`, or (`None`) both `"auto"`.
 pub(super) fn minimal(config: &str, fixed: Option<(usize, usize)>) -> Result<String> {
+    let regression = fixed.map_or_else(
+        || "\n[regression]\nwindow = \"auto\"\nhorizon = \"auto\"\n".to_string(),
+        |(h, m)| format!("\n[regression]\nwindow = {m}\nhorizon = {h}\n"),
+    );
+    minimal_with(config, &regression)
+}
+
+/// The record's columns, gain and margin, then `regression` (a section's text) as given.
+pub(super) fn minimal_with(config: &str, regression: &str) -> Result<String> {
     let mut lines = config.lines().skip_while(|l| l.trim() != "[columns]");
     let mut columns = String::new();
     if let Some(head) = lines.next() {
@@ -38,10 +47,6 @@ pub(super) fn minimal(config: &str, fixed: Option<(usize, usize)>) -> Result<Str
             .map(|l| l.split('#').next().unwrap_or(l).trim().to_string())
             .with_context(|| format!("no `{key}` in the record's configuration"))
     };
-    let regression = fixed.map_or_else(
-        || "\n[regression]\nwindow = \"auto\"\nhorizon = \"auto\"\n".to_string(),
-        |(h, m)| format!("\n[regression]\nwindow = {m}\nhorizon = {h}\n"),
-    );
     Ok(format!(
         "{columns}\n[controller]\n{}\n\n[certificate]\n{}\n{regression}",
         line("gain")?,

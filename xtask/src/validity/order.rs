@@ -32,6 +32,8 @@ pub(super) struct Cell {
     pub(super) plant: ObservableLoop,
     pub(super) scale: (f64, f64),
     pub(super) auto: bool,
+    /// The window (rows) and horizon certified at: `(WINDOW, HORIZON)` unless set.
+    pub(super) regression: (usize, usize),
 }
 
 impl Cell {
@@ -43,7 +45,8 @@ impl Cell {
             (plant.sensor, plant.process) = (0.0, 0.05);
         }
         let noise = if process { "process noise" } else { "sensor noise" };
-        Self { name: format!("{name}, {noise}"), order, plant, scale: (1.0, 1.0), auto: false }
+        let (scale, auto, regression) = ((1.0, 1.0), false, (WINDOW, HORIZON));
+        Self { name: format!("{name}, {noise}"), order, plant, scale, auto, regression }
     }
 
     /// The certifier a user gets with `[regression] order = n`, `window = 2000`, `horizon =
@@ -55,7 +58,7 @@ impl Cell {
         let regression = RegressionConfig {
             order: LoopModel::of_order(order)
                 .ok_or_else(|| anyhow::anyhow!("order {order} is not 1, 2 or 3"))?,
-            ..RegressionConfig::new(1, 1, WINDOW, HORIZON, 0.0)
+            ..RegressionConfig::new(1, 1, self.regression.0, self.regression.1, 0.0)
         };
         let gain = self.plant.gain * self.scale.1 / self.scale.0;
         let mut cfg = CertifierConfig::new(regression, vec![gain], 1.0, MARGIN, 1);
@@ -265,23 +268,31 @@ fn hidden_share(results: &[Run]) -> String {
     format!("{} / {}", share(hidden, looks), share(varying, looks))
 }
 
+/// A boundary cell's row: its name, `β*`, the runs opened, the 95 % Clopper–Pearson upper
+/// bound on the false-opening rate and whether it is at most 2δ.
+pub(super) fn boundary_row(cell: &Cell, results: &[Run]) -> Vec<String> {
+    let runs = results.len();
+    let opened = results.iter().filter(|r| r.first_open.is_some()).count();
+    let (_, hi) = clopper_pearson(opened, runs);
+    vec![
+        cell.name.clone(),
+        format!("{:.4}", cell.truth().0),
+        format!("{opened} / {runs}"),
+        format!("{hi:.4}"),
+        if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
+    ]
+}
+
 /// The loops just below the margin, `runs` each.
 fn near_table(runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
     let mut s = String::new();
     let mut rows = Vec::new();
     for (ci, cell) in near_cells().iter().enumerate() {
         let results = runs_of(cell, 300_000_000 + 1_000_000 * ci as u64, runs, bar)?;
-        let opened = results.iter().filter(|r| r.first_open.is_some()).count();
-        let (_, hi) = clopper_pearson(opened, runs);
-        rows.push(vec![
-            cell.name.clone(),
-            format!("{:.4}", cell.truth().0),
-            format!("{opened} / {runs}"),
-            format!("{hi:.4}"),
-            if hi <= 2.0 * DELTA { "yes".into() } else { "**no**".into() },
-            format!("{} / {runs}", results.iter().filter(|r| r.overstated).count()),
-            hidden_share(&results),
-        ]);
+        let mut row = boundary_row(cell, &results);
+        row.push(format!("{} / {runs}", results.iter().filter(|r| r.overstated).count()));
+        row.push(hidden_share(&results));
+        rows.push(row);
     }
     let _ = writeln!(s, "## Loops just below the margin (n_s = 1): every opening is false\n");
     let header = [

@@ -324,6 +324,9 @@ fn order_selects_the_certificate_of_order_n() {
 /// the first order (the paper's certificates are of the first order).
 #[test]
 fn order_auto_is_the_order_ladder() {
+    // The default is the first order alone.
+    let default = parse(&base(), "x").unwrap().certifier;
+    assert!(default.regression.order.is_first_order() && default.orders.is_none());
     let auto = base().replace("order = 1", "order = \"auto\"");
     let c = parse(&auto, "x").unwrap().certifier;
     assert!(c.regression.order.is_first_order());

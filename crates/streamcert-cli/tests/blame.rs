@@ -174,12 +174,17 @@ fn order_auto_certifies_a_hidden_state_and_names_its_order() {
         data.push_str(&format!("{t},{y},{u}\n"));
         true
     });
+    // The keys at the start of their lines (a comment may quote them).
     let text = |order: &str| {
-        config::g5_node_b()
-            .replacen("gain = [[-4.0]]", "gain = [[0.7625]]", 1)
+        let t = config::g5_node_b()
+            .replacen("\ngain = [[-4.0]]", "\ngain = [[0.7625]]", 1)
             .replacen("\norder = 1\n", &format!("\norder = {order}\n"), 1)
-            .replacen("window = 150 ", "window = 2000 ", 1)
-            .replacen("horizon = 5 ", "horizon = 50 ", 1)
+            .replacen("\nwindow = 150 ", "\nwindow = 2000 ", 1)
+            .replacen("\nhorizon = 5 ", "\nhorizon = 50 ", 1);
+        for key in ["\ngain = [[0.7625]]", "\nwindow = 2000 ", "\nhorizon = 50 "] {
+            assert!(t.contains(key), "{key:?} not set");
+        }
+        t
     };
     let auto = config::parse(&text("\"auto\""), "auto.toml").expect("order = \"auto\"");
     let mut rows = Vec::new();

@@ -332,20 +332,27 @@ fn beyond_table(beyond_runs: usize, bar: &indicatif::ProgressBar) -> Result<Stri
     Ok(s)
 }
 
+/// A power cell's row: its name, `β*`, the share of runs certified and the median first
+/// opening.
+pub(super) fn power_row(cell: &Cell, results: &[Run]) -> Vec<String> {
+    let times: Vec<f64> = results.iter().filter_map(|r| r.first_open).collect();
+    vec![
+        cell.name.clone(),
+        format!("{:.4}", cell.truth().0),
+        share(times.len(), results.len()),
+        if times.is_empty() { "never".into() } else { format!("{:.2}", median(&times)) },
+    ]
+}
+
 /// The loops of order 2 at 2×, 5× and 20× the margin, `power_runs` each.
 fn power_table(power_runs: usize, bar: &indicatif::ProgressBar) -> Result<String> {
     let mut s = String::new();
     let mut rows = Vec::new();
     for (ci, cell) in power_cells().iter().enumerate() {
         let results = runs_of(cell, 320_000_000 + 1_000_000 * ci as u64, power_runs, bar)?;
-        let times: Vec<f64> = results.iter().filter_map(|r| r.first_open).collect();
-        rows.push(vec![
-            cell.name.clone(),
-            format!("{:.4}", cell.truth().0),
-            share(times.len(), power_runs),
-            if times.is_empty() { "never".into() } else { format!("{:.2}", median(&times)) },
-            hidden_share(&results),
-        ]);
+        let mut row = power_row(cell, &results);
+        row.push(hidden_share(&results));
+        rows.push(row);
     }
     let _ = writeln!(s, "## Power ({power_runs} runs each)\n");
     let header = [

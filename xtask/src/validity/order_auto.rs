@@ -8,9 +8,9 @@ use std::fmt::Write as _;
 use anyhow::Result;
 
 use super::order::{
-    Cell, Run, beyond_cells, boundary_row, near_cells, power_cells, runs_of, share,
+    Cell, Run, beyond_cells, boundary_row, near_cells, power_cells, power_row, runs_of, share,
 };
-use crate::common::{markdown, median};
+use crate::common::markdown;
 
 /// `cell` under `order = "auto"`.
 fn auto(mut cell: Cell) -> Cell {
@@ -147,14 +147,9 @@ fn power_table(
     let mut rows = Vec::new();
     for (ci, cell) in cells.iter().enumerate() {
         let results = runs_of(cell, base + 1_000_000 * ci as u64, power_runs, bar)?;
-        let times: Vec<f64> = results.iter().filter_map(|r| r.first_open).collect();
-        rows.push(vec![
-            cell.name.clone(),
-            format!("{:.4}", cell.truth().0),
-            share(times.len(), power_runs),
-            if times.is_empty() { "never".into() } else { format!("{:.2}", median(&times)) },
-            orders_share(&results),
-        ]);
+        let mut row = power_row(cell, &results);
+        row.push(orders_share(&results));
+        rows.push(row);
     }
     let _ = writeln!(s, "### {title}\n");
     let header = ["cell", "β*", "certified", "median first opening [s]", "open at order 1 / 2 / 3"];

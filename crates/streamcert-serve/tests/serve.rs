@@ -6,25 +6,12 @@
 mod support;
 
 use std::collections::HashMap;
-use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use streamcert_serve::{Monitor, MonitorOptions, Routes, Server, VerdictMessage};
-/// A scrape's values by metric name and sorted labels.
-type Scraped = HashMap<(String, Vec<(String, String)>), f64>;
+use streamcert_serve::{Monitor, MonitorOptions, Server, VerdictMessage};
 
-use support::{evidence, g5_rows, get, node_b, raw, request, run_paused};
-
-fn loopback() -> SocketAddr {
-    "127.0.0.1:0".parse().unwrap()
-}
-
-fn started(name: &str) -> (Monitor, Server) {
-    let monitor = Monitor::new(MonitorOptions::named(name));
-    let server = monitor.serve(loopback(), Routes::All).unwrap();
-    (monitor, server)
-}
+use support::{evidence, g5_rows, get, node_b, parse, raw, request, run_paused, started, value};
 
 /// G5 node b's configuration, a monitor named `name` serving on a free port, and its
 /// certify watcher (no verdict sink).
@@ -48,35 +35,6 @@ fn documented(kind: &str) -> Vec<String> {
         .collect();
     assert!(rows.len() >= 10, "the metrics table of docs/operations.md: {rows:?}");
     rows
-}
-
-/// A scrape, parsed by `prometheus-parse`: value by (name, sorted labels).
-fn parse(text: &str) -> Scraped {
-    let lines = text.lines().map(|l| Ok(l.to_string()));
-    let scrape = prometheus_parse::Scrape::parse(lines).unwrap();
-    scrape
-        .samples
-        .into_iter()
-        .map(|s| {
-            let v = match s.value {
-                prometheus_parse::Value::Counter(v)
-                | prometheus_parse::Value::Gauge(v)
-                | prometheus_parse::Value::Untyped(v) => v,
-                other => panic!("{} is not a number: {other:?}", s.metric),
-            };
-            let mut labels: Vec<(String, String)> =
-                s.labels.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
-            labels.sort();
-            ((s.metric, labels), v)
-        })
-        .collect()
-}
-
-fn value(m: &Scraped, name: &str, labels: &[(&str, &str)]) -> f64 {
-    let mut l: Vec<(String, String)> =
-        labels.iter().map(|(k, v)| ((*k).to_string(), (*v).to_string())).collect();
-    l.sort();
-    *m.get(&(name.to_string(), l.clone())).unwrap_or_else(|| panic!("no {name} {l:?}"))
 }
 
 fn field(row: &HashMap<String, String>, c: &str) -> f64 {

@@ -115,3 +115,44 @@ pub(crate) fn request(addr: SocketAddr, method: &str, path: &str) -> Response {
 pub(crate) fn get(addr: SocketAddr, path: &str) -> Response {
     request(addr, "GET", path)
 }
+
+/// A scrape's values by metric name and sorted labels.
+pub(crate) type Scraped = std::collections::HashMap<(String, Vec<(String, String)>), f64>;
+
+/// A monitor named `name` serving every route on a free loopback port.
+pub(crate) fn started(name: &str) -> (streamcert_serve::Monitor, streamcert_serve::Server) {
+    let monitor = streamcert_serve::Monitor::new(streamcert_serve::MonitorOptions::named(name));
+    let addr: SocketAddr = "127.0.0.1:0".parse().unwrap();
+    let server = monitor.serve(addr, streamcert_serve::Routes::All).unwrap();
+    (monitor, server)
+}
+
+/// A scrape, parsed by `prometheus-parse`: value by (name, sorted labels).
+pub(crate) fn parse(text: &str) -> Scraped {
+    let lines = text.lines().map(|l| Ok(l.to_string()));
+    let scrape = prometheus_parse::Scrape::parse(lines).unwrap();
+    scrape
+        .samples
+        .into_iter()
+        .map(|s| {
+            let v = match s.value {
+                prometheus_parse::Value::Counter(v)
+                | prometheus_parse::Value::Gauge(v)
+                | prometheus_parse::Value::Untyped(v) => v,
+                other => panic!("{} is not a number: {other:?}", s.metric),
+            };
+            let mut labels: Vec<(String, String)> =
+                s.labels.iter().map(|(k, v)| (k.clone(), v.clone())).collect();
+            labels.sort();
+            ((s.metric, labels), v)
+        })
+        .collect()
+}
+
+/// The value of series `name` with `labels` in a scrape (a missing one fails the test).
+pub(crate) fn value(m: &Scraped, name: &str, labels: &[(&str, &str)]) -> f64 {
+    let mut l: Vec<(String, String)> =
+        labels.iter().map(|(k, v)| ((*k).to_string(), (*v).to_string())).collect();
+    l.sort();
+    *m.get(&(name.to_string(), l.clone())).unwrap_or_else(|| panic!("no {name} {l:?}"))
+}
